@@ -1,0 +1,136 @@
+"""The result record of one smoothing run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["SmoothResult", "Spectrum"]
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """Spectral view of report section 5 (eq. 12).
+
+    Attributes
+    ----------
+    sigma : ndarray
+        Singular values of ``L`` (``D = I``) or generalized singular values of ``(L, D)``,
+        in decreasing order.
+    gamma : ndarray
+        Filter factors ``gamma_i = lambda / (sigma_i^2 + lambda)`` at the chosen lambda.
+    """
+
+    sigma: NDArray[np.float64]
+    gamma: NDArray[np.float64]
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"sigma": self.sigma.tolist(), "gamma": self.gamma.tolist()}
+
+
+@dataclass(frozen=True)
+class SmoothResult:
+    """Smoothed points plus convergence diagnostics.
+
+    Attributes
+    ----------
+    points : ndarray, shape (n, s)
+        Smoothed points ``X``, same order and count as the input; fixed points bit-identical.
+    lam : float
+        The lambda of eq. (4) used for ``points``.
+    phi : float
+        ``phi(lam) = ||D(X - P)||_F^2`` (eq. 15).
+    tau : float or None
+        Requested smoothing factor (``None`` when ``lam`` was given).
+    relative_error : float or None
+        ``|phi - tau| / tau``.
+    converged : bool
+        Whether ``relative_error <= tolerance`` (always true for a given ``lam``).
+    iterations : int
+        lambda values tried (each one a numeric factorization and a solve).
+    factorizations : int
+        Numeric factorizations done.
+    history : list of (float, float)
+        ``(lambda, phi)`` for every lambda tried, in order.
+    deviation : ndarray, shape (n,)
+        ``||x_i - p_i||`` per point.
+    rms_deviation, max_deviation : float
+        RMS and maximum of ``deviation``.
+    timings : dict
+        Seconds per stage: neighborhoods, laplacian, analysis, factorization, solve, total.
+    solver : str
+        ``"cholmod"`` or ``"superlu"``.
+    laplacian, weights : str
+        Variant and resolved weight scheme actually used.
+    kind : str
+        ``"mesh"``, ``"curve"`` or ``"cloud"``.
+    n_fixed : int
+        Points held fixed.
+    volume_scale : float or None
+        Scale applied for volume/area preservation.
+    warnings : list of str
+        Anything the user should know (solver fallback, search not converged, ...).
+    spectrum : Spectrum or None
+        Present when requested and the input is small enough.
+    """
+
+    points: NDArray[np.float64]
+    lam: float
+    phi: float
+    tau: float | None
+    relative_error: float | None
+    converged: bool
+    iterations: int
+    factorizations: int
+    history: list[tuple[float, float]]
+    deviation: NDArray[np.float64]
+    rms_deviation: float
+    max_deviation: float
+    timings: dict[str, float]
+    solver: str
+    laplacian: str
+    weights: str
+    kind: str
+    n_fixed: int = 0
+    volume_scale: float | None = None
+    warnings: list[str] = field(default_factory=list)
+    spectrum: Spectrum | None = None
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def dimension(self) -> int:
+        return int(self.points.shape[1])
+
+    def report(self) -> dict[str, Any]:
+        """JSON-ready diagnostics (the CLI's ``--report`` file and the API's report)."""
+        out: dict[str, Any] = {
+            "lambda": self.lam,
+            "phi": self.phi,
+            "tau": self.tau,
+            "relative_error": self.relative_error,
+            "converged": self.converged,
+            "iterations": self.iterations,
+            "factorizations": self.factorizations,
+            "history": [{"lambda": lam, "phi": phi} for lam, phi in self.history],
+            "n_points": self.n_points,
+            "dimension": self.dimension,
+            "kind": self.kind,
+            "laplacian": self.laplacian,
+            "weights": self.weights,
+            "n_fixed": self.n_fixed,
+            "rms_deviation": self.rms_deviation,
+            "max_deviation": self.max_deviation,
+            "volume_scale": self.volume_scale,
+            "timings": dict(self.timings),
+            "solver": self.solver,
+            "warnings": list(self.warnings),
+        }
+        if self.spectrum is not None:
+            out["spectrum"] = self.spectrum.to_dict()
+        return out
