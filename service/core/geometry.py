@@ -148,8 +148,10 @@ class Geometry:
             object.__setattr__(self, "weights", w)
         if self.fixed is not None:
             f = np.asarray(self.fixed).reshape(-1)
-            if f.size and f.dtype.kind not in "iu" and (
-                f.dtype.kind != "f" or np.any(f != np.round(f))
+            if (
+                f.size
+                and f.dtype.kind not in "iu"
+                and (f.dtype.kind != "f" or np.any(f != np.round(f)))
             ):
                 raise InvalidShape("fixed must hold integer indices", field="geometry.fixed")
             f = f.astype(np.int64)

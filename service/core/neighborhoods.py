@@ -1,0 +1,384 @@
+"""Neighbourhoods: who is a neighbour of whom (the edge sets E_i of report section 2.1).
+
+Three sources of neighbourhoods:
+
+* triangle meshes: 1-rings from the faces (section 4.3), with the incident triangles kept as
+  *wedges* ``(i, j, k)`` (triangle ``i j k`` seen from vertex ``i``) for mean-value and
+  cotangent weights and for the mean-curvature normal (eq. 11);
+* polylines and curve networks: the edge graph (section 4.2), with *chains* ``(i, j, k)``
+  (vertex ``i`` between ``j`` and ``k``) for the osculating-circle curvature;
+* point clouds: k nearest neighbours, or the Delaunay neighbourhoods of section 4.4 — the k
+  nearest neighbours projected onto their least-squares plane (surface samples) or line (curve
+  samples), triangulated, and the 1-ring of the point taken.
+
+The Delaunay 1-ring of a point ``p`` among its projected neighbours ``q_j`` is computed without a
+triangulation call per point: ``q_j`` is a Delaunay neighbour of ``p`` exactly when its
+half-plane ``{x : x . q_j <= |q_j|^2 / 2}`` bounds the Voronoi cell of ``p``, i.e. when the polar
+point ``a_j = 2 q_j / |q_j|^2`` is a vertex of the convex hull of ``{0} U {a_j}``. The hulls of all
+points are found together by a gift-wrapping march vectorised over the points, which also
+yields the neighbours in angular order (the fan).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "Neighborhoods",
+    "cloud_delaunay_neighborhoods",
+    "cloud_knn_neighborhoods",
+    "curve_neighborhoods",
+    "mesh_neighborhoods",
+    "unique_faces",
+]
+
+Source = Literal["mesh", "curve", "knn", "delaunay"]
+_EMPTY3 = np.zeros((0, 3), dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class Neighborhoods:
+    """Neighbour sets of every point.
+
+    Attributes
+    ----------
+    n : int
+        Number of points.
+    adjacency : scipy.sparse.csr_matrix, shape (n, n)
+        Row ``i`` holds a 1 for every neighbour ``j`` of ``i`` (the set I_i of eq. 1). Not
+        necessarily symmetric (k-NN and Delaunay neighbourhoods are directed).
+    wedges : ndarray, shape (w, 3)
+        Triangles ``(i, j, k)`` incident to vertex ``i`` (mesh faces per corner, Delaunay fans).
+    chains : ndarray, shape (c, 3)
+        Curve vertices ``i`` with two neighbours ``j, k`` (every pair at a junction).
+    boundary : ndarray of bool, shape (n,)
+        Mesh boundary vertices, open-polyline endpoints, cloud points with an open fan.
+    source : str
+        ``"mesh"``, ``"curve"``, ``"knn"`` or ``"delaunay"``.
+    """
+
+    n: int
+    adjacency: sp.csr_matrix
+    wedges: NDArray[np.int64]
+    chains: NDArray[np.int64]
+    boundary: NDArray[np.bool_]
+    source: Source
+
+    def degree(self) -> NDArray[np.int64]:
+        """Number of neighbours per point."""
+        return np.diff(self.adjacency.indptr).astype(np.int64)
+
+
+def _adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
+    adj = sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
+    adj.sum_duplicates()
+    adj.data[:] = 1.0
+    return adj
+
+
+def unique_faces(faces: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Drop duplicate triangles (same vertex set, any order or winding), keeping the first."""
+    key = np.sort(faces, axis=1)
+    _, first = np.unique(key, axis=0, return_index=True)
+    return faces[np.sort(first)]
+
+
+def _edge_graph(edges: NDArray[np.int64], n: int) -> sp.csr_matrix:
+    i = np.concatenate([edges[:, 0], edges[:, 1]])
+    j = np.concatenate([edges[:, 1], edges[:, 0]])
+    return _adjacency(i, j, n)
+
+
+def _chains(adj: sp.csr_matrix, rows: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``(i, j, k)`` for every pair of neighbours ``j < k`` of each vertex in ``rows``."""
+    deg = np.diff(adj.indptr)
+    two = rows[deg[rows] == 2]
+    start = adj.indptr[two]
+    out = [np.column_stack([two, adj.indices[start], adj.indices[start + 1]])]
+    for i in rows[deg[rows] > 2]:  # junctions of curve networks: few, loop is fine
+        nb = adj.indices[adj.indptr[i] : adj.indptr[i + 1]]
+        a, b = np.triu_indices(nb.size, 1)
+        out.append(np.column_stack([np.full(a.size, i), nb[a], nb[b]]))
+    return np.concatenate(out).astype(np.int64) if out else _EMPTY3
+
+
+def curve_neighborhoods(edges: NDArray[np.int64], n: int) -> Neighborhoods:
+    """Neighbourhoods of polylines and curve networks (report section 4.2).
+
+    Parameters
+    ----------
+    edges : ndarray, shape (k, 2)
+        Undirected edges; duplicates are merged.
+    n : int
+        Number of points.
+
+    Returns
+    -------
+    Neighborhoods
+        Endpoints (degree 1) are marked as boundary.
+    """
+    adj = _edge_graph(edges, n)
+    deg = np.diff(adj.indptr)
+    chains = _chains(adj, np.flatnonzero(deg >= 2))
+    return Neighborhoods(n, adj, _EMPTY3, chains, deg == 1, "curve")
+
+
+def mesh_neighborhoods(
+    faces: NDArray[np.int64], n: int, edges: NDArray[np.int64] | None = None
+) -> Neighborhoods:
+    """1-ring neighbourhoods of a triangle mesh (report section 4.3).
+
+    Duplicate faces are merged. Vertices referenced by no face keep the neighbours given by
+    ``edges`` (mixed input) or none (they pass through smoothing unchanged).
+
+    Parameters
+    ----------
+    faces : ndarray, shape (m, 3)
+        Triangles.
+    n : int
+        Number of points.
+    edges : ndarray, shape (k, 2), optional
+        Extra edges for vertices outside every face.
+
+    Returns
+    -------
+    Neighborhoods
+        Boundary vertices are those on an edge used by exactly one (distinct) face.
+    """
+    faces = unique_faces(faces)
+    wedges = np.concatenate([faces, faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
+    i = np.concatenate([wedges[:, 0], wedges[:, 0]])
+    j = np.concatenate([wedges[:, 1], wedges[:, 2]])
+    adj = _adjacency(i, j, n)
+    # boundary: undirected edges used by exactly one face
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    boundary = np.zeros(n, dtype=bool)
+    boundary[uniq[counts == 1].ravel()] = True
+    chains = _EMPTY3
+    if edges is not None and len(edges):
+        in_face = np.zeros(n, dtype=bool)
+        in_face[faces.ravel()] = True
+        keep = ~in_face[edges[:, 0]] | ~in_face[edges[:, 1]]
+        eg = _edge_graph(edges[keep], n)
+        free_rows = np.flatnonzero(~in_face)
+        mask = sp.diags(np.isin(np.arange(n), free_rows).astype(float))
+        eg = (mask @ eg).tocsr()
+        eg.eliminate_zeros()
+        adj = (adj + eg).tocsr()
+        adj.data[:] = 1.0
+        deg_e = np.diff(eg.indptr)
+        boundary |= deg_e == 1
+        chains = _chains(eg, np.flatnonzero(deg_e >= 2))
+    return Neighborhoods(n, adj, wedges.astype(np.int64), chains, boundary, "mesh")
+
+
+def _knn(points: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """k nearest neighbours of every point (itself excluded); ``-1`` pads small clouds."""
+    n = points.shape[0]
+    kk = min(k, n - 1)
+    if kk < 1:
+        return np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int64)
+    dist, idx = cKDTree(points).query(points, k=kk + 1)
+    dist, idx = dist[:, 1:], idx[:, 1:].astype(np.int64)
+    # exact duplicates of a point may come before the point itself: drop self explicitly
+    self_hit = idx == np.arange(n)[:, None]
+    if self_hit.any():
+        dist2, idx2 = cKDTree(points).query(points, k=kk + 2)
+        keep = idx2 != np.arange(n)[:, None]
+        order = np.argsort(~keep, axis=1, kind="stable")[:, :kk]
+        idx = np.take_along_axis(idx2, order, axis=1).astype(np.int64)
+        dist = np.take_along_axis(dist2, order, axis=1)
+    return dist, idx
+
+
+def cloud_knn_neighborhoods(points: NDArray[np.float64], k: int) -> Neighborhoods:
+    """k-nearest-neighbour neighbourhoods of a point cloud (directed).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, s)
+    k : int
+        Neighbours per point.
+    """
+    n = points.shape[0]
+    _, idx = _knn(points, k)
+    rows = np.repeat(np.arange(n), idx.shape[1])
+    adj = _adjacency(rows, idx.ravel(), n)
+    return Neighborhoods(n, adj, _EMPTY3, _EMPTY3, np.zeros(n, dtype=bool), "knn")
+
+
+def _local_frames(
+    points: NDArray[np.float64], idx: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Principal directions and variances of each point with its neighbours (least squares)."""
+    nbh = np.concatenate([points[:, None, :], points[idx]], axis=1)  # (n, k+1, s)
+    centered = nbh - nbh.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centered, centered) / nbh.shape[1]
+    evals, evecs = np.linalg.eigh(cov)  # ascending
+    return evals[:, ::-1], evecs[:, :, ::-1]
+
+
+def _polar_hull_fans(
+    q: NDArray[np.float64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+    """Delaunay 1-rings of the origin among planar neighbours, for many points at once.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n, m, 2)
+        Neighbours of each point, relative to the point, in its tangent plane.
+
+    Returns
+    -------
+    order : ndarray, shape (n, m)
+        Neighbour slots in counter-clockwise fan order, ``-1`` padded.
+    count : ndarray, shape (n,)
+        Fan size per point.
+    open_fan : ndarray of bool, shape (n,)
+        True where the origin is on the hull (the point lies on the cloud's border).
+    """
+    n, m, _ = q.shape
+    r2 = np.einsum("nmi,nmi->nm", q, q)
+    valid = r2 > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(valid[..., None], 2.0 * q / r2[..., None], 0.0)
+    # candidate set: the m polar points plus the origin (slot m)
+    cand = np.concatenate([a, np.zeros((n, 1, 2))], axis=1)
+    cvalid = np.concatenate([valid, np.ones((n, 1), dtype=bool)], axis=1)
+    norms = np.where(cvalid, np.einsum("nmi,nmi->nm", cand, cand), -1.0)
+    norms[:, m] = -1.0
+    start = np.argmax(norms, axis=1)
+    rows = np.arange(n)
+    has_any = valid.any(axis=1)
+    cur = start.copy()
+    sp_ = cand[rows, start]
+    direction = np.column_stack([-sp_[:, 1], sp_[:, 0]])  # CCW tangent of the circle |x| = |start|
+    on_hull = np.zeros((n, m + 1), dtype=bool)
+    on_hull[rows[has_any], start[has_any]] = True
+    order = np.full((n, m + 1), -1, dtype=np.int64)
+    order[:, 0] = np.where(has_any, start, -1)
+    active = has_any.copy()
+    for step in range(1, m + 2):
+        if not active.any():
+            break
+        ar = rows[active]
+        c = cand[ar, cur[ar]]
+        d = direction[ar]
+        v = cand[ar] - c[:, None, :]
+        cross = d[:, None, 0] * v[..., 1] - d[:, None, 1] * v[..., 0]
+        dot = np.einsum("ni,nmi->nm", d, v)
+        ang = np.mod(np.arctan2(cross, dot), 2 * np.pi)
+        dist = np.einsum("nmi,nmi->nm", v, v)
+        scale = np.maximum(dist.max(axis=1, keepdims=True), 1e-300)
+        bad = ~cvalid[ar] | (dist <= 1e-24 * scale)
+        ang = np.where(bad, np.inf, ang)
+        # smallest turn; among (near-)collinear candidates the farthest one
+        key = np.round(ang, 12) - dist / scale * 1e-13
+        nxt = np.argmin(key, axis=1)
+        done = (nxt == start[ar]) | on_hull[ar, nxt] | ~np.isfinite(ang[np.arange(ar.size), nxt])
+        go = ar[~done]
+        on_hull[go, nxt[~done]] = True
+        order[go, step] = nxt[~done]
+        direction[go] = cand[go, nxt[~done]] - cand[go, cur[go]]
+        cur[go] = nxt[~done]
+        active[ar[done]] = False
+    open_fan = on_hull[:, m]
+    # rotate each fan to start right after the origin (open fans), then drop the origin slot
+    lengths = (order >= 0).sum(axis=1)
+    fans = np.full((n, m), -1, dtype=np.int64)
+    count = np.zeros(n, dtype=np.int64)
+    for length in np.unique(lengths[lengths > 0]):
+        for with_origin in (False, True):
+            sel = np.flatnonzero((lengths == length) & (open_fan == with_origin))
+            if sel.size == 0:
+                continue
+            o = order[sel, :length]
+            if with_origin:
+                shift = np.argmax(o == m, axis=1) + 1
+                roll = (np.arange(length)[None, :] + shift[:, None]) % length
+                o = np.take_along_axis(o, roll, axis=1)[:, : length - 1]
+            fans[sel, : o.shape[1]] = o
+            count[sel] = o.shape[1]
+    return fans, count, open_fan
+
+
+def cloud_delaunay_neighborhoods(
+    points: NDArray[np.float64], k: int, line_ratio: float = 0.05
+) -> Neighborhoods:
+    """Delaunay neighbourhoods of a point cloud (report section 4.4).
+
+    The k nearest neighbours of each point are projected onto their least-squares plane
+    (surface samples) or line (curve samples); the 1-ring of the point in the Delaunay
+    triangulation of the projection is its neighbourhood. A cloud is taken as curve samples when
+    the median ratio of the second to the first principal variance of the neighbourhoods is
+    below ``line_ratio`` (and always for ``s == 1``).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, s)
+    k : int
+        Neighbours considered per point.
+    line_ratio : float
+        Threshold for telling curve samples from surface samples.
+
+    Returns
+    -------
+    Neighborhoods
+        Surface samples get fans (wedges) and boundary flags for open fans; curve samples get
+        chains (predecessor, successor along the local line).
+    """
+    n, s = points.shape
+    dist, idx = _knn(points, k)
+    if idx.shape[1] == 0:
+        empty = _adjacency(np.zeros(0, np.int64), np.zeros(0, np.int64), n)
+        return Neighborhoods(n, empty, _EMPTY3, _EMPTY3, np.zeros(n, dtype=bool), "delaunay")
+    evals, evecs = _local_frames(points, idx)
+    rel = points[idx] - points[:, None, :]  # (n, k, s)
+    curve_like = s == 1 or float(np.median(evals[:, 1] / np.maximum(evals[:, 0], 1e-300))) < (
+        line_ratio
+    )
+    rows = np.arange(n)
+    if curve_like:
+        t = np.einsum("nks,ns->nk", rel, evecs[:, :, 0])
+        t = np.where(dist > 0, t, np.nan)
+        neg = np.where(t < 0, t, -np.inf)
+        pos = np.where(t > 0, t, np.inf)
+        prev = idx[rows, np.argmax(neg, axis=1)]
+        nxt = idx[rows, np.argmin(pos, axis=1)]
+        has_prev = np.isfinite(neg.max(axis=1))
+        has_next = np.isfinite(pos.min(axis=1))
+        i = np.concatenate([rows[has_prev], rows[has_next]])
+        j = np.concatenate([prev[has_prev], nxt[has_next]])
+        adj = _adjacency(i, j, n)
+        both = has_prev & has_next
+        chains = np.column_stack([rows[both], prev[both], nxt[both]]).astype(np.int64)
+        return Neighborhoods(n, adj, _EMPTY3, chains, has_prev ^ has_next, "delaunay")
+    q = np.stack(
+        [np.einsum("nks,ns->nk", rel, evecs[:, :, c]) for c in (0, 1)],
+        axis=-1,
+    )
+    q = np.where((dist > 0)[..., None], q, 0.0)
+    fans, count, open_fan = _polar_hull_fans(q)
+    slot_ok = fans >= 0
+    nb = np.where(slot_ok, idx[rows[:, None], np.maximum(fans, 0)], -1)
+    i = np.repeat(rows, slot_ok.sum(axis=1))
+    adj = _adjacency(i, nb[slot_ok], n)
+    # wedges between consecutive fan neighbours; closed fans wrap around
+    w_i, w_j, w_k = [], [], []
+    for t in range(fans.shape[1]):
+        closing = t + 1 == count  # last slot: wraps to slot 0 for closed fans
+        ok = (t < count) & (~closing | (~open_fan & (count >= 3)))
+        sel = rows[ok]
+        w_i.append(sel)
+        w_j.append(nb[sel, t])
+        w_k.append(nb[sel, np.where(closing[sel], 0, t + 1)])
+    wedges = np.column_stack([np.concatenate(w_i), np.concatenate(w_j), np.concatenate(w_k)])
+    wedges = wedges[(wedges[:, 1] != wedges[:, 2])].astype(np.int64)
+    return Neighborhoods(n, adj, wedges, _EMPTY3, open_fan, "delaunay")

@@ -1,0 +1,142 @@
+"""Finding lambda so that the deviation ``phi(lambda)`` equals the smoothing factor ``tau``.
+
+``phi(lambda) = ||D(X(lambda) - P)||_F^2`` (eq. 15) is convex and strictly decreasing, from
+``phi(0) = ||D(P - P_bar)||_F^2`` (eq. 14) to ``phi(inf) = 0``. Section 6.3 of the report finds
+``phi(lambda*) = tau`` by rational interpolation as in Dierckx's FITPACK (``fprati``): through
+three points ``(lambda_1, f_1), (lambda_2, f_2), (lambda_3, f_3)`` with ``f = phi - tau``, starting
+from ``lambda_1 = 0``, ``lambda_3 = inf`` and ``lambda_2 = ||L^T L||_F / ||D^2||_F``, fit
+``R(lambda) = (u lambda + v) / (lambda + w)`` and take its root as the next lambda; the bracket
+``f_1 > 0 > f_3`` is kept. A step that leaves the bracket is replaced by a (geometric) bisection,
+so the search always converges.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+__all__ = ["LambdaSearch", "initial_lambda", "rational_step", "search_lambda"]
+
+
+@dataclass
+class LambdaSearch:
+    """Outcome of the lambda search.
+
+    Attributes
+    ----------
+    lam, phi : float
+        The last lambda tried and its deviation.
+    converged : bool
+        ``|phi - tau| / tau <= tolerance``.
+    history : list of (float, float)
+        Every ``(lambda, phi)`` evaluated, in order.
+    """
+
+    lam: float
+    phi: float
+    converged: bool
+    history: list[tuple[float, float]] = field(default_factory=list)
+
+    @property
+    def iterations(self) -> int:
+        return len(self.history)
+
+
+def initial_lambda(m_fro: float, d2_fro: float) -> float:
+    """``lambda_2 = ||L^T L||_F / ||D^2||_F`` (report section 6.3, after [14])."""
+    if m_fro > 0 and d2_fro > 0:
+        return m_fro / d2_fro
+    return 1.0
+
+
+def rational_step(p1: float, f1: float, p2: float, f2: float, p3: float, f3: float) -> float:
+    """Root of the rational ``R(p) = (u p + v) / (p + w)`` through three points.
+
+    ``p3 = inf`` is allowed (then ``R(inf) = f3``). Same formulas as FITPACK's ``fprati``.
+
+    Parameters
+    ----------
+    p1, f1, p2, f2, p3, f3 : float
+        Abscissae ``p1 < p2 < p3`` and values ``f_i = phi(p_i) - tau``.
+
+    Returns
+    -------
+    float
+        The next lambda (may be outside the bracket or not finite; the caller checks).
+    """
+    if math.isinf(p3):
+        den = (f1 - f2) * f3
+        return (p1 * (f1 - f3) * f2 - p2 * (f2 - f3) * f1) / den if den != 0 else math.nan
+    h1 = f1 * (f2 - f3)
+    h2 = f2 * (f3 - f1)
+    h3 = f3 * (f1 - f2)
+    den = p1 * h1 + p2 * h2 + p3 * h3
+    return -(p1 * p2 * h3 + p2 * p3 * h1 + p3 * p1 * h2) / den if den != 0 else math.nan
+
+
+def _bisect(p1: float, p3: float, p2: float) -> float:
+    if math.isinf(p3):
+        return max(p2, p1) * 10.0
+    if p1 <= 0.0:
+        return min(p2, p3) / 10.0
+    return math.sqrt(p1 * p3)
+
+
+def search_lambda(
+    phi_of: Callable[[float], float],
+    tau: float,
+    phi0: float,
+    lam0: float,
+    tolerance: float,
+    max_iterations: int,
+) -> LambdaSearch:
+    """Find lambda with ``|phi(lambda) - tau| / tau <= tolerance`` (report section 6.3).
+
+    Parameters
+    ----------
+    phi_of : callable
+        ``phi_of(lam)`` solves eq. (4) at ``lam`` and returns ``phi(lam)`` (eq. 15).
+    tau : float
+        Target, ``0 < tau < phi0``.
+    phi0 : float
+        ``phi(0)``.
+    lam0 : float
+        First lambda to try (``lambda_2``).
+    tolerance : float
+        ``xi``.
+    max_iterations : int
+        Cap on evaluations of ``phi_of``.
+
+    Returns
+    -------
+    LambdaSearch
+        The best lambda found; ``converged`` is false when the cap was hit.
+    """
+    p1, f1 = 0.0, phi0 - tau
+    p3, f3 = math.inf, -tau
+    p2 = lam0
+    history: list[tuple[float, float]] = []
+    best: tuple[float, float] | None = None
+    for _ in range(max_iterations):
+        phi2 = phi_of(p2)
+        history.append((p2, phi2))
+        f2 = phi2 - tau
+        if best is None or abs(f2) < abs(best[1] - tau):
+            best = (p2, phi2)
+        if abs(f2) <= tolerance * tau:
+            return LambdaSearch(p2, phi2, True, history)
+        p = rational_step(p1, f1, p2, f2, p3, f3)
+        # keep the bracket f1 > 0 > f3 around the root
+        if f2 < 0:
+            p3, f3 = p2, f2
+        else:
+            p1, f1 = p2, f2
+        if not (math.isfinite(p) and p1 < p < p3) or p in (p1, p3):
+            p = _bisect(p1, p3, p2)
+        if p1 > 0 and not math.isinf(p3) and p3 - p1 <= 1e-14 * p3:
+            break  # bracket collapsed: phi is flat here, tau cannot be met more closely
+        p2 = p
+    assert best is not None
+    lam, phi = best
+    return LambdaSearch(lam, phi, False, history)
