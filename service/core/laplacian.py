@@ -3,7 +3,8 @@
 * ``L^(n) = I - W``: normalized, unit diagonal (eq. 1) for every point with neighbours; rows of
   points without neighbours are zero, so such points pass through smoothing unchanged.
 * ``L^(kappa)_i = g(||L^(n)_i P||) kappa_i L^(n)_i`` (eqs. 7-9): curvature scaled, with the Huber
-  function ``g`` of eq. (8).
+  function ``g`` of eq. (8) (its threshold floored relative to the data, see
+  :func:`effective_sigma_h`).
 * ``L^(f)_i = g(||L^(n)_i P||) psi(kappa~_i) L^(n)_i`` (eq. 10): feature preserving, with the
   Gaussian ``psi(k) = exp(-k^2 / (2 sigma_f^2))`` on curvatures rescaled to [0, 1].
 """
@@ -16,12 +17,24 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-__all__ = ["huber_g", "laplacian", "normalized_laplacian", "row_scales"]
+__all__ = ["effective_sigma_h", "huber_g", "laplacian", "normalized_laplacian", "row_scales"]
 
 
 def huber_g(x: NDArray[np.float64], sigma_h: float) -> NDArray[np.float64]:
     """Huber edge-stopping function of eq. (8): ``1/sigma_h`` for ``x <= sigma_h``, else ``1/x``."""
     return 1.0 / np.maximum(x, sigma_h)
+
+
+def effective_sigma_h(norms: NDArray[np.float64], sigma_h: float) -> float:
+    """Huber threshold actually used: ``max(sigma_h, 1e-3 * median ||L^(n)_i P||)``.
+
+    The report's absolute ``sigma_h = 1e-7`` assumes data of unit size. Exactly flat or
+    duplicated points have ``||L^(n)_i P|| = 0`` and would get a row ``1e7`` times larger than a
+    typical one, making eq. (17) numerically singular; the relative floor keeps the ratio of row
+    scales below about 1e3 and makes the result independent of the unit of the coordinates.
+    """
+    nz = norms[norms > 0]
+    return max(sigma_h, 1e-3 * float(np.median(nz))) if nz.size else sigma_h
 
 
 def normalized_laplacian(W: sp.csr_matrix) -> sp.csr_matrix:
@@ -56,7 +69,8 @@ def row_scales(
     -------
     ndarray, shape (n,)
     """
-    g = huber_g(np.linalg.norm(Ln @ points, axis=1), sigma_h)
+    norms = np.linalg.norm(Ln @ points, axis=1)
+    g = huber_g(norms, effective_sigma_h(norms, sigma_h))
     if variant == "curvature":
         return g * kappa
     lo, hi = float(kappa.min()), float(kappa.max())
@@ -94,4 +108,6 @@ def laplacian(
     if kappa is None:
         raise ValueError("the scaled Laplacians need curvature estimates")
     scales = row_scales(Ln, points, variant, kappa, sigma_h, sigma_f)
-    return (sp.diags(scales) @ Ln).tocsr()
+    out = (sp.diags(scales) @ Ln).tocsr()
+    out.eliminate_zeros()
+    return out

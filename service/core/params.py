@@ -83,9 +83,7 @@ class SmoothingParams(BaseModel):
         default="delaunay",
         description="Point clouds only: Delaunay neighbourhoods (section 4.4) or plain k-NN.",
     )
-    k: int = Field(
-        default=12, ge=3, le=64, description="Point clouds only: neighbours per point."
-    )
+    k: int = Field(default=12, ge=3, le=64, description="Point clouds only: neighbours per point.")
     sigma_h: float = Field(
         default=1e-7, gt=0, allow_inf_nan=False, description="Huber threshold of eq. (8)."
     )

@@ -215,6 +215,10 @@ def smooth(
         fixed = fixed | nb.boundary
     if params.preserve_volume:
         _check_preservable(geometry, fixed)
+    n_fixed = int(fixed.sum())
+    # points without any coupling pass through bit-identical: eliminate them like fixed points
+    coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=n) > 0)
+    fixed = fixed | ~coupled
     omega = geometry.omega()
     L_F, L_C, free, fixed_idx = split_fixed(L, fixed)
     w2_free = omega[free] ** 2
@@ -252,7 +256,7 @@ def smooth(
             timings,
             "none",
             scheme,
-            int(fixed.sum()),
+            n_fixed,
             [*notes, "nothing to smooth: the input is returned unchanged"],
             t_start,
         )
@@ -342,7 +346,7 @@ def smooth(
         timings,
         eq.method,
         scheme,
-        int(fixed.sum()),
+        n_fixed,
         notes,
         t_start,
         volume_scale,
