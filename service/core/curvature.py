@@ -5,7 +5,8 @@
   value over pairs of neighbours; endpoints get 0.
 * Meshes and Delaunay neighbourhoods of point clouds: the magnitude of the discrete mean
   curvature normal (eq. 11), ``|(1 / 4A) sum_j (cot beta_j + cot gamma_j)(p_i - p_j)|`` with ``A``
-  the area of the triangles around ``p_i``.
+  the barycentric area of ``p_i`` (a third of the area of its triangles), which makes it the
+  mean curvature ``H`` (``1/r`` on a sphere).
 
 Zero-area triangles and zero-length edges contribute nothing; the result is always finite.
 """
@@ -81,8 +82,34 @@ def mean_curvature_normal(
     np.add.at(out, w[:, 0], contrib)
     ring_area = np.zeros(n)
     np.add.at(ring_area, w[:, 0], area[ok])
-    scale = np.divide(1.0, 4.0 * ring_area, out=np.zeros(n), where=ring_area > 0)
+    # A of eq. (11) is the barycentric area (a third of the ring), so that |kappa n| is the
+    # mean curvature H (1/r on a sphere), on the same scale as the polylines' 1/r
+    scale = np.divide(3.0, 4.0 * ring_area, out=np.zeros(n), where=ring_area > 0)
     return out * scale[:, None]
+
+
+def _normal_part(
+    points: NDArray[np.float64], K: NDArray[np.float64], rows: NDArray[np.int64], nb: Neighborhoods
+) -> NDArray[np.float64]:
+    """Component of ``K[rows]`` normal to the tangent plane at each boundary vertex.
+
+    At a boundary vertex eq. (11) also contains an in-plane (geodesic) term that is unbounded on
+    sliver triangles; the tangent plane is spanned by the two principal directions of the
+    vertex's neighbours (relative to the vertex).
+    """
+    adj = nb.adjacency
+    deg = np.diff(adj.indptr)[rows]
+    width = int(deg.max()) if rows.size else 0
+    rel = np.zeros((rows.size, max(width, 1), points.shape[1]))
+    for t in range(width):
+        has = deg > t
+        nbr = adj.indices[adj.indptr[rows[has]] + t]
+        rel[has, t] = points[nbr] - points[rows[has]]
+    scatter = np.einsum("bki,bkj->bij", rel, rel)
+    _, vecs = np.linalg.eigh(scatter)
+    T = vecs[:, :, -2:]  # two largest principal directions
+    k = K[rows]
+    return k - np.einsum("bij,bj->bi", T, np.einsum("bji,bj->bi", T, k))
 
 
 def curvature(points: NDArray[np.float64], nb: Neighborhoods) -> NDArray[np.float64]:
@@ -100,7 +127,11 @@ def curvature(points: NDArray[np.float64], nb: Neighborhoods) -> NDArray[np.floa
     """
     kappa = osculating_curvature(points, nb.chains, nb.n)
     if len(nb.wedges):
-        mc = np.linalg.norm(mean_curvature_normal(points, nb.wedges, nb.n), axis=1)
+        K = mean_curvature_normal(points, nb.wedges, nb.n)
+        edge = np.flatnonzero(nb.boundary & (np.diff(nb.adjacency.indptr) >= 2))
+        if edge.size and points.shape[1] > 2:
+            K[edge] = _normal_part(points, K, edge, nb)
+        mc = np.linalg.norm(K, axis=1)
         has_wedge = np.zeros(nb.n, dtype=bool)
         has_wedge[nb.wedges[:, 0]] = True
         kappa = np.where(has_wedge, mc, kappa)
