@@ -40,6 +40,7 @@ openapi: setup
 	$(BIN)/python -m service.api.openapi_export openapi/openapi.json
 
 bench: setup
+	scripts/install-system-deps.sh --bench
 	$(BIN)/pip install -q -e '.[bench]'
 	$(BIN)/python -m benchmarks
 

@@ -5,14 +5,19 @@
 #
 #   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, Redis)
 #   scripts/install-system-deps.sh --runtime  only what the running service needs (Docker final stage)
+#   scripts/install-system-deps.sh --bench    also what the peer libraries of benchmarks/ need
 set -euo pipefail
 
 build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc python3-dev python3-venv redis-server)
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
 pkgs=("${build_pkgs[@]}")
-if [[ "${1:-}" == "--runtime" ]]; then
-  pkgs=("${runtime_pkgs[@]}")
-fi
+bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
+case "${1:-}" in
+  --runtime) pkgs=("${runtime_pkgs[@]}") ;;
+  --bench) pkgs+=("${bench_pkgs[@]}") ;;
+  "") ;;
+  *) echo "usage: $0 [--runtime|--bench]" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${pkgs[@]}"; do
