@@ -8,7 +8,7 @@
 #   scripts/install-system-deps.sh --bench    also what the peer libraries of benchmarks/ need
 set -euo pipefail
 
-build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc python3-dev python3-venv redis-server)
+build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc python3-dev python3-venv)
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
 pkgs=("${build_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
