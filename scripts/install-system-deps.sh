@@ -3,7 +3,7 @@
 # Used by the Makefile (make setup / run / test), .ci/run and the Dockerfile, so CI exercises the
 # same install path as the Docker image. Idempotent: does nothing when everything is present.
 #
-#   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, Redis)
+#   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, venv)
 #   scripts/install-system-deps.sh --runtime  only what the running service needs (Docker final stage)
 #   scripts/install-system-deps.sh --bench    also what the peer libraries of benchmarks/ need
 set -euo pipefail
