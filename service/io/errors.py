@@ -1,0 +1,63 @@
+"""Errors raised while reading or writing geometry files.
+
+A :class:`FormatError` means the bytes are not a valid file of the format (bad header, truncated
+data, a non-numeric token, an index outside the vertex list, ...). An :class:`UnsupportedFormat`
+means geosmooth does not read or write the format at all (GPX, GeoJSON, DXF, unknown extensions);
+its message says what to convert the data to. The HTTP layer maps ``UnsupportedFormat`` to 415.
+
+Both carry the same machine-readable surface as the engine's errors (``.message``, ``.field``,
+``.code``, ``.to_dict()``) so callers can report them uniformly, but they are not
+``GeosmoothError`` subclasses: a malformed file is not a geometry problem.
+"""
+
+from __future__ import annotations
+
+__all__ = ["FormatError", "UnsupportedFormat"]
+
+
+class FormatError(ValueError):
+    """A malformed file: one line saying what is wrong and where.
+
+    Parameters
+    ----------
+    message : str
+        Human readable, one line. For text formats it starts with the line number.
+    fmt : str, optional
+        The format being read or written (``"ply"``, ``"obj"``, ``"xyz"``, ``"json"``), if known.
+    line : int, optional
+        1-based line number of the offending line (text formats only).
+
+    Attributes
+    ----------
+    message, fmt, line
+        As given.
+    field : str
+        Always ``"file"`` (the part of a request at fault).
+    code : str
+        ``"format-error"`` (``"unsupported-format"`` for :class:`UnsupportedFormat`).
+    """
+
+    code: str = "format-error"
+    field: str = "file"
+
+    def __init__(self, message: str, *, fmt: str | None = None, line: int | None = None) -> None:
+        message = " ".join(message.split())  # always one line
+        super().__init__(message)
+        self.message = message
+        self.fmt = fmt
+        self.line = int(line) if line is not None else None
+
+    def to_dict(self) -> dict[str, object]:
+        """Machine-readable form (used in job records and problem details)."""
+        out: dict[str, object] = {"code": self.code, "message": self.message, "field": self.field}
+        if self.fmt is not None:
+            out["format"] = self.fmt
+        if self.line is not None:
+            out["line"] = self.line
+        return out
+
+
+class UnsupportedFormat(FormatError):
+    """A format geosmooth does not read or write; the message says what to convert to."""
+
+    code = "unsupported-format"
