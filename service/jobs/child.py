@@ -1,0 +1,184 @@
+"""Entry point of a worker process: one process runs one job run, then exits.
+
+The process
+
+1. dies with its server, three ways: a watchdog thread waits on multiprocessing's parent
+   sentinel (a pipe the server holds: it reads EOF the moment the server dies, however it
+   dies) and SIGKILLs the process; ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` on Linux makes the
+   kernel do the same when the parent dies, even while the job holds the GIL in C code; and the
+   copy of the forkserver's "server alive" pipe that forkserver children inherit is closed, so
+   the forkserver (the parent under the forkserver start method) exits with the server and
+   does not wait for its children to finish first;
+2. leaves the server's session (``setsid``) and ignores SIGINT, so a Ctrl-C or a terminal hangup
+   aimed at the server does not kill the job mid-run (the server's ``stop()`` requeues it);
+3. checks that its run still holds the job (``owner`` + ``attempt``); every progress write and the
+   final write are conditional on that too, so a stale run (an orphan on a system without
+   ``PDEATHSIG``, a run whose server was presumed dead) can never overwrite a newer run;
+4. runs the job function and records ``succeeded`` (report) or ``failed`` (problem).
+
+If it dies without recording (segfault, ``os._exit``, SIGKILL), the server records the crash.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import importlib
+import json
+import multiprocessing
+import multiprocessing.connection
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from service.jobs import problems
+from service.jobs.files import JobFiles
+from service.jobs.runner import JobContext, RunLost
+from service.jobs.store import JobStore
+
+__all__ = ["RunSpec", "load_runner", "main", "set_parent_death_signal"]
+
+_PR_SET_PDEATHSIG = 1
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """What a worker process needs (pickled to it; no arrays, only names and paths)."""
+
+    job_id: str
+    fmt: str
+    attempt: int
+    owner: str
+    data_dir: str
+    db_path: str
+    runner: str
+    server_pid: int
+    progress_interval: float = 0.2
+
+
+def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
+    """Ask Linux to send ``sig`` to this process when its parent dies; ``False`` elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):  # pragma: no cover - non-glibc oddities
+        return False
+
+
+def load_runner(path: str) -> Callable[[JobContext], dict[str, Any]]:
+    """Import a job function from ``"package.module:function"``."""
+    module_name, _, attr = path.partition(":")
+    if not attr:
+        raise ValueError(f"runner must look like 'module:function', got {path!r}")
+    fn = getattr(importlib.import_module(module_name), attr)
+    if not callable(fn):
+        raise TypeError(f"runner {path!r} is not callable")
+    return fn  # type: ignore[no-any-return]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - exists, owned by someone else
+        return True
+    return True
+
+
+def _release_forkserver() -> None:
+    """Close this process's copy of the forkserver's liveness pipe (forkserver children only).
+
+    The forkserver exits when every write end of that pipe is closed; each forked child gets
+    one, so without this the forkserver (and, with PDEATHSIG, its children) would outlive a
+    killed server for as long as any job runs.
+    """
+    try:
+        from multiprocessing import forkserver
+
+        server = forkserver._forkserver  # type: ignore[attr-defined]
+        fd = server._forkserver_alive_fd
+    except AttributeError:  # pragma: no cover - other Python versions
+        return
+    if fd is not None:  # only set in children of a forkserver
+        with contextlib.suppress(OSError):
+            os.close(fd)
+        server._forkserver_alive_fd = None
+
+
+def _watch_parent() -> None:
+    """SIGKILL this process as soon as the process that started it is gone."""
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.sentinel is None:  # pragma: no cover - not a multiprocessing child
+        return
+    sentinel = parent.sentinel
+
+    def watch() -> None:
+        multiprocessing.connection.wait([sentinel])
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    threading.Thread(target=watch, name="geosmooth-parent-watch", daemon=True).start()
+
+
+def main(spec: RunSpec) -> None:
+    """Run one job run and record its outcome (the target of the worker process)."""
+    set_parent_death_signal()
+    _release_forkserver()
+    _watch_parent()
+    if not _alive(spec.server_pid):  # the server died before the signals were armed
+        os._exit(0)
+    with contextlib.suppress(OSError):  # already a session leader
+        os.setsid()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    store = JobStore(Path(spec.db_path), create=False)
+    try:
+        _run(spec, store)
+    finally:
+        store.close()
+
+
+def _run(spec: RunSpec, store: JobStore) -> None:
+    if not store.owns(spec.job_id, spec.owner, spec.attempt):
+        return
+    files = JobFiles(Path(spec.data_dir))
+
+    def report_progress(
+        iteration: int, lam: float, phi: float, tau: float | None, rel: float | None
+    ) -> bool:
+        return store.progress(spec.job_id, spec.owner, spec.attempt, iteration, lam, phi, tau, rel)
+
+    started = time.perf_counter()
+    try:
+        from service.core.params import SmoothingParams
+
+        rec = store.get(spec.job_id, with_report=False)
+        if rec is None:
+            return
+        ctx = JobContext(
+            job_id=spec.job_id,
+            job_dir=files.dir(spec.job_id),
+            input_path=files.input(spec.job_id, spec.fmt),
+            fmt=spec.fmt,
+            params=SmoothingParams.model_validate(rec.params),
+            report_progress=report_progress,
+            progress_interval=spec.progress_interval,
+        )
+        report = load_runner(spec.runner)(ctx)
+        elapsed = time.perf_counter() - started
+        if not store.owns(spec.job_id, spec.owner, spec.attempt):
+            return
+        ctx.write("report.json", json.dumps(report, indent=1).encode())
+        store.succeed(spec.job_id, spec.owner, spec.attempt, report, elapsed)
+    except RunLost:
+        return
+    except BaseException as exc:
+        store.fail(spec.job_id, spec.owner, spec.attempt, problems.from_exception(exc))

@@ -1,0 +1,112 @@
+"""Problems recorded on failed jobs.
+
+A problem is a JSON-ready dict with the members of the API's problem details, minus the HTTP
+status: ``code``, ``title``, ``detail`` and, when they apply, ``field``, ``indices`` and the
+error's own extras (e.g. ``valid_range`` of ``tau-out-of-range``). No traceback ever gets in:
+an unexpected exception is reduced to its class name and the first line of its message.
+"""
+
+from __future__ import annotations
+
+import signal
+from typing import Any
+
+__all__ = [
+    "attempts_exhausted",
+    "crashed",
+    "from_exception",
+    "timed_out",
+]
+
+
+def _one_line(text: str, limit: int = 300) -> str:
+    line = " ".join(str(text).split())
+    return line if len(line) <= limit else line[: limit - 1] + "…"
+
+
+def _from_typed(exc: Exception, title: str) -> dict[str, Any]:
+    info = dict(exc.to_dict())  # type: ignore[attr-defined]
+    out: dict[str, Any] = {
+        "code": info.pop("code", "invalid-input"),
+        "title": title,
+        "detail": _one_line(str(info.pop("message", exc))),
+    }
+    out.update(info)
+    return out
+
+
+def from_exception(exc: BaseException) -> dict[str, Any]:
+    """The problem for an exception raised by a job.
+
+    Core errors (:class:`~service.core.errors.GeosmoothError`) and io format errors keep their
+    code, field and indices; anything else becomes ``internal-error`` with one line of detail.
+    """
+    from service.core.errors import GeometryError, GeosmoothError, ParameterError, SolverError
+
+    try:
+        from service.io.errors import FormatError, UnsupportedFormat
+    except ImportError:  # pragma: no cover - io is always installed with the service
+        FormatError = UnsupportedFormat = ()  # type: ignore[assignment,misc]
+
+    if isinstance(exc, UnsupportedFormat):
+        return _from_typed(exc, "Unsupported format")  # type: ignore[arg-type]
+    if isinstance(exc, FormatError):
+        return _from_typed(exc, "Malformed input file")  # type: ignore[arg-type]
+    if isinstance(exc, GeosmoothError):
+        titles = (
+            (GeometryError, "Invalid geometry"),
+            (ParameterError, "Invalid parameters"),
+            (SolverError, "The input cannot be solved"),
+        )
+        title = next((t for cls, t in titles if isinstance(exc, cls)), "Invalid input")
+        return _from_typed(exc, title)
+    if isinstance(exc, MemoryError):
+        return {
+            "code": "out-of-memory",
+            "title": "Out of memory",
+            "detail": "The job ran out of memory.",
+        }
+    message = _one_line(str(exc))
+    return {
+        "code": "internal-error",
+        "title": "Internal error",
+        "detail": f"{type(exc).__name__}: {message}" if message else type(exc).__name__,
+    }
+
+
+def crashed(exitcode: int | None) -> dict[str, Any]:
+    """The problem for a worker process that died without recording an outcome."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = f"signal {-exitcode}"
+        detail = f"The worker process was killed by {name}"
+        if -exitcode == signal.SIGKILL:
+            detail += " (possibly out of memory)"
+    else:
+        detail = f"The worker process exited with code {exitcode}"
+    return {"code": "worker-crashed", "title": "Worker crashed", "detail": detail + "."}
+
+
+def timed_out(seconds: float) -> dict[str, Any]:
+    """The problem for a job killed at its time limit."""
+    return {
+        "code": "timeout",
+        "title": "Job timed out",
+        "detail": f"The job did not finish within {seconds:g} s and was stopped.",
+        "timeout": seconds,
+    }
+
+
+def attempts_exhausted(attempts: int) -> dict[str, Any]:
+    """The problem for a job whose runs were interrupted too often (a poison job)."""
+    return {
+        "code": "attempts-exhausted",
+        "title": "Job interrupted too often",
+        "detail": (
+            f"The job was interrupted {attempts} times (its server or worker stopped while it"
+            " ran) and was given up."
+        ),
+        "attempts": attempts,
+    }
