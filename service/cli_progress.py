@@ -1,0 +1,193 @@
+"""Terminal output of ``geosmooth smooth``: the lambda-search progress line and the summary.
+
+Everything here writes to a text stream (stderr in the CLI) so that stdout stays free for
+``-o -``. Nothing here imports numpy or the engine: the summary reads a
+:meth:`service.core.SmoothResult.report` dictionary.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any, TextIO
+
+__all__ = ["ProgressDisplay", "format_summary"]
+
+
+def _g(value: float | None, digits: int = 4) -> str:
+    """Format a float compactly in scientific notation (``-`` for ``None``)."""
+    if value is None:
+        return "-"
+    return f"{value:.{digits}e}"
+
+
+class ProgressDisplay:
+    """Progress of the lambda search, shown while :func:`service.core.smooth` iterates.
+
+    An instance is the ``progress(iteration, lam, phi)`` callback of ``smooth()``. On a
+    terminal it keeps one line up to date with carriage returns; on anything else (a pipe, a
+    log file, a CI job) it writes one plain line per iteration.
+
+    Parameters
+    ----------
+    stream : TextIO
+        Where to write (the CLI passes ``sys.stderr``).
+    tau : float or None
+        The requested smoothing factor, or ``None`` when lambda was given directly.
+    enabled : bool, optional
+        ``False`` (``--quiet``) writes nothing at all.
+    tty : bool or None, optional
+        Force terminal (``True``) or plain-line (``False``) mode; by default
+        ``stream.isatty()`` decides.
+    approximate_tau : bool, optional
+        ``tau`` is an estimate (``--rms`` before the engine knows which points it fixes);
+        shown as ``tau~``.
+    """
+
+    def __init__(
+        self,
+        stream: TextIO,
+        tau: float | None,
+        *,
+        enabled: bool = True,
+        tty: bool | None = None,
+        approximate_tau: bool = False,
+    ) -> None:
+        self.stream = stream
+        self.tau = tau
+        self.approximate_tau = approximate_tau
+        self.enabled = enabled
+        if tty is None:
+            isatty = getattr(stream, "isatty", None)
+            tty = bool(isatty()) if callable(isatty) else False
+        self.tty = tty
+        self.calls = 0
+        self._width = 0
+
+    def line(self, iteration: int, lam: float, phi: float) -> str:
+        """The text shown for one iteration (without line ending).
+
+        Parameters
+        ----------
+        iteration : int
+            1-based lambda iteration.
+        lam, phi : float
+            The lambda just tried and the deviation ``phi(lam)`` it gives (eq. 15).
+
+        Returns
+        -------
+        str
+        """
+        text = f"geosmooth: iteration {iteration:>2}  lambda={_g(lam)}  phi={_g(phi)}"
+        if self.tau is not None:
+            rel = abs(phi - self.tau) / self.tau
+            eq = "~" if self.approximate_tau else "="
+            text += f"  tau{eq}{_g(self.tau)}  rel.error{eq}{_g(rel, 2)}"
+        return text
+
+    def __call__(self, iteration: int, lam: float, phi: float) -> None:
+        self.calls += 1
+        if not self.enabled:
+            return
+        text = self.line(iteration, lam, phi)
+        if self.tty:
+            pad = max(0, self._width - len(text))
+            self.stream.write("\r" + text + " " * pad)
+            self._width = len(text)
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def finish(self) -> None:
+        """End the updating terminal line (call once the search is over or interrupted)."""
+        if self.enabled and self.tty and self._width:
+            self.stream.write("\n")
+            self.stream.flush()
+        self._width = 0
+
+
+def _timings(timings: Mapping[str, float]) -> str:
+    stages = [
+        f"{name} {float(sec):.3f}"
+        for name, sec in timings.items()
+        if name != "total" and isinstance(sec, int | float)
+    ]
+    return f" ({', '.join(stages)})" if stages else ""
+
+
+def format_summary(
+    report: Mapping[str, Any],
+    *,
+    source: str,
+    target: str,
+    wall_seconds: float,
+    tolerance: float | None = None,
+    details: Sequence[str] = (),
+    notes: Sequence[str] = (),
+) -> str:
+    """One paragraph describing a finished run, for stderr.
+
+    Parameters
+    ----------
+    report : mapping
+        :meth:`service.core.SmoothResult.report` of the run.
+    source, target : str
+        Input and output file names as the user gave them.
+    wall_seconds : float
+        Time measured by the CLI for reading, smoothing and writing (start-up excluded).
+    tolerance : float, optional
+        The relative tolerance xi the search used.
+    details : sequence of str
+        Facts about the input (``"16301 faces"``, ``"welded from 5096 vertices"``).
+    notes : sequence of str
+        What the reader repaired or ignored; one ``note:`` line each.
+
+    Returns
+    -------
+    str
+        Several lines, the last one without a trailing newline.
+    """
+    n_fixed = int(report.get("n_fixed") or 0)
+    lines = [
+        f"geosmooth: {source} -> {target}: {report.get('kind', 'geometry')}, "
+        f"{report['n_points']} points in {report['dimension']}-D"
+        + "".join(f", {d}" for d in details)
+        + (f" ({n_fixed} fixed)" if n_fixed else "")
+        + f"; laplacian {report['laplacian']}, weights {report['weights']}, "
+        f"solver {report['solver']}."
+    ]
+    iters = int(report["iterations"])
+    facts = int(report["factorizations"])
+    search = (
+        f"  lambda={_g(report['lambda'])} after {iters} iteration{'s' if iters != 1 else ''}"
+        f" ({facts} factorization{'s' if facts != 1 else ''})"
+    )
+    if report.get("tau") is not None:
+        state = "converged" if report.get("converged") else "NOT converged"
+        tol = f", tolerance {tolerance:g}" if tolerance is not None else ""
+        search += (
+            f": phi={_g(report['phi'])} vs tau={_g(report['tau'])}"
+            f" (relative error {_g(report.get('relative_error'), 2)}{tol}, {state})."
+        )
+    else:
+        search += f": phi={_g(report['phi'])} (lambda given, no search)."
+    lines.append(search)
+    lines.append(
+        f"  deviation RMS {_g(report['rms_deviation'], 3)}, max {_g(report['max_deviation'], 3)}"
+        + (
+            f"; volume scale {report['volume_scale']:.6f}"
+            if report.get("volume_scale") is not None
+            else ""
+        )
+        + "."
+    )
+    timings: Mapping[str, float] = report.get("timings") or {}
+    total = timings.get("total")
+    lines.append(
+        f"  time {wall_seconds:.2f} s (read, smooth, write)"
+        + (f", smoothing {float(total):.3f} s{_timings(timings)}" if total is not None else "")
+        + "."
+    )
+    lines.extend(f"  note: {n}" for n in notes)
+    warnings: Sequence[str] = report.get("warnings") or []
+    lines.extend(f"  warning: {w}" for w in warnings)
+    return "\n".join(lines)
