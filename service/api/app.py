@@ -1,0 +1,162 @@
+"""The FastAPI application factory."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import anyio
+from fastapi import FastAPI
+from starlette.concurrency import run_in_threadpool
+
+from service.api.limits import BodySizeLimitMiddleware
+from service.api.metrics import Metrics
+from service.api.problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
+from service.api.routers import health, jobs, smooth
+from service.api.schemas import (
+    COMPONENT_REFS,
+    GEOMETRY_EXAMPLE,
+    SmoothJsonRequest,
+    SmoothJsonResponse,
+)
+from service.api.settings import Settings, get_settings
+from service.io import GEOMETRY_JSON_SCHEMA
+from service.jobs.queue import JobQueue
+
+__all__ = ["create_app"]
+
+log = logging.getLogger("geosmooth.api")
+
+DESCRIPTION = """\
+Smoothing of meshes, polylines and point clouds with a deviation budget: the smoothed points X
+minimise ``||L X||^2`` subject to ``sum_i omega_i^2 ||x_i - p_i||^2 = tau`` (KU Leuven TW 451).
+
+* ``POST /v1/jobs`` queues a job (PLY, OBJ, XYZ or JSON upload, or JSON inline); poll
+  ``GET /v1/jobs/{id}``, then download ``/result`` and ``/report``.
+* ``POST /v1/smooth`` answers directly for small inputs.
+
+Every error is RFC 9457 ``application/problem+json`` with ``field`` naming the input at fault.
+"""
+
+
+def _make_queue(settings: Settings) -> JobQueue:
+    from service.jobs.local import LocalQueue  # imported here: export of the spec needs no queue
+
+    return LocalQueue(
+        data_dir=settings.data_dir,
+        workers=settings.workers,
+        job_timeout=settings.job_timeout,
+        result_ttl=settings.result_ttl,
+    )
+
+
+@asynccontextmanager
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    settings: Settings = app.state.settings
+    if app.state.queue is None:
+        app.state.queue = _make_queue(settings)
+    queue: JobQueue = app.state.queue
+    app.state.sync_limiter = anyio.CapacityLimiter(settings.workers)
+    await run_in_threadpool(queue.start)
+    app.state.queue_started = True
+    log.info("geosmooth ready: data_dir=%s workers=%d", settings.data_dir, settings.workers)
+    try:
+        yield
+    finally:
+        app.state.queue_started = False
+        await run_in_threadpool(queue.stop)
+
+
+def _openapi_with_extra_models(app: FastAPI) -> dict[str, Any]:
+    """The spec, plus the request/response models referenced from hand-written fragments."""
+    if app.openapi_schema is None:
+        spec = FastAPI.openapi(app)
+        schemas = spec.setdefault("components", {}).setdefault("schemas", {})
+        geometry = {k: v for k, v in GEOMETRY_JSON_SCHEMA.items() if k != "$schema"}
+        schemas.setdefault("GeometryJson", {**geometry, "examples": [GEOMETRY_EXAMPLE]})
+        for model in (SmoothJsonRequest, SmoothJsonResponse):
+            schema = model.model_json_schema(ref_template="#/components/schemas/{model}")
+            for name, sub in schema.pop("$defs", {}).items():
+                schemas.setdefault(name, sub)
+            schemas.setdefault(model.__name__, schema)
+        _link_components(schemas)
+        _problems_for_validation_errors(spec)
+        app.openapi_schema = spec
+    return app.openapi_schema
+
+
+def _link_components(schemas: dict[str, Any]) -> None:
+    """Point pass-through dict fields at the components documenting them (COMPONENT_REFS)."""
+    for (component, prop), target in COMPONENT_REFS.items():
+        field = schemas.get(component, {}).get("properties", {}).get(prop)
+        if field is None or target not in schemas:
+            continue
+        ref = {"$ref": f"#/components/schemas/{target}"}
+        nullable = any(alt.get("type") == "null" for alt in field.get("anyOf", []))
+        linked: dict[str, Any] = {"anyOf": [ref, {"type": "null"}]} if nullable else dict(ref)
+        for key in ("title", "description", "default"):
+            if key in field:
+                linked[key] = field[key]
+        schemas[component]["properties"][prop] = linked
+
+
+def _problems_for_validation_errors(spec: dict[str, Any]) -> None:
+    """Document FastAPI's automatic 422 answers as the problem details they really are."""
+    problem = {"$ref": "#/components/schemas/Problem"}
+    for operations in spec.get("paths", {}).values():
+        for operation in operations.values():
+            answer = operation.get("responses", {}).get("422")
+            if answer and "HTTPValidationError" in json.dumps(answer):
+                operation["responses"]["422"] = {
+                    "description": "Invalid request; ``field`` / ``errors`` name the input.",
+                    "content": {PROBLEM_MEDIA_TYPE: {"schema": problem}},
+                }
+    schemas = spec.get("components", {}).get("schemas", {})
+    schemas.pop("HTTPValidationError", None)
+    schemas.pop("ValidationError", None)
+
+
+def create_app(settings: Settings | None = None, queue: JobQueue | None = None) -> FastAPI:
+    """Build the geosmooth HTTP application.
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        Default: read from the environment (``GEOSMOOTH_*``).
+    queue : JobQueue, optional
+        Default: a :class:`~service.jobs.local.LocalQueue` on ``settings.data_dir``, created when
+        the app starts. Either way the app's lifespan starts and stops the queue.
+
+    Returns
+    -------
+    FastAPI
+        The app; nothing is started or written until its lifespan runs.
+    """
+    settings = settings or get_settings()
+    app = FastAPI(
+        title="geosmooth",
+        version="0.1.0",
+        summary="Smoothing of meshes, polylines and point clouds with a deviation budget.",
+        description=DESCRIPTION,
+        lifespan=_lifespan,
+        openapi_tags=[
+            {"name": "jobs", "description": "Asynchronous smoothing jobs."},
+            {"name": "smooth", "description": "Synchronous smoothing of small inputs."},
+            {"name": "operations", "description": "Health, readiness and metrics."},
+        ],
+    )
+    app.state.settings = settings
+    app.state.queue = queue
+    app.state.queue_started = False
+    app.state.metrics = Metrics(lambda: app.state.queue if app.state.queue_started else None)
+    app.state.sync_limiter = None
+    install_problem_handlers(app)
+    app.add_middleware(BodySizeLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    app.include_router(jobs.router)
+    app.include_router(smooth.router)
+    app.include_router(health.router)
+    app.openapi = lambda: _openapi_with_extra_models(app)  # type: ignore[method-assign]
+    return app

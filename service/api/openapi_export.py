@@ -1,0 +1,46 @@
+"""Write the OpenAPI document of the app: ``python -m service.api.openapi_export PATH``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from service.api.app import create_app
+from service.api.settings import Settings
+
+__all__ = ["main", "openapi_spec", "render"]
+
+
+def openapi_spec() -> dict[str, Any]:
+    """The spec of an app built with default settings (independent of the environment)."""
+    return create_app(Settings.model_construct(**_defaults())).openapi()
+
+
+def _defaults() -> dict[str, Any]:
+    return {
+        name: (f.default_factory() if f.default_factory else f.default)  # type: ignore[call-arg]
+        for name, f in Settings.model_fields.items()
+    }
+
+
+def render(spec: dict[str, Any]) -> str:
+    """The committed text form: FastAPI's key order, 2-space indent, final newline."""
+    return json.dumps(spec, indent=2, ensure_ascii=False) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Write the spec to the path given (``-`` or nothing: stdout)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    text = render(openapi_spec())
+    if not args or args[0] == "-":
+        sys.stdout.write(text)
+    else:
+        Path(args[0]).write_text(text, encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

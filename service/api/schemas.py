@@ -1,0 +1,370 @@
+"""Request and response bodies of the HTTP API (documentation and validation).
+
+Smoothing parameters are :class:`service.core.params.SmoothingParams`, reused unchanged.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from service.core.params import SmoothingParams
+
+__all__ = [
+    "COMPONENT_REFS",
+    "GEOMETRY_EXAMPLE",
+    "FieldError",
+    "GeometryJsonDict",
+    "HistoryEntry",
+    "Job",
+    "JobLinks",
+    "JobList",
+    "JobProblem",
+    "JobProgress",
+    "JobStatusName",
+    "OutputFormat",
+    "PageLinks",
+    "Problem",
+    "Report",
+    "SmoothJsonRequest",
+    "SmoothJsonResponse",
+]
+
+JobStatusName = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+OutputFormat = Literal["ply", "obj", "xyz", "json"]
+
+_GEOMETRY_EXAMPLE: dict[str, Any] = {
+    "points": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [1.0, 1.0, -0.1], [0.0, 1.0, 0.05]],
+    "faces": [[0, 1, 2], [0, 2, 3]],
+}
+_REPORT_EXAMPLE: dict[str, Any] = {
+    "lambda": 0.0123,
+    "phi": 0.4998,
+    "tau": 0.5,
+    "relative_error": 0.0004,
+    "converged": True,
+    "iterations": 6,
+    "factorizations": 6,
+    "history": [{"lambda": 0.01, "phi": 0.41}, {"lambda": 0.0123, "phi": 0.4998}],
+    "n_points": 2930,
+    "dimension": 3,
+    "kind": "mesh",
+    "laplacian": "normalized",
+    "weights": "mean-value",
+    "n_fixed": 0,
+    "rms_deviation": 0.013,
+    "max_deviation": 0.041,
+    "volume_scale": None,
+    "timings": {"laplacian": 0.004, "analysis": 0.002, "solve": 0.011, "total": 0.03},
+    "solver": "cholmod",
+    "warnings": [],
+}
+
+
+class FieldError(BaseModel):
+    """One invalid input."""
+
+    field: str = Field(description="Dotted path of the input at fault.", examples=["params.tau"])
+    message: str = Field(description="What is wrong with it.", examples=["Input should be > 0"])
+    type: str = Field(description="Machine readable error type.", examples=["greater_than"])
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details (``application/problem+json``), used for every error."""
+
+    model_config = ConfigDict(
+        extra="allow",
+        json_schema_extra={
+            "examples": [
+                {
+                    "type": "urn:geosmooth:problem:invalid-parameters",
+                    "title": "Invalid parameters",
+                    "status": 422,
+                    "detail": "params.tau: Input should be greater than 0",
+                    "instance": "/v1/jobs",
+                    "code": "invalid-parameters",
+                    "field": "params.tau",
+                    "errors": [
+                        {
+                            "field": "params.tau",
+                            "message": "Input should be greater than 0",
+                            "type": "greater_than",
+                        }
+                    ],
+                }
+            ]
+        },
+    )
+
+    type: str = Field(
+        description="Problem type URI: ``urn:geosmooth:problem:<code>`` or ``about:blank``."
+    )
+    title: str = Field(description="Short summary of the problem type.")
+    status: int = Field(description="HTTP status code.")
+    detail: str = Field(description="Explanation of this occurrence (e.g. the parser's message).")
+    instance: str | None = Field(default=None, description="Request path.")
+    code: str | None = Field(default=None, description="Machine readable problem code.")
+    field: str | None = Field(
+        default=None, description="Dotted path of the input at fault (``params.tau``, ``file``)."
+    )
+    errors: list[FieldError] | None = Field(
+        default=None, description="Every invalid input, for validation problems."
+    )
+
+
+class JobProblem(BaseModel):
+    """Why a job failed: the problem details of the failure (no HTTP status of its own)."""
+
+    model_config = ConfigDict(
+        extra="allow",
+        json_schema_extra={
+            "examples": [
+                {
+                    "type": "urn:geosmooth:problem:tau-out-of-range",
+                    "title": "Invalid parameters",
+                    "detail": "tau = 12 is outside (0, phi(0)) = (0, 3.2)",
+                    "code": "tau-out-of-range",
+                    "field": "params.tau",
+                    "valid_range": [0.0, 3.2],
+                }
+            ]
+        },
+    )
+
+    type: str = Field(description="Problem type URI: ``urn:geosmooth:problem:<code>``.")
+    title: str = Field(description="Short summary of the problem type.")
+    detail: str = Field(description="What went wrong.")
+    code: str | None = Field(default=None, description="Machine readable problem code.")
+    field: str | None = Field(default=None, description="Dotted path of the input at fault.")
+
+
+# The JSON geometry format is defined (and validated) by service.io; in the OpenAPI document the
+# fields listed in COMPONENT_REFS point at the component ``GeometryJson`` (io's
+# ``GEOMETRY_JSON_SCHEMA``) and ``Report`` (added by the app's openapi()).
+GeometryJsonDict = dict[str, Any]
+GEOMETRY_EXAMPLE = _GEOMETRY_EXAMPLE
+
+
+class SmoothJsonRequest(BaseModel):
+    """JSON request body: the geometry inline plus the smoothing parameters."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"geometry": _GEOMETRY_EXAMPLE, "params": {"tau": 0.01}}]},
+    )
+
+    geometry: GeometryJsonDict = Field(
+        description="The input geometry (the JSON format of service.io, as a .json upload)."
+    )
+    params: SmoothingParams = Field(description="Smoothing parameters.")
+
+
+class HistoryEntry(BaseModel):
+    """One lambda tried by the tau search."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    lam: float = Field(alias="lambda", description="lambda of eq. (4).", examples=[0.0123])
+    phi: float = Field(description="phi(lambda), eq. (15).", examples=[0.4998])
+
+
+class Report(BaseModel):
+    """Diagnostics of a smoothing run: exactly ``SmoothResult.report()`` of ``service.core``."""
+
+    model_config = ConfigDict(
+        extra="allow", populate_by_name=True, json_schema_extra={"examples": [_REPORT_EXAMPLE]}
+    )
+
+    lam: float = Field(alias="lambda", description="The lambda used.")
+    phi: float = Field(description="phi(lambda) = ||D(X - P)||_F^2 reached.")
+    tau: float | None = Field(description="Requested smoothing factor (null when lam was given).")
+    relative_error: float | None = Field(description="|phi - tau| / tau.")
+    converged: bool = Field(description="Whether the tau search met the tolerance.")
+    iterations: int = Field(description="lambda values tried.")
+    factorizations: int = Field(description="Numeric factorizations done.")
+    history: list[HistoryEntry] = Field(description="(lambda, phi) for every lambda tried.")
+    n_points: int = Field(description="Points smoothed.")
+    dimension: int = Field(description="Coordinates per point.")
+    kind: str = Field(description="mesh, curve or cloud.")
+    laplacian: str = Field(description="Laplacian variant used.")
+    weights: str = Field(description="Weight scheme used.")
+    n_fixed: int = Field(description="Points held fixed.")
+    rms_deviation: float = Field(description="RMS of ||x_i - p_i||.")
+    max_deviation: float = Field(description="Maximum of ||x_i - p_i||.")
+    volume_scale: float | None = Field(description="Scale applied to preserve volume.")
+    timings: dict[str, float] = Field(description="Seconds per stage.")
+    solver: str = Field(description="cholmod or superlu.")
+    warnings: list[str] = Field(description="Anything the user should know.")
+    spectrum: dict[str, list[float]] | None = Field(
+        default=None, description="Singular values and filter factors, when requested."
+    )
+
+
+# Reports are passed through exactly as ``SmoothResult.report()`` made them (no re-validation,
+# so new diagnostics never break the status endpoint); the ``Report`` model documents them.
+ReportDict = dict[str, Any]
+
+# (component, property) -> component the property's schema refers to in the OpenAPI document.
+COMPONENT_REFS: dict[tuple[str, str], str] = {
+    ("SmoothJsonRequest", "geometry"): "GeometryJson",
+    ("SmoothJsonResponse", "geometry"): "GeometryJson",
+    ("SmoothJsonResponse", "report"): "Report",
+    ("Job", "report"): "Report",
+}
+
+
+class JobProgress(BaseModel):
+    """Progress of a running job: the latest lambda iteration of the tau search."""
+
+    model_config = ConfigDict(
+        populate_by_name=True,
+        json_schema_extra={
+            "examples": [
+                {"iteration": 3, "lambda": 0.011, "phi": 0.47, "tau": 0.5, "relative_error": 0.06}
+            ]
+        },
+    )
+
+    iteration: int = Field(description="lambda iterations done so far.")
+    lam: float = Field(alias="lambda", description="Latest lambda tried.")
+    phi: float = Field(description="phi(lambda) of the latest lambda.")
+    tau: float | None = Field(default=None, description="Target smoothing factor, when known.")
+    relative_error: float | None = Field(
+        default=None, description="|phi - tau| / tau (null when tau is not known)."
+    )
+
+
+class JobLinks(BaseModel):
+    """Where to find the job's status, result and report."""
+
+    status: str = Field(description="GET: job status.", examples=["/v1/jobs/3f2a9c"])
+    result: str = Field(
+        description="GET: smoothed geometry (when succeeded).", examples=["/v1/jobs/3f2a9c/result"]
+    )
+    report: str = Field(
+        description="GET: diagnostics (when succeeded).", examples=["/v1/jobs/3f2a9c/report"]
+    )
+
+
+class Job(BaseModel):
+    """A smoothing job."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": "3f2a9c",
+                    "status": "running",
+                    "format": "ply",
+                    "filename": "bunny.ply",
+                    "created_at": "2026-01-01T12:00:00Z",
+                    "started_at": "2026-01-01T12:00:01Z",
+                    "finished_at": None,
+                    "params": {"tau": 0.5},
+                    "progress": {
+                        "iteration": 3,
+                        "lambda": 0.011,
+                        "phi": 0.47,
+                        "tau": 0.5,
+                        "relative_error": 0.06,
+                    },
+                    "report": None,
+                    "error": None,
+                    "links": {
+                        "status": "/v1/jobs/3f2a9c",
+                        "result": "/v1/jobs/3f2a9c/result",
+                        "report": "/v1/jobs/3f2a9c/report",
+                    },
+                }
+            ]
+        }
+    )
+
+    id: str = Field(description="Job id.")
+    status: JobStatusName = Field(description="queued, running, succeeded, failed or cancelled.")
+    format: str | None = Field(default=None, description="Input format (default result format).")
+    filename: str | None = Field(default=None, description="Uploaded file name, if any.")
+    created_at: datetime | None = Field(default=None, description="When the job was submitted.")
+    started_at: datetime | None = Field(default=None, description="When a worker picked it up.")
+    finished_at: datetime | None = Field(default=None, description="When it ended.")
+    params: dict[str, Any] | None = Field(default=None, description="Smoothing parameters.")
+    progress: JobProgress | None = Field(
+        default=None, description="Latest lambda iteration (while running)."
+    )
+    report: ReportDict | None = Field(default=None, description="Diagnostics (when succeeded).")
+    error: JobProblem | None = Field(default=None, description="Problem details (when failed).")
+    attempts: int = Field(default=0, description="Runs started (interrupted runs are retried).")
+    run_seconds: float | None = Field(default=None, description="Wall time of the successful run.")
+    expires_at: datetime | None = Field(
+        default=None, description="When a finished job and its files are purged."
+    )
+    links: JobLinks = Field(description="Related resources.")
+
+
+class PageLinks(BaseModel):
+    """Neighbouring pages of a job list."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {"next": "/v1/jobs?offset=100&limit=50", "prev": "/v1/jobs?offset=0&limit=50"}
+            ]
+        }
+    )
+
+    next: str | None = Field(default=None, description="Next page, if any.")
+    prev: str | None = Field(default=None, description="Previous page, if any.")
+
+
+class JobList(BaseModel):
+    """A page of jobs, newest first."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "items": [
+                        {
+                            "id": "3f2a9c",
+                            "status": "succeeded",
+                            "format": "ply",
+                            "filename": "bunny.ply",
+                            "created_at": "2026-01-01T12:00:00Z",
+                            "finished_at": "2026-01-01T12:00:03Z",
+                            "params": {"tau": 0.5},
+                            "links": {
+                                "status": "/v1/jobs/3f2a9c",
+                                "result": "/v1/jobs/3f2a9c/result",
+                                "report": "/v1/jobs/3f2a9c/report",
+                            },
+                        }
+                    ],
+                    "total": 1,
+                    "offset": 0,
+                    "limit": 50,
+                    "links": {"next": None, "prev": None},
+                }
+            ]
+        }
+    )
+
+    items: list[Job] = Field(description="Jobs on this page (without their reports).")
+    total: int = Field(description="Jobs matching the filter, over all pages.", examples=[42])
+    offset: int = Field(description="Index of the first item.", examples=[0])
+    limit: int = Field(description="Page size.", examples=[50])
+    links: PageLinks = Field(description="Neighbouring pages.")
+
+
+class SmoothJsonResponse(BaseModel):
+    """Result of ``POST /v1/smooth?format=json``: the smoothed geometry and its diagnostics."""
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"geometry": _GEOMETRY_EXAMPLE, "report": _REPORT_EXAMPLE}]}
+    )
+
+    geometry: GeometryJsonDict = Field(
+        description="Smoothed geometry in the JSON format (same schema as the input)."
+    )
+    report: ReportDict = Field(description="Diagnostics.")

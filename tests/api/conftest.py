@@ -1,0 +1,50 @@
+"""Fixtures of the HTTP tests: one live server shared by the module tests, fresh ones on demand."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+from api_helpers import LiveServer
+
+# Small limits so that the 413 paths are cheap to exercise.
+SERVER_ENV = {
+    "GEOSMOOTH_MAX_UPLOAD_BYTES": str(8 * 1024 * 1024),
+    "GEOSMOOTH_SYNC_MAX_POINTS": "2000",
+    "GEOSMOOTH_MAX_POINTS": "300000",
+    "GEOSMOOTH_JOB_TIMEOUT": "120",
+}
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A real uvicorn server (subprocess, 127.0.0.1, free port, temp data dir, 3 workers)."""
+    data_dir = tmp_path_factory.mktemp("api") / "data"
+    live = LiveServer(data_dir, workers=3, env=SERVER_ENV).start()
+    try:
+        yield live
+    finally:
+        live.stop()
+
+
+@pytest.fixture
+def client(server: LiveServer) -> Iterator[httpx.Client]:
+    with server.client() as c:
+        yield c
+
+
+@pytest.fixture
+def make_server(tmp_path: Path) -> Iterator[Callable[..., LiveServer]]:
+    """Start extra servers (stopped at the end of the test)."""
+    started: list[LiveServer] = []
+
+    def make(data_dir: Path | None = None, workers: int = 2, **env: str) -> LiveServer:
+        live = LiveServer(data_dir or tmp_path / "data", workers=workers, env={**SERVER_ENV, **env})
+        started.append(live)
+        return live.start()
+
+    yield make
+    for live in started:
+        live.stop()

@@ -1,0 +1,163 @@
+"""``geosmooth submit`` (the console script) against a live server."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "api"))
+
+from api_helpers import (
+    LiveServer,
+    encode,
+    free_port,
+    noisy_plane_cloud,
+    noisy_sphere,
+    parse_points,
+    phi,
+)
+
+from service.client import (
+    EXIT_CANCELLED,
+    EXIT_JOB_FAILED,
+    EXIT_REJECTED,
+    EXIT_UNREACHABLE,
+)
+
+GEOSMOOTH = Path(sys.executable).with_name("geosmooth")
+ROOT = Path(__file__).resolve().parents[2]
+
+pytestmark = pytest.mark.skipif(not GEOSMOOTH.exists(), reason="console script not installed")
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    server = LiveServer(tmp_path_factory.mktemp("submit") / "data", workers=2).start()
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def _run(*args: str | Path, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(GEOSMOOTH), "submit", *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def test_submit_downloads_result_and_report(live: LiveServer, tmp_path: Path) -> None:
+    pts, faces = noisy_sphere(2, seed=40)
+    src = tmp_path / "sphere.ply"
+    src.write_bytes(encode("ply", pts, faces))
+    out, report = tmp_path / "out.ply", tmp_path / "report.json"
+    done = _run(src, "--server", live.url, "-o", out, "--tau", "0.05", "--report", report)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == ""
+    after = parse_points(out.read_bytes(), "ply")
+    assert abs(phi(pts, after) - 0.05) / 0.05 <= 1e-3
+    data = json.loads(report.read_text())
+    assert data["phi"] == pytest.approx(phi(pts, after), rel=1e-9) and data["converged"] is True
+    assert "sphere.ply -> " in done.stderr
+
+    converted = tmp_path / "out.obj"  # output format from the file name
+    done = _run(src, "--server", live.url, "-o", converted, "--tau", "0.05", "-q")
+    assert done.returncode == 0 and done.stderr == ""
+    assert parse_points(converted.read_bytes(), "obj").shape == pts.shape
+
+
+def test_submit_shows_progress(live: LiveServer, tmp_path: Path) -> None:
+    src = tmp_path / "cloud.xyz"
+    src.write_bytes(encode("xyz", noisy_plane_cloud(20000, seed=41), None))
+    out = tmp_path / "cloud.out.xyz"
+    done = _run(src, "--server", live.url, "-o", out, "--tau", "1", "--tolerance", "1e-9")
+    assert done.returncode == 0, done.stderr
+    lines = [ln for ln in done.stderr.splitlines() if "iteration" in ln]
+    assert lines, done.stderr
+    assert "lambda=" in lines[0] and "phi=" in lines[0] and "rel.error=" in lines[0]
+
+
+def test_submit_rejected_input(live: LiveServer, tmp_path: Path) -> None:
+    src = tmp_path / "bad.xyz"
+    src.write_text("0 0 0\n1 1\n")
+    done = _run(src, "--server", live.url, "-o", tmp_path / "o.xyz", "--tau", "1")
+    assert done.returncode == EXIT_REJECTED, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert "Malformed input file" in done.stderr and "line 2" in done.stderr
+    assert not (tmp_path / "o.xyz").exists()
+
+
+def test_submit_failed_job(live: LiveServer, tmp_path: Path) -> None:
+    pts, faces = noisy_sphere(1)
+    src = tmp_path / "s.obj"
+    src.write_bytes(encode("obj", pts, faces))
+    done = _run(src, "--server", live.url, "-o", tmp_path / "o.obj", "--tau", "1e9")
+    assert done.returncode == EXIT_JOB_FAILED, done.stderr
+    assert "failed" in done.stderr.splitlines()[-1]
+
+
+def test_submit_unreachable_server(tmp_path: Path) -> None:
+    pts, faces = noisy_sphere(1)
+    src = tmp_path / "s.ply"
+    src.write_bytes(encode("ply", pts, faces))
+    url = f"http://127.0.0.1:{free_port()}"
+    done = _run(src, "--server", url, "-o", tmp_path / "o.ply", "--tau", "0.1")
+    assert done.returncode == EXIT_UNREACHABLE, done.stderr
+    assert "cannot reach" in done.stderr
+
+
+def test_submit_cancelled_job(live: LiveServer, tmp_path: Path) -> None:
+    src = tmp_path / "slow.xyz"
+    src.write_bytes(encode("xyz", noisy_plane_cloud(40000, seed=42), None))
+    args = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "64"]
+    cmd = [str(GEOSMOOTH), "submit", str(src), "--server", live.url, "-o", str(tmp_path / "o")]
+    proc = subprocess.Popen([*cmd, *args], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    try:
+        with live.client() as client:
+            deadline = time.monotonic() + 30
+            running: list[dict] = []
+            while not running and time.monotonic() < deadline:
+                running = client.get("/v1/jobs", params={"status": "running"}).json()["items"]
+                time.sleep(0.05)
+            assert running, "the job did not start"
+            assert client.delete(f"/v1/jobs/{running[0]['id']}").status_code == 200
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == EXIT_CANCELLED, stderr
+    assert "cancelled" in stderr.splitlines()[-1]
+
+
+def test_ctrl_c_cancels_the_job(live: LiveServer, tmp_path: Path) -> None:
+    src = tmp_path / "slow.xyz"
+    src.write_bytes(encode("xyz", noisy_plane_cloud(40000, seed=43), None))
+    args = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "64"]
+    cmd = [str(GEOSMOOTH), "submit", str(src), "--server", live.url, "-o", str(tmp_path / "o")]
+    proc = subprocess.Popen([*cmd, *args], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    try:
+        with live.client() as client:
+            deadline = time.monotonic() + 30
+            running: list[dict] = []
+            while not running and time.monotonic() < deadline:
+                running = client.get("/v1/jobs", params={"status": "running"}).json()["items"]
+                time.sleep(0.05)
+            assert running, "the job did not start"
+            proc.send_signal(signal.SIGINT)
+            _, stderr = proc.communicate(timeout=30)
+            job = client.get(f"/v1/jobs/{running[0]['id']}").json()
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, stderr
+    assert "cancelled" in stderr
+    assert job["status"] == "cancelled"
