@@ -16,7 +16,7 @@ ENV PIP_DISABLE_PIP_VERSION_CHECK=1 \
 WORKDIR /src
 # The one place that installs Debian packages (also used by make and CI).
 COPY scripts/install-system-deps.sh scripts/install-system-deps.sh
-RUN scripts/install-system-deps.sh \
+RUN scripts/install-system-deps.sh --build \
     && rm -rf /var/lib/apt/lists/*
 
 RUN python -m venv /opt/geosmooth \

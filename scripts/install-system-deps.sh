@@ -4,19 +4,23 @@
 # same install path as the Docker image. Idempotent: does nothing when everything is present.
 #
 #   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, venv)
+#   scripts/install-system-deps.sh --build    only what compiling scikit-sparse needs (Docker builder,
+#                                             whose Python is the image's own, not Debian's)
 #   scripts/install-system-deps.sh --runtime  only what the running service needs (Docker final stage)
 #   scripts/install-system-deps.sh --bench    also what the peer libraries of benchmarks/ need
 set -euo pipefail
 
-build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc python3-dev python3-venv)
+build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc)
+python_pkgs=(python3-dev python3-venv)  # Debian's python3 needs these for venv + C extensions
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
-pkgs=("${build_pkgs[@]}")
+pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
 case "${1:-}" in
+  --build) pkgs=("${build_pkgs[@]}") ;;
   --runtime) pkgs=("${runtime_pkgs[@]}") ;;
   --bench) pkgs+=("${bench_pkgs[@]}") ;;
   "") ;;
-  *) echo "usage: $0 [--runtime|--bench]" >&2; exit 2 ;;
+  *) echo "usage: $0 [--build|--runtime|--bench]" >&2; exit 2 ;;
 esac
 
 missing=()
@@ -41,7 +45,7 @@ $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 # Make sure the BLAS alternative points at OpenBLAS (reference BLAS is 5-8x slower for CHOLMOD).
 if command -v update-alternatives >/dev/null 2>&1; then
-  for alt in libblas.so.3-x86_64-linux-gnu liblapack.so.3-x86_64-linux-gnu; do
+  for alt in $(update-alternatives --get-selections 2>/dev/null | awk '/^lib(blas|lapack)\.so\.3-/ {print $1}'); do
     target=$(update-alternatives --list "$alt" 2>/dev/null | grep -m1 openblas-pthread || true)
     if [[ -n "$target" ]]; then $SUDO update-alternatives --set "$alt" "$target" >/dev/null; fi
   done

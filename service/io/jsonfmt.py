@@ -259,6 +259,8 @@ def read_json(data: bytes, *, weld: bool = False) -> GeometryDocument:
         ) from None
     except UnicodeDecodeError:
         raise FormatError("the file is not UTF-8 text", fmt="json") from None
+    except RecursionError:
+        raise FormatError("the JSON is nested too deeply", fmt="json") from None
     return geometry_from_json_obj(obj, weld=weld)
 
 

@@ -283,3 +283,10 @@ def test_binary_ply_absurd_list_lengths(count: int, message: str) -> None:
     data = data[:at] + np.array([count], "<i4").tobytes() + data[at + 4 :]
     with pytest.raises(FormatError, match=message):
         read_geometry(data, "ply")
+
+
+def test_deeply_nested_json_is_a_format_error() -> None:
+    from service.io import FormatError, read_geometry
+
+    with pytest.raises(FormatError, match="nested too deeply"):
+        read_geometry(b"[" * 100_000 + b"]" * 100_000, "json")
