@@ -13,7 +13,8 @@ __all__ = ["Settings", "get_settings"]
 
 
 def _default_workers() -> int:
-    return max(1, min(4, (os.cpu_count() or 2) // 2))
+    """One solver process per core (the issue's default)."""
+    return max(1, os.cpu_count() or 1)
 
 
 class Settings(BaseSettings):
