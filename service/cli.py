@@ -41,27 +41,18 @@ __all__ = [
     "read_fixed_indices",
 ]
 
-EXIT_OK = 0
-EXIT_INTERNAL = 1
-EXIT_USAGE = 2
-EXIT_INPUT = 3
-EXIT_GEOMETRY = 4
-EXIT_SOLVER = 5
-EXIT_OUTPUT = 6
-EXIT_INTERRUPTED = 130
-
-#: Exit status -> meaning; printed in ``geosmooth --help``.
-EXIT_CODES: dict[int, str] = {
-    EXIT_OK: "success",
-    EXIT_INTERNAL: "unexpected internal error (GEOSMOOTH_DEBUG=1 shows the traceback)",
-    EXIT_USAGE: "invalid command line or parameter value (e.g. --tau -1, --tau with --lam)",
-    EXIT_INPUT: "input file missing, unreadable, malformed or in an unsupported format (GPX, ...)",
-    EXIT_GEOMETRY: "invalid geometry, or a parameter this geometry cannot take "
-    "(e.g. tau outside (0, phi(0)); the message gives the valid range)",
-    EXIT_SOLVER: "the linear solver failed",
-    EXIT_OUTPUT: "cannot write the output or report file",
-    EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
-}
+from service.exit_codes import (
+    EXIT_CODES,
+    EXIT_GEOMETRY,
+    EXIT_INPUT,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_OUTPUT,
+    EXIT_SOLVER,
+    EXIT_USAGE,
+    SUBMIT_EXIT_CODES,
+)
 
 #: The three ways to pick lambda (a required, mutually exclusive group). Every other
 #: :class:`SmoothingParams` field becomes an option too, in the model's order, named ``--`` +
@@ -267,16 +258,6 @@ def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
 
 def _wrap(text: str) -> str:
     return textwrap.fill(text, 78)
-
-
-#: Further statuses of ``geosmooth submit``, set by ``service.client.submit`` (listed here so
-#: that ``--help`` does not import the HTTP client).
-SUBMIT_EXIT_CODES: dict[int, str] = {
-    7: "submit: the server cannot be reached",
-    8: "submit: the server rejected the input or the parameters",
-    9: "submit: the job failed on the server",
-    10: "submit: the job was cancelled",
-}
 
 
 def _epilog(submit: bool = True) -> str:

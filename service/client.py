@@ -26,22 +26,18 @@ __all__ = [
     "submit",
 ]
 
-EXIT_OK = 0
-EXIT_SERVER = 1  # the server answered something unexpected (5xx, not geosmooth)
-EXIT_INPUT = 3  # the local input file cannot be read (as ``geosmooth smooth``)
-EXIT_OUTPUT = 6  # the output or report file cannot be written (as ``geosmooth smooth``)
-EXIT_UNREACHABLE = 7
-EXIT_REJECTED = 8
-EXIT_JOB_FAILED = 9
-EXIT_CANCELLED = 10
-EXIT_INTERRUPTED = 130
-
-CLIENT_EXIT_CODES: dict[int, str] = {
-    EXIT_UNREACHABLE: "submit: the server cannot be reached",
-    EXIT_REJECTED: "submit: the server rejected the input or parameters (4xx)",
-    EXIT_JOB_FAILED: "submit: the job failed on the server",
-    EXIT_CANCELLED: "submit: the job was cancelled",
-}
+from service.exit_codes import (
+    EXIT_CANCELLED,
+    EXIT_INPUT,
+    EXIT_INTERRUPTED,
+    EXIT_JOB_FAILED,
+    EXIT_OK,
+    EXIT_OUTPUT,
+    EXIT_REJECTED,
+    EXIT_SERVER,
+    EXIT_UNREACHABLE,
+)
+from service.exit_codes import SUBMIT_EXIT_CODES as CLIENT_EXIT_CODES
 
 _RECONNECT_SECONDS = 30.0  # keep polling through a server restart this long
 

@@ -1,0 +1,43 @@
+"""Exit statuses of the ``geosmooth`` command, shared by ``smooth`` and ``submit``.
+
+Kept free of heavy imports, so ``geosmooth --help`` lists them without loading the HTTP client
+or the engine.
+"""
+
+from __future__ import annotations
+
+EXIT_OK = 0
+EXIT_INTERNAL = 1
+EXIT_USAGE = 2
+EXIT_INPUT = 3
+EXIT_GEOMETRY = 4
+EXIT_SOLVER = 5
+EXIT_OUTPUT = 6
+EXIT_INTERRUPTED = 130
+
+#: Exit status -> meaning; printed in ``geosmooth --help``.
+EXIT_CODES: dict[int, str] = {
+    EXIT_OK: "success",
+    EXIT_INTERNAL: "unexpected internal error (GEOSMOOTH_DEBUG=1 shows the traceback)",
+    EXIT_USAGE: "invalid command line or parameter value (e.g. --tau -1, --tau with --lam)",
+    EXIT_INPUT: "input file missing, unreadable, malformed or in an unsupported format (GPX, ...)",
+    EXIT_GEOMETRY: "invalid geometry, or a parameter this geometry cannot take "
+    "(e.g. tau outside (0, phi(0)); the message gives the valid range)",
+    EXIT_SOLVER: "the linear solver failed",
+    EXIT_OUTPUT: "cannot write the output or report file",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
+}
+
+EXIT_SERVER = EXIT_INTERNAL  # submit: the server answered something unexpected (5xx)
+EXIT_UNREACHABLE = 7
+EXIT_REJECTED = 8
+EXIT_JOB_FAILED = 9
+EXIT_CANCELLED = 10
+
+#: Further statuses of ``geosmooth submit``, set by ``service.client.submit``.
+SUBMIT_EXIT_CODES: dict[int, str] = {
+    EXIT_UNREACHABLE: "submit: the server cannot be reached",
+    EXIT_REJECTED: "submit: the server rejected the input or the parameters",
+    EXIT_JOB_FAILED: "submit: the job failed on the server",
+    EXIT_CANCELLED: "submit: the job was cancelled",
+}
