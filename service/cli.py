@@ -388,6 +388,11 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("-o", "--output", required=True, metavar="OUTPUT", help="output file")
     _add_smoothing_options(su)
     su.add_argument("--format", dest="format", metavar=fmt_metavar, help="output format")
+    su.add_argument(
+        "--weld",
+        action="store_true",
+        help="have the server weld exactly coincident vertices (the output keeps the input's)",
+    )
     su.add_argument("--report", metavar="REPORT.json", help="write the job's report as JSON")
     su.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     return parser
@@ -716,6 +721,7 @@ def _run_submit(ns: argparse.Namespace, err: TextIO) -> int:
             report=ns.report,
             fmt=ns.format,
             quiet=ns.quiet,
+            weld=ns.weld,
         )
     )
 

@@ -218,6 +218,7 @@ def submit(
     *,
     stderr: IO[str] | None = None,
     timeout: float = 60.0,
+    weld: bool = False,
 ) -> int:
     """Smooth ``input_path`` on a geosmooth server and save the result.
 
@@ -243,6 +244,8 @@ def submit(
         Where progress and errors go (default ``sys.stderr``).
     timeout : float
         Seconds to wait for one HTTP exchange (upload included).
+    weld : bool
+        Ask the server to weld exactly coincident vertices (the output keeps the input's).
 
     Returns
     -------
@@ -263,6 +266,8 @@ def submit(
             raise _Fail(f"cannot read {input_path}: {exc.strerror or exc}", EXIT_INPUT) from exc
         files = {"file": (path.name, data, "application/octet-stream")}
         form = {"params": _params_json(params)}
+        if weld:
+            form["weld"] = "true"
         answer = _check(_request(client, "POST", "/v1/jobs", files=files, data=form), "upload")
         job = answer.json()
         job_id = job["id"]

@@ -80,6 +80,12 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
             "enum": ["ply", "obj", "xyz", "json"],
             "description": "Input format when the file name has no telling extension.",
         },
+        "weld": {
+            "type": "boolean",
+            "default": False,
+            "description": "Weld exactly coincident vertices before smoothing (meshes stored "
+            "with split normals); the result keeps the input's vertex count and order.",
+        },
     },
 }
 

@@ -159,6 +159,12 @@ class SmoothJsonRequest(BaseModel):
         description="The input geometry (the JSON format of service.io, as a .json upload)."
     )
     params: SmoothingParams = Field(description="Smoothing parameters.")
+    weld: bool = Field(
+        default=False,
+        description="Weld exactly coincident vertices before smoothing (the result keeps the "
+        "input's vertex count and order).",
+        examples=[False],
+    )
 
 
 class HistoryEntry(BaseModel):

@@ -38,7 +38,8 @@ from service.io import (
 
 __all__ = ["SmoothInput", "read_smooth_input"]
 
-_FORM_FIELDS = frozenset({"file", "params", "format"})
+_FORM_FIELDS = frozenset({"file", "params", "format", "weld"})
+_TRUE, _FALSE = frozenset({"true", "1", "yes", "on"}), frozenset({"false", "0", "no", "off", ""})
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,8 @@ class SmoothInput:
         Validated parameters.
     document : GeometryDocument
         The parsed input.
+    weld : bool
+        Exactly coincident vertices were welded on reading (and will be in the job).
     """
 
     data: bytes
@@ -64,6 +67,7 @@ class SmoothInput:
     filename: str | None
     params: SmoothingParams
     document: GeometryDocument
+    weld: bool = False
 
 
 def _missing(field: str, detail: str) -> ApiProblem:
@@ -134,14 +138,34 @@ def _format(explicit: str | None, filename: str | None) -> str:
     return detect_format(filename)  # UnsupportedFormat -> 415
 
 
-async def _from_multipart(request: Request) -> tuple[bytes, str | None, str | None, Any]:
+def _flag(raw: Any) -> bool:
+    """A form field's boolean (``true``/``false``, ``1``/``0``); absent means false."""
+    if raw is None:
+        return False
+    text = str(raw).strip().lower() if isinstance(raw, str) else None
+    if text in _TRUE:
+        return True
+    if text in _FALSE:
+        return False
+    raise ApiProblem(
+        422,
+        "weld must be true or false",
+        code="invalid-request",
+        title="Invalid request",
+        field="weld",
+    )
+
+
+async def _from_multipart(
+    request: Request,
+) -> tuple[bytes, str | None, str | None, Any, bool]:
     form = await request.form(max_files=1, max_fields=len(_FORM_FIELDS), max_part_size=1 << 20)
     try:
         unknown = sorted(set(form.keys()) - _FORM_FIELDS)
         if unknown:
             raise ApiProblem(
                 422,
-                f"unknown form field(s): {', '.join(unknown)}; expected file, params, format",
+                f"unknown form field(s): {', '.join(unknown)}; expected file, params, format, weld",
                 code="invalid-request",
                 title="Invalid request",
                 field=unknown[0],
@@ -153,13 +177,14 @@ async def _from_multipart(request: Request) -> tuple[bytes, str | None, str | No
         if params is None:
             raise _missing("params", "a 'params' field (JSON object) is required")
         fmt = form.get("format")
+        weld = _flag(form.get("weld"))
         data = await upload.read()
-        return data, upload.filename, fmt if isinstance(fmt, str) else None, params
+        return data, upload.filename, fmt if isinstance(fmt, str) else None, params, weld
     finally:
         await form.close()
 
 
-async def _from_json(request: Request) -> tuple[bytes, Any, Any]:
+async def _from_json(request: Request) -> tuple[bytes, Any, Any, bool]:
     body = await request.body()
     try:
         obj = await run_in_threadpool(json.loads, body)  # large bodies: not on the event loop
@@ -174,11 +199,11 @@ async def _from_json(request: Request) -> tuple[bytes, Any, Any]:
             code="invalid-request",
             field="body",
         )
-    unknown = sorted(set(obj) - {"geometry", "params"})
+    unknown = sorted(set(obj) - {"geometry", "params", "weld"})
     if unknown:
         raise ApiProblem(
             422,
-            f"unknown member(s): {', '.join(unknown)}; expected geometry and params",
+            f"unknown member(s): {', '.join(unknown)}; expected geometry, params and weld",
             code="invalid-request",
             title="Invalid request",
             field=unknown[0],
@@ -187,24 +212,33 @@ async def _from_json(request: Request) -> tuple[bytes, Any, Any]:
         raise _missing("params", "a 'params' member (object) is required")
     if not isinstance(obj.get("geometry"), dict):
         raise _missing("geometry", "a 'geometry' member (object with points) is required")
+    weld = obj.get("weld", False)
+    if not isinstance(weld, bool):
+        raise ApiProblem(
+            422,
+            "weld must be true or false",
+            code="invalid-request",
+            title="Invalid request",
+            field="weld",
+        )
     data = (await run_in_threadpool(_compact, obj["geometry"])).encode()
-    return data, obj["params"], obj["geometry"]
+    return data, obj["params"], obj["geometry"], weld
 
 
 def _compact(obj: Any) -> str:
     return json.dumps(obj, separators=(",", ":"))
 
 
-def _read_file(data: bytes, fmt: str, filename: str | None) -> GeometryDocument:
+def _read_file(data: bytes, fmt: str, filename: str | None, weld: bool) -> GeometryDocument:
     try:
-        return read_geometry(data, fmt, filename=filename)
+        return read_geometry(data, fmt, filename=filename, weld=weld)
     except RecursionError:  # e.g. JSON nested thousands deep: malformed, not a server error
         raise FormatError("the file is nested too deeply", fmt=fmt) from None
 
 
-def _inline_document(geometry: Any) -> GeometryDocument:
+def _inline_document(geometry: Any, weld: bool) -> GeometryDocument:
     try:
-        return geometry_from_json_obj(geometry)
+        return geometry_from_json_obj(geometry, weld=weld)
     except UnsupportedFormat:
         raise
     except FormatError as exc:
@@ -229,17 +263,17 @@ async def read_smooth_input(request: Request, max_points: int) -> SmoothInput:
     """
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype == "multipart/form-data":
-        data, filename, explicit, raw_params = await _from_multipart(request)
+        data, filename, explicit, raw_params, weld = await _from_multipart(request)
         params = _params(raw_params)
         fmt = _format(explicit, filename)
         if not data:
             raise ApiProblem(400, "the uploaded file is empty", code="format-error", field="file")
-        document = await run_in_threadpool(_read_file, data, fmt, filename)
+        document = await run_in_threadpool(_read_file, data, fmt, filename, weld)
     elif ctype == "application/json" or ctype.endswith("+json"):
-        data, raw_params, geometry = await _from_json(request)
+        data, raw_params, geometry, weld = await _from_json(request)
         params = _params(raw_params)
         filename, fmt = None, "json"
-        document = await run_in_threadpool(_inline_document, geometry)
+        document = await run_in_threadpool(_inline_document, geometry, weld)
     else:
         raise ApiProblem(
             415,
@@ -259,4 +293,4 @@ async def read_smooth_input(request: Request, max_points: int) -> SmoothInput:
             n_points=n,
             max_points=max_points,
         )
-    return SmoothInput(data, fmt, filename, params, document)
+    return SmoothInput(data, fmt, filename, params, document, weld)

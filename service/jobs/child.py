@@ -171,6 +171,7 @@ def _run(spec: RunSpec, store: JobStore) -> None:
             params=SmoothingParams.model_validate(rec.params),
             report_progress=report_progress,
             progress_interval=spec.progress_interval,
+            options=files.read_options(spec.job_id),
         )
         report = load_runner(spec.runner)(ctx)
         elapsed = time.perf_counter() - started

@@ -12,11 +12,13 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
 import time
 from pathlib import Path
+from typing import Any
 
 __all__ = ["JobFiles", "is_job_id", "write_durable"]
 
@@ -95,13 +97,27 @@ class JobFiles:
         """``SmoothResult.report()`` as JSON."""
         return self.dir(job_id) / "report.json"
 
-    def create(self, job_id: str, fmt: str, data: bytes) -> Path:
-        """Create the job directory and store its input durably; returns the input path."""
+    def create(
+        self, job_id: str, fmt: str, data: bytes, options: dict[str, Any] | None = None
+    ) -> Path:
+        """Create the job directory and store its input durably; returns the input path.
+
+        ``options`` (how to read the input, e.g. ``{"weld": true}``) go to ``options.json``.
+        """
         path = self.input(job_id, fmt)
         path.parent.mkdir()
         _fsync_dir(self.root)
+        if options:
+            write_durable(path.parent / "options.json", json.dumps(options).encode())
         write_durable(path, data)
         return path
+
+    def read_options(self, job_id: str) -> dict[str, Any]:
+        """The job's input options (``{}`` when none were stored)."""
+        try:
+            return dict(json.loads((self.dir(job_id) / "options.json").read_text()))
+        except FileNotFoundError:
+            return {}
 
     def remove(self, job_id: str) -> None:
         """Delete a job's directory (no error if it is gone)."""

@@ -221,6 +221,8 @@ class LocalQueue:
         fmt: str,
         params: SmoothingParams | dict[str, Any],
         filename: str | None = None,
+        *,
+        weld: bool = False,
     ) -> JobRecord:
         """Store the input durably, enqueue the job and return its ``queued`` record.
 
@@ -239,7 +241,7 @@ class LocalQueue:
             params = SmoothingParams.model_validate(params)
         job_id = uuid.uuid4().hex
         data = bytes(input_bytes)
-        self.files.create(job_id, fmt, data)
+        self.files.create(job_id, fmt, data, {"weld": True} if weld else None)
         try:
             rec = self.store.insert(
                 job_id,
@@ -298,7 +300,8 @@ class LocalQueue:
 
         try:
             points = np.load(self.files.result_points(job_id), allow_pickle=False)
-            doc = read_geometry(self.files.input(job_id, rec.fmt), rec.fmt)
+            weld = bool(self.files.read_options(job_id).get("weld", False))
+            doc = read_geometry(self.files.input(job_id, rec.fmt), rec.fmt, weld=weld)
         except FileNotFoundError:  # deleted or expired meanwhile
             return None
         return _with_points(doc, points)

@@ -173,8 +173,14 @@ class JobQueue(Protocol):
         fmt: str,
         params: SmoothingParams,
         filename: str | None = None,
+        *,
+        weld: bool = False,
     ) -> JobRecord:
-        """Store the input durably and enqueue a job; returns the ``queued`` record."""
+        """Store the input durably and enqueue a job; returns the ``queued`` record.
+
+        ``weld`` merges exactly coincident vertices when the input is read (the result keeps the
+        input's vertex count and order).
+        """
         ...
 
     def get(self, job_id: str) -> JobRecord | None:

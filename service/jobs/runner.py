@@ -57,6 +57,8 @@ class JobContext:
         ``False`` when the run lost its job.
     progress_interval : float
         Minimum seconds between two progress writes (the first and last always go through).
+    options : dict
+        How to read the input (``{"weld": True}``), from the job's ``options.json``.
     """
 
     job_id: str
@@ -66,6 +68,7 @@ class JobContext:
     params: SmoothingParams
     report_progress: Callable[[int, float, float, float | None, float | None], bool]
     progress_interval: float = 0.2
+    options: dict[str, Any] = field(default_factory=dict)
     tau: float | None = None
     _last_write: float = field(default=float("-inf"), repr=False)
     _pending: tuple[int, float, float] | None = field(default=None, repr=False)
@@ -129,7 +132,8 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     from service.core.smooth import smooth
     from service.io import read_geometry, write_geometry
 
-    doc = read_geometry(ctx.input_path, ctx.fmt)
+    weld = bool(ctx.options.get("weld", False))
+    doc = read_geometry(ctx.input_path, ctx.fmt, weld=weld)
     ctx.tau = target_tau(ctx.params, doc.geometry)
     result = smooth(doc.geometry, ctx.params, progress=ctx.progress)
     ctx.flush_progress()

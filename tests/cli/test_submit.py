@@ -10,6 +10,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "api"))
@@ -161,3 +162,24 @@ def test_ctrl_c_cancels_the_job(live: LiveServer, tmp_path: Path) -> None:
     assert proc.returncode == 130, stderr
     assert "cancelled" in stderr
     assert job["status"] == "cancelled"
+
+
+def test_submit_weld_keeps_split_vertices_together(live: LiveServer, tmp_path: Path) -> None:
+    # a closed octahedron stored STL-style: every face has its own three vertices
+    v = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    tri = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5],
+                    [3, 1, 5], [0, 3, 5]])  # fmt: skip
+    pts = v[tri.ravel()] * 1.3
+    faces = np.arange(pts.shape[0]).reshape(-1, 3)
+    src = tmp_path / "soup.ply"
+    src.write_bytes(encode("ply", pts, faces))
+    out, report = tmp_path / "out.ply", tmp_path / "report.json"
+    done = _run(src, "--server", live.url, "-o", out, "--lam", "1", "--weld", "--report", report)
+    assert done.returncode == 0, done.stderr
+    after = parse_points(out.read_bytes(), "ply")
+    assert after.shape == pts.shape
+    for corner in range(6):  # the copies of each octahedron corner moved together
+        copies = np.flatnonzero(np.all(pts == v[corner] * 1.3, axis=1))
+        assert np.all(after[copies] == after[copies[0]])
+    assert json.loads(report.read_text())["n_points"] == 6
+    assert not np.allclose(after, pts)  # it did smooth: a welded octahedron shrinks

@@ -52,6 +52,7 @@ async def submit_job(
         smooth_input.fmt,
         smooth_input.params,
         smooth_input.filename,
+        weld=smooth_input.weld,
     )
     metrics.jobs_submitted.inc()
     response.headers["Location"] = job_location(record.id)
