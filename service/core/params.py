@@ -110,7 +110,9 @@ class SmoothingParams(BaseModel):
         default=False,
         description=(
             "Rescale the result about its centroid to keep the enclosed volume (closed meshes) "
-            "or area (closed planar polygons); report sections 8-9."
+            "or area (closed planar polygons); report sections 8-9. The rescaling follows the "
+            "lambda search, so the final deviation (rms/max_deviation) can exceed tau; phi is "
+            "the deviation before rescaling."
         ),
     )
     solver: SolverName = Field(

@@ -267,8 +267,11 @@ def test_serve_and_submit_are_lazy_and_forward_arguments(monkeypatch: pytest.Mon
     )
     client = types.ModuleType("service.client")
 
-    def submit(input_path, server_url, params, output, report=None, fmt=None, quiet=False):
+    def submit(
+        input_path, server_url, params, output, report=None, fmt=None, quiet=False, weld=False
+    ):
         calls["submit"] = (input_path, server_url, params, output, report, fmt, quiet)
+        calls["weld"] = weld
         return 7
 
     client.submit = submit  # type: ignore[attr-defined]
@@ -279,9 +282,10 @@ def test_serve_and_submit_are_lazy_and_forward_arguments(monkeypatch: pytest.Mon
     assert calls["serve"] == ("127.0.0.1", 8123, 2, "/tmp/x")
     rc = cli.main([
         "submit", "in.ply", "--server", "http://h:1", "-o", "o.ply", "--rms", "0.1",
-        "--laplacian", "feature", "--report", "r.json", "-q",
+        "--laplacian", "feature", "--report", "r.json", "-q", "--weld",
     ])  # fmt: skip
     assert rc == 7
+    assert calls["weld"] is True
     path, url, params, output, report, fmt, quiet = calls["submit"]  # type: ignore[misc]
     assert (path, url, output, report, fmt, quiet) == (
         "in.ply",
