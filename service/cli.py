@@ -1,7 +1,7 @@
 """The ``geosmooth`` command line: ``smooth`` a file, ``serve`` the HTTP API, ``submit`` to it.
 
 ``geosmooth smooth INPUT -o OUTPUT --tau T`` reads a mesh, polyline network or point cloud
-(``service.io``), smooths it with :func:`service.core.smooth` and writes the result in the same
+(``service.io``), smooths it with :func:`service.core.pipeline` and writes the result in the same
 vertex order. Parameters are validated once, by :class:`service.core.SmoothingParams`; the
 CLI only maps option names to field names (:func:`params_from_args`) and pydantic's messages to
 one-line errors. Every failure is one line on stderr and a documented exit code

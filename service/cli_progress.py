@@ -21,7 +21,7 @@ def _g(value: float | None, digits: int = 4) -> str:
 
 
 class ProgressDisplay:
-    """Progress of the lambda search, shown while :func:`service.core.smooth` iterates.
+    """Progress of the lambda search, shown while :func:`service.core.pipeline` iterates.
 
     An instance is the ``progress(iteration, lam, phi)`` callback of ``smooth()``. On a
     terminal it keeps one line up to date with carriage returns; on anything else (a pipe, a

@@ -23,8 +23,8 @@ _EXPORTS = {
     "SmoothingParams": "params",
     "SmoothResult": "result",
     "Spectrum": "result",
-    "ProgressCallback": "smooth",
-    "smooth": "smooth",
+    "ProgressCallback": "pipeline",
+    "smooth": "pipeline",
 }
 
 __all__ = [
@@ -59,8 +59,8 @@ if TYPE_CHECKING:  # pragma: no cover
     )
     from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
+    from service.core.pipeline import ProgressCallback, smooth
     from service.core.result import SmoothResult, Spectrum
-    from service.core.smooth import ProgressCallback, smooth
 
 
 def __getattr__(name: str) -> Any:

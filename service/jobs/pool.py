@@ -38,7 +38,7 @@ __all__ = ["WorkerPool", "default_start_method"]
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.core.smooth", "service.io")
+_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.core.pipeline", "service.io")
 _INTERRUPTS = (-signal.SIGTERM, -signal.SIGINT, -signal.SIGHUP)
 
 

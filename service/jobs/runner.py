@@ -74,7 +74,7 @@ class JobContext:
     _pending: tuple[int, float, float] | None = field(default=None, repr=False)
 
     def progress(self, iteration: int, lam: float, phi: float) -> None:
-        """Progress callback for :func:`service.core.smooth` (throttled).
+        """Progress callback for :func:`service.core.pipeline` (throttled).
 
         Raises
         ------
@@ -129,7 +129,7 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     dict
         ``SmoothResult.report()``.
     """
-    from service.core.smooth import smooth
+    from service.core.pipeline import smooth
     from service.io import read_geometry, write_geometry
 
     weld = bool(ctx.options.get("weld", False))

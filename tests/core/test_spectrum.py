@@ -7,7 +7,7 @@ import pytest
 from core_fixtures import noisy_icosphere
 
 from service.core import Geometry, SmoothingParams, smooth
-from service.core.smooth import build_laplacian
+from service.core.pipeline import build_laplacian
 
 
 def test_solution_equals_filtered_svd_expansion_identity_weights() -> None:

@@ -11,7 +11,7 @@ from core_fixtures import grid_mesh, noisy_icosphere, polyline_edges, random_rot
 from scipy.spatial import Delaunay
 
 from service.core import Geometry, ParameterError, SmoothingParams, TauOutOfRange, smooth
-from service.core.smooth import build_laplacian
+from service.core.pipeline import build_laplacian
 
 
 def _curve_network(seed: int = 0) -> Geometry:

@@ -1,4 +1,4 @@
-"""``smooth()``: the single entry point of the engine.
+"""``smooth()``: the single entry point of the engine (exported as ``service.core.smooth``).
 
 Pipeline (report sections 4-8): neighbourhoods -> weights and curvature -> Laplacian variant ->
 elimination of fixed points -> one symbolic analysis -> for each lambda of the search of section
