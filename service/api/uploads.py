@@ -138,6 +138,16 @@ def _format(explicit: str | None, filename: str | None) -> str:
     return detect_format(filename)  # UnsupportedFormat -> 415
 
 
+def _bad_weld() -> ApiProblem:
+    return ApiProblem(
+        422,
+        "weld must be true or false",
+        code="invalid-request",
+        title="Invalid request",
+        field="weld",
+    )
+
+
 def _flag(raw: Any) -> bool:
     """A form field's boolean (``true``/``false``, ``1``/``0``); absent means false."""
     if raw is None:
@@ -147,13 +157,7 @@ def _flag(raw: Any) -> bool:
         return True
     if text in _FALSE:
         return False
-    raise ApiProblem(
-        422,
-        "weld must be true or false",
-        code="invalid-request",
-        title="Invalid request",
-        field="weld",
-    )
+    raise _bad_weld()
 
 
 async def _from_multipart(
@@ -214,13 +218,7 @@ async def _from_json(request: Request) -> tuple[bytes, Any, Any, bool]:
         raise _missing("geometry", "a 'geometry' member (object with points) is required")
     weld = obj.get("weld", False)
     if not isinstance(weld, bool):
-        raise ApiProblem(
-            422,
-            "weld must be true or false",
-            code="invalid-request",
-            title="Invalid request",
-            field="weld",
-        )
+        raise _bad_weld()
     data = (await run_in_threadpool(_compact, obj["geometry"])).encode()
     return data, obj["params"], obj["geometry"], weld
 

@@ -118,20 +118,31 @@ def test_submit_unreachable_server(tmp_path: Path) -> None:
     assert "cannot reach" in done.stderr
 
 
-def test_submit_cancelled_job(live: LiveServer, tmp_path: Path) -> None:
+def _start_slow_submit(
+    live: LiveServer, tmp_path: Path, seed: int
+) -> tuple[subprocess.Popen[str], list[dict]]:
+    """Start ``geosmooth submit`` on a slow input; return it once its job is running."""
     src = tmp_path / "slow.xyz"
-    src.write_bytes(encode("xyz", noisy_plane_cloud(40000, seed=42), None))
+    src.write_bytes(encode("xyz", noisy_plane_cloud(40000, seed=seed), None))
     args = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "64"]
     cmd = [str(GEOSMOOTH), "submit", str(src), "--server", live.url, "-o", str(tmp_path / "o")]
     proc = subprocess.Popen([*cmd, *args], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    with live.client() as client:
+        deadline = time.monotonic() + 30
+        running: list[dict] = []
+        while not running and time.monotonic() < deadline:
+            running = client.get("/v1/jobs", params={"status": "running"}).json()["items"]
+            time.sleep(0.05)
+    if not running:
+        proc.kill()
+    assert running, "the job did not start"
+    return proc, running
+
+
+def test_submit_cancelled_job(live: LiveServer, tmp_path: Path) -> None:
+    proc, running = _start_slow_submit(live, tmp_path, seed=42)
     try:
         with live.client() as client:
-            deadline = time.monotonic() + 30
-            running: list[dict] = []
-            while not running and time.monotonic() < deadline:
-                running = client.get("/v1/jobs", params={"status": "running"}).json()["items"]
-                time.sleep(0.05)
-            assert running, "the job did not start"
             assert client.delete(f"/v1/jobs/{running[0]['id']}").status_code == 200
         _, stderr = proc.communicate(timeout=30)
     finally:
@@ -141,19 +152,9 @@ def test_submit_cancelled_job(live: LiveServer, tmp_path: Path) -> None:
 
 
 def test_ctrl_c_cancels_the_job(live: LiveServer, tmp_path: Path) -> None:
-    src = tmp_path / "slow.xyz"
-    src.write_bytes(encode("xyz", noisy_plane_cloud(40000, seed=43), None))
-    args = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "64"]
-    cmd = [str(GEOSMOOTH), "submit", str(src), "--server", live.url, "-o", str(tmp_path / "o")]
-    proc = subprocess.Popen([*cmd, *args], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    proc, running = _start_slow_submit(live, tmp_path, seed=43)
     try:
         with live.client() as client:
-            deadline = time.monotonic() + 30
-            running: list[dict] = []
-            while not running and time.monotonic() < deadline:
-                running = client.get("/v1/jobs", params={"status": "running"}).json()["items"]
-                time.sleep(0.05)
-            assert running, "the job did not start"
             proc.send_signal(signal.SIGINT)
             _, stderr = proc.communicate(timeout=30)
             job = client.get(f"/v1/jobs/{running[0]['id']}").json()
