@@ -547,25 +547,6 @@ def _map_fixed(doc: Any, indices: Sequence[int]) -> list[int]:
     return [int(weld.index[i]) for i in indices]
 
 
-def _estimated_tau(geometry: Any, rms: float, fix_boundary: bool) -> float:
-    """The tau that ``--rms`` implies, for the progress line, before the engine reports it.
-
-    The engine sums ``w_i^2 * rms^2`` over the points that can move. Fixed points, points on no
-    face or edge and (with ``--fix-boundary``) curve endpoints are excluded here as well; mesh
-    and cloud boundaries are only known to the engine, so the value is shown as an estimate.
-    """
-    import numpy as np
-
-    free = ~geometry.fixed_mask()
-    conn = [c for c in (geometry.faces, geometry.edges) if c is not None]
-    if conn:
-        degree = sum(np.bincount(c.ravel(), minlength=geometry.n) for c in conn)
-        free &= degree > 0
-        if fix_boundary and geometry.faces is None and geometry.edges is not None:
-            free &= np.bincount(geometry.edges.ravel(), minlength=geometry.n) != 1
-    return float((geometry.omega()[free] ** 2).sum()) * rms**2
-
-
 def _run_smooth(ns: argparse.Namespace, err: TextIO) -> int:
     from service.cli_progress import ProgressDisplay, format_summary
     from service.core import smooth
@@ -610,10 +591,7 @@ def _run_smooth(ns: argparse.Namespace, err: TextIO) -> int:
         details.append(f"{len(doc.polylines)} polylines")
     if doc.weld is not None:
         details.append(f"welded from {doc.weld.n_original} vertices")
-    tau_shown = params.tau
-    if params.rms is not None:
-        tau_shown = _estimated_tau(geometry, params.rms, params.fix_boundary)
-    progress = ProgressDisplay(err, tau_shown, enabled=show, approximate_tau=params.rms is not None)
+    progress = ProgressDisplay(err, enabled=show)
     try:
         result = smooth(geometry, params, progress=progress)
     except TauOutOfRange as exc:

@@ -8,7 +8,10 @@ Everything here writes to a text stream (stderr in the CLI) so that stdout stays
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
+
+if TYPE_CHECKING:
+    from service.core.progress import ProgressEvent
 
 __all__ = ["ProgressDisplay", "format_summary"]
 
@@ -23,7 +26,8 @@ def _g(value: float | None, digits: int = 4) -> str:
 class ProgressDisplay:
     """Progress of the lambda search, shown while :func:`service.core.pipeline` iterates.
 
-    An instance is the ``progress(iteration, lam, phi)`` callback of ``smooth()``. On a
+    An instance is the ``progress(event)`` callback of ``smooth()``; it shows the search
+    iterations (stage ``search``) with the engine's resolved ``tau``. On a
     terminal it keeps one line up to date with carriage returns; on anything else (a pipe, a
     log file, a CI job) it writes one plain line per iteration.
 
@@ -31,30 +35,25 @@ class ProgressDisplay:
     ----------
     stream : TextIO
         Where to write (the CLI passes ``sys.stderr``).
-    tau : float or None
-        The requested smoothing factor, or ``None`` when lambda was given directly.
+    tau : float or None, optional
+        The smoothing factor to compare with until an event carries the engine's own.
     enabled : bool, optional
         ``False`` (``--quiet``) writes nothing at all.
     tty : bool or None, optional
         Force terminal (``True``) or plain-line (``False``) mode; by default
         ``stream.isatty()`` decides.
-    approximate_tau : bool, optional
-        ``tau`` is an estimate (``--rms`` before the engine knows which points it fixes);
-        shown as ``tau~``.
     """
 
     def __init__(
         self,
         stream: TextIO,
-        tau: float | None,
+        tau: float | None = None,
         *,
         enabled: bool = True,
         tty: bool | None = None,
-        approximate_tau: bool = False,
     ) -> None:
         self.stream = stream
         self.tau = tau
-        self.approximate_tau = approximate_tau
         self.enabled = enabled
         if tty is None:
             isatty = getattr(stream, "isatty", None)
@@ -80,15 +79,18 @@ class ProgressDisplay:
         text = f"geosmooth: iteration {iteration:>2}  lambda={_g(lam)}  phi={_g(phi)}"
         if self.tau is not None:
             rel = abs(phi - self.tau) / self.tau
-            eq = "~" if self.approximate_tau else "="
-            text += f"  tau{eq}{_g(self.tau)}  rel.error{eq}{_g(rel, 2)}"
+            text += f"  tau={_g(self.tau)}  rel.error={_g(rel, 2)}"
         return text
 
-    def __call__(self, iteration: int, lam: float, phi: float) -> None:
+    def __call__(self, event: ProgressEvent) -> None:
+        if event.tau is not None:
+            self.tau = event.tau
+        if event.lam is None or event.phi is None:
+            return
         self.calls += 1
         if not self.enabled:
             return
-        text = self.line(iteration, lam, phi)
+        text = self.line(event.iteration, event.lam, event.phi)
         if self.tty:
             pad = max(0, self._width - len(text))
             self.stream.write("\r" + text + " " * pad)

@@ -6,6 +6,7 @@ from typing import Any
 
 from service.api.problems import PROBLEM_MEDIA_TYPE
 from service.api.schemas import Problem, SmoothJsonRequest
+from service.io.registry import FORMATS
 
 __all__ = [
     "FORMAT_QUERY_DESCRIPTION",
@@ -16,14 +17,11 @@ __all__ = [
     "problem_responses",
 ]
 
-MEDIA_TYPES: dict[str, str] = {
-    "ply": "application/octet-stream",
-    "obj": "model/obj",
-    "xyz": "text/plain; charset=utf-8",
-    "json": "application/json",
-}
+MEDIA_TYPES: dict[str, str] = {name: f.media_type for name, f in FORMATS.items()}
 
-FORMAT_QUERY_DESCRIPTION = "Output format: ply, obj, xyz or json (default: the input's format)."
+FORMAT_QUERY_DESCRIPTION = (
+    f"Output format: {', '.join(FORMATS)} (default: the input's format)."
+)
 
 _DESCRIPTIONS: dict[int, str] = {
     400: "Malformed file or body (the parser's message in ``detail``).",
@@ -77,7 +75,7 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
         },
         "format": {
             "type": "string",
-            "enum": ["ply", "obj", "xyz", "json"],
+            "enum": list(FORMATS),
             "description": "Input format when the file name has no telling extension.",
         },
         "weld": {

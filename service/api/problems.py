@@ -21,7 +21,7 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from service.core.errors import GeometryError, GeosmoothError, ParameterError, SolverError
+from service.core.errors import GeosmoothError
 from service.io import FormatError, UnsupportedFormat
 
 __all__ = [
@@ -187,11 +187,11 @@ def problem_from_exception(exc: BaseException) -> ApiProblem:
     exception                     status  notes
     ============================  ======  =================================================
     ApiProblem                    own     raised by the routers (404 job, 409, 413 ...)
-    io.UnsupportedFormat          415     ``field="format"``
+    io.UnsupportedFormat          415     ``field="format"`` (status and title: class attributes)
     io.FormatError                400     parser message, ``field="file"``, ``line``
-    core.GeometryError            422     ``field="geometry.*"``, ``indices``
-    core.ParameterError           422     ``field="params.*"`` (TauOutOfRange: valid_range)
-    core.SolverError              422     the input cannot be solved
+    core.GeosmoothError           422     ``field``, ``indices``, extras of ``to_dict()``; the
+                                          class's ``status`` and ``title`` (TauOutOfRange:
+                                          valid_range)
     InvalidParams                 422     SmoothingParams; ``errors`` with ``params.<name>``
     InvalidInlineGeometry         422     JSON body ``geometry`` against the schema
     RequestValidationError        422     FastAPI query/path validation
@@ -211,32 +211,24 @@ def problem_from_exception(exc: BaseException) -> ApiProblem:
             field="geometry",
             errors=[{"field": "geometry", "message": message, "type": exc.error.code}],
         )
-    if isinstance(exc, UnsupportedFormat):
-        return ApiProblem(415, str(exc), code=exc.code, title="Unsupported format", field="format")
-    if isinstance(exc, FormatError):
+    if isinstance(exc, FormatError):  # UnsupportedFormat (415) included
         return ApiProblem(
-            400,
+            exc.status,
             str(exc),
             code=exc.code,
-            title="Malformed input file",
-            field=exc.field,
-            format=exc.fmt,
+            title=exc.title,
+            field="format" if isinstance(exc, UnsupportedFormat) else exc.field,
+            format=None if isinstance(exc, UnsupportedFormat) else exc.fmt,
             line=exc.line,
         )
     if isinstance(exc, GeosmoothError):
         info = exc.to_dict()
         extra = {k: v for k, v in info.items() if k not in _RESERVED}
-        title = {
-            GeometryError: "Invalid geometry",
-            ParameterError: "Invalid parameters",
-            SolverError: "The input cannot be solved",
-        }
-        kind = next((t for cls, t in title.items() if isinstance(exc, cls)), "Invalid input")
         return ApiProblem(
-            422,
+            exc.status,
             exc.message,
             code=exc.code,
-            title=kind,
+            title=exc.title,
             field=exc.field,
             errors=[{"field": exc.field, "message": exc.message, "type": exc.code}],
             **extra,

@@ -11,6 +11,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from service.core.params import SmoothingParams
+from service.io.registry import FORMATS
 
 __all__ = [
     "COMPONENT_REFS",
@@ -33,7 +34,8 @@ __all__ = [
 ]
 
 JobStatusName = Literal["queued", "running", "succeeded", "failed", "cancelled"]
-OutputFormat = Literal["ply", "obj", "xyz", "json"]
+#: Format names, from the io registry (one place to add a format).
+OutputFormat = Literal[tuple(FORMATS)]  # type: ignore[valid-type]
 
 _GEOMETRY_EXAMPLE: dict[str, Any] = {
     "points": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [1.0, 1.0, -0.1], [0.0, 1.0, 0.05]],

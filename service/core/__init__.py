@@ -23,7 +23,8 @@ _EXPORTS = {
     "SmoothingParams": "params",
     "SmoothResult": "result",
     "Spectrum": "result",
-    "ProgressCallback": "pipeline",
+    "ProgressCallback": "progress",
+    "ProgressEvent": "progress",
     "smooth": "pipeline",
 }
 
@@ -37,6 +38,7 @@ __all__ = [
     "NonFiniteCoordinates",
     "ParameterError",
     "ProgressCallback",
+    "ProgressEvent",
     "SmoothResult",
     "SmoothingParams",
     "SolverError",
@@ -59,7 +61,8 @@ if TYPE_CHECKING:  # pragma: no cover
     )
     from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
-    from service.core.pipeline import ProgressCallback, smooth
+    from service.core.pipeline import smooth
+    from service.core.progress import ProgressCallback, ProgressEvent
     from service.core.result import SmoothResult, Spectrum
 
 

@@ -2,12 +2,18 @@
 
 Every error names the problem, the field at fault (a dotted path such as ``geometry.faces`` or
 ``params.tau``, used by the HTTP layer for RFC 9457 problem details) and, where it applies, the
-first offending indices. The HTTP status mapping lives in one place in ``service.api``.
+first offending indices. Each class also carries its presentation metadata as class attributes
+(``title``, HTTP ``status``, CLI ``exit_code``): the HTTP problem mapping (``service.api``), the
+job problems (``service.jobs``) and the CLI read them, so adding an error class touches this file
+only.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import ClassVar
+
+from service.exit_codes import EXIT_GEOMETRY, EXIT_SOLVER
 
 __all__ = [
     "DegenerateElement",
@@ -37,7 +43,11 @@ class GeosmoothError(ValueError):
         First offending indices (at most ten are kept).
     """
 
-    code: str = "geosmooth-error"
+    code: ClassVar[str] = "geosmooth-error"
+    #: Problem title (RFC 9457 ``title``), HTTP status and CLI exit status of this error class.
+    title: ClassVar[str] = "Invalid input"
+    status: ClassVar[int] = 422
+    exit_code: ClassVar[int] = EXIT_GEOMETRY
 
     def __init__(self, message: str, *, field: str, indices: Sequence[int] | None = None) -> None:
         super().__init__(message)
@@ -57,6 +67,7 @@ class GeometryError(GeosmoothError):
     """The geometry has no meaning as smoothing input."""
 
     code = "invalid-geometry"
+    title = "Invalid geometry"
 
 
 class InvalidShape(GeometryError):
@@ -87,6 +98,7 @@ class ParameterError(GeosmoothError):
     """Parameters that cannot be applied to this geometry."""
 
     code = "invalid-parameter"
+    title = "Invalid parameters"
 
 
 class TauOutOfRange(ParameterError):
@@ -118,3 +130,5 @@ class SolverError(GeosmoothError):
     """The linear solver failed (e.g. a matrix that is not positive definite)."""
 
     code = "solver-failed"
+    title = "The input cannot be solved"
+    exit_code = EXIT_SOLVER

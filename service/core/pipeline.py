@@ -9,7 +9,6 @@ diagnostics.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,6 +28,7 @@ from service.core.neighborhoods import (
     unique_faces,
 )
 from service.core.params import SmoothingParams
+from service.core.progress import ProgressCallback, ProgressEvent
 from service.core.result import SmoothResult, Spectrum
 from service.core.shrinkage import (
     enclosed_measure,
@@ -42,9 +42,6 @@ from service.core.tau import initial_lambda, search_lambda
 from service.core.weights import ResolvedScheme, neighbor_weights
 
 __all__ = ["ProgressCallback", "build_laplacian", "resolve_weights", "smooth"]
-
-ProgressCallback = Callable[[int, float, float], None]
-
 
 def resolve_weights(params: SmoothingParams, geometry: Geometry) -> ResolvedScheme:
     """The weight scheme actually used: ``auto`` resolved as in the report.
@@ -187,7 +184,9 @@ def smooth(
     params : SmoothingParams
         Exactly one of ``lam``, ``tau``, ``rms``; see the model for the other fields.
     progress : callable, optional
-        ``progress(iteration, lam, phi)``, called once per lambda tried.
+        ``progress(event)`` with a :class:`~service.core.progress.ProgressEvent`: once per
+        stage, and once per lambda tried (stage ``search``). From the ``analysis`` stage on,
+        ``event.tau`` is the resolved target (the one ``rms`` implies, over the free points).
 
     Returns
     -------
@@ -203,9 +202,15 @@ def smooth(
         The factorization failed.
     """
     t_start = time.perf_counter()
+
+    def emit(stage: str, **kw: float | int | None) -> None:
+        if progress is not None:
+            progress(ProgressEvent(stage, elapsed=time.perf_counter() - t_start, **kw))  # type: ignore[arg-type]
+
     P = geometry.points
     n = geometry.n
     notes: list[str] = []
+    emit("neighborhoods")
     L, nb, scheme, timings = build_laplacian(geometry, params)
 
     fixed = geometry.fixed_mask()
@@ -233,6 +238,7 @@ def smooth(
     if params.lam is None:
         tau = params.tau if params.tau is not None else float(params.rms**2 * w2_free.sum())  # type: ignore[operator]
     field = "params.tau" if params.tau is not None else "params.rms"
+    emit("analysis", tau=tau)
 
     if free.size == 0 or M.nnz == 0:
         if tau is not None:
@@ -275,8 +281,7 @@ def smooth(
     def phi_of(lam: float) -> float:
         X_F = solve(lam)
         phi = float(np.sum(w2_free[:, None] * (X_F - P_F) ** 2))
-        if progress is not None:
-            progress(len(history_calls) + 1, lam, phi)
+        emit("search", tau=tau, iteration=len(history_calls) + 1, lam=lam, phi=phi)
         history_calls.append(lam)
         return phi
 
@@ -311,6 +316,7 @@ def smooth(
             solve(lam)
     t_end_search = time.perf_counter()
 
+    emit("postprocess", tau=tau, iteration=len(history_calls))
     X = P.copy()
     X[free] = state["X_F"]  # type: ignore[assignment]
     volume_scale = None

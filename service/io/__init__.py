@@ -12,12 +12,14 @@ whose docstring states exactly what is read and written. Welding is in :mod:`.we
 
 from service.io.document import GeometryDocument, Polyline, WeldMap
 from service.io.errors import FormatError, UnsupportedFormat
-from service.io.formats import FORMATS, detect_format, read_geometry, sniff_format, write_geometry
+from service.io.formats import detect_format, read_geometry, sniff_format, write_geometry
 from service.io.jsonfmt import GEOMETRY_JSON_SCHEMA, document_to_json_obj, geometry_from_json_obj
+from service.io.registry import FORMATS, Format, get_format
 
 __all__ = [
     "FORMATS",
     "GEOMETRY_JSON_SCHEMA",
+    "Format",
     "FormatError",
     "GeometryDocument",
     "Polyline",
@@ -26,6 +28,7 @@ __all__ = [
     "detect_format",
     "document_to_json_obj",
     "geometry_from_json_obj",
+    "get_format",
     "read_geometry",
     "sniff_format",
     "write_geometry",

@@ -3,7 +3,8 @@
 A :class:`FormatError` means the bytes are not a valid file of the format (bad header, truncated
 data, a non-numeric token, an index outside the vertex list, ...). An :class:`UnsupportedFormat`
 means geosmooth does not read or write the format at all (GPX, GeoJSON, DXF, unknown extensions);
-its message says what to convert the data to. The HTTP layer maps ``UnsupportedFormat`` to 415.
+its message says what to convert the data to. Title, HTTP status (400 / 415) and CLI exit
+status are class attributes.
 
 Both carry the same machine-readable surface as the engine's errors (``.message``, ``.field``,
 ``.code``, ``.to_dict()``) so callers can report them uniformly, but they are not
@@ -11,6 +12,10 @@ Both carry the same machine-readable surface as the engine's errors (``.message`
 """
 
 from __future__ import annotations
+
+from typing import ClassVar
+
+from service.exit_codes import EXIT_INPUT
 
 __all__ = ["FormatError", "UnsupportedFormat"]
 
@@ -37,8 +42,12 @@ class FormatError(ValueError):
         ``"format-error"`` (``"unsupported-format"`` for :class:`UnsupportedFormat`).
     """
 
-    code: str = "format-error"
+    code: ClassVar[str] = "format-error"
     field: str = "file"
+    #: Problem title, HTTP status and CLI exit status (read by the API, the jobs and the CLI).
+    title: ClassVar[str] = "Malformed input file"
+    status: ClassVar[int] = 400
+    exit_code: ClassVar[int] = EXIT_INPUT
 
     def __init__(self, message: str, *, fmt: str | None = None, line: int | None = None) -> None:
         message = " ".join(message.split())  # always one line
@@ -61,3 +70,5 @@ class UnsupportedFormat(FormatError):
     """A format geosmooth does not read or write; the message says what to convert to."""
 
     code = "unsupported-format"
+    title = "Unsupported format"
+    status = 415

@@ -16,14 +16,9 @@ from numpy.typing import ArrayLike
 
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
-from service.io.jsonfmt import read_json, write_json
-from service.io.obj import read_obj, write_obj
-from service.io.ply import read_ply, write_ply
-from service.io.xyz import read_xyz, write_xyz
+from service.io.registry import FORMATS, format_for_name, get_format, supported_text
 
 __all__ = ["FORMATS", "detect_format", "read_geometry", "sniff_format", "write_geometry"]
-
-FORMATS: tuple[str, ...] = ("ply", "obj", "xyz", "json")
 
 _TO_POLYLINE = "as OBJ polylines ('v' + 'l' lines) or geosmooth JSON {points, polylines}"
 _REFUSED: dict[str, str] = {
@@ -47,17 +42,13 @@ _REFUSED: dict[str, str] = {
     "las": "LAS/LAZ is not supported: convert the point cloud to PLY or XYZ (e.g. with PDAL)",
     "laz": "LAS/LAZ is not supported: convert the point cloud to PLY or XYZ (e.g. with PDAL)",
 }
-_ALIASES = {"json": "json", "ply": "ply", "obj": "obj", "xyz": "xyz"}
-_SUPPORTED = "geosmooth reads and writes PLY (.ply), OBJ (.obj), XYZ (.xyz) and JSON (.json)"
 
 
 def _check_fmt(fmt: str) -> str:
     key = fmt.lower().lstrip(".")
-    if key in _ALIASES:
-        return _ALIASES[key]
-    if key in _REFUSED:
+    if key in _REFUSED and key not in FORMATS:
         raise UnsupportedFormat(_REFUSED[key], fmt=key)
-    raise UnsupportedFormat(f"format {fmt!r} is not supported: {_SUPPORTED}", fmt=key)
+    return get_format(key).name
 
 
 def detect_format(filename: str) -> str:
@@ -73,15 +64,16 @@ def detect_format(filename: str) -> str:
     suffix = Path(name).suffix.lower().lstrip(".")
     if not suffix:
         raise UnsupportedFormat(
-            f"cannot tell the format of {name!r} (no file extension): {_SUPPORTED};"
+            f"cannot tell the format of {name!r} (no file extension): {supported_text()};"
             " pass the format explicitly"
         )
-    if suffix in _ALIASES:
-        return _ALIASES[suffix]
+    known = format_for_name(name)
+    if known is not None:
+        return known.name
     if suffix in _REFUSED:
         raise UnsupportedFormat(_REFUSED[suffix], fmt=suffix)
     raise UnsupportedFormat(
-        f"unsupported file extension '.{suffix}' ({name!r}): {_SUPPORTED}", fmt=suffix
+        f"unsupported file extension '.{suffix}' ({name!r}): {supported_text()}", fmt=suffix
     )
 
 
@@ -168,17 +160,12 @@ def read_geometry(
         if sniffed is None:
             if not data.strip():
                 raise FormatError("the file is empty")
-            raise UnsupportedFormat(f"cannot tell the format of the data: {_SUPPORTED}")
+            raise UnsupportedFormat(f"cannot tell the format of the data: {supported_text()}")
         kind = sniffed
     if kind != "xyz" and xyz_dims is not None:
         raise ValueError("xyz_dims applies to XYZ files only")
-    if kind == "ply":
-        return read_ply(data, weld=weld)
-    if kind == "obj":
-        return read_obj(data, weld=weld)
-    if kind == "xyz":
-        return read_xyz(data, weld=weld, xyz_dims=xyz_dims)
-    return read_json(data, weld=weld)
+    options = {"xyz_dims": xyz_dims} if xyz_dims is not None else {}
+    return FORMATS[kind].read(data, weld=weld, **options)
 
 
 def write_geometry(
@@ -212,17 +199,13 @@ def write_geometry(
     ValueError
         ``points`` has the wrong shape.
     """
-    kind = _check_fmt(fmt)
+    spec = FORMATS[_check_fmt(fmt)]
+    if spec.write is None:
+        raise UnsupportedFormat(f"{spec.title} can be read but not written", fmt=spec.name)
     pts: Any = None if points is None else np.asarray(points, dtype=np.float64)
     if pts is not None and pts.shape != doc.geometry.points.shape:
         raise ValueError(
             f"points must have the shape of the document's points {doc.geometry.points.shape},"
             f" got {pts.shape}"
         )
-    if kind == "ply":
-        return write_ply(doc, pts, ascii=ply_ascii)
-    if kind == "obj":
-        return write_obj(doc, pts)
-    if kind == "xyz":
-        return write_xyz(doc, pts)
-    return write_json(doc, pts)
+    return spec.write(doc, pts, ascii=ply_ascii)

@@ -424,14 +424,10 @@ class LocalQueue:
 
     @staticmethod
     def _check_format(fmt: str) -> None:
-        try:
-            from service.io import FORMATS
-        except ImportError:  # io not importable yet: accept what looks like a format name
-            formats: tuple[str, ...] = ("ply", "obj", "xyz", "json")
-        else:
-            formats = tuple(FORMATS)
-        if fmt not in formats:
-            raise ValueError(f"unknown format {fmt!r}; expected one of {', '.join(formats)}")
+        from service.io import FORMATS
+
+        if fmt not in FORMATS:
+            raise ValueError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
 
 
 def _with_points(doc: GeometryDocument, points: np.ndarray) -> GeometryDocument:

@@ -41,25 +41,11 @@ def from_exception(exc: BaseException) -> dict[str, Any]:
     Core errors (:class:`~service.core.errors.GeosmoothError`) and io format errors keep their
     code, field and indices; anything else becomes ``internal-error`` with one line of detail.
     """
-    from service.core.errors import GeometryError, GeosmoothError, ParameterError, SolverError
+    from service.core.errors import GeosmoothError
+    from service.io.errors import FormatError
 
-    try:
-        from service.io.errors import FormatError, UnsupportedFormat
-    except ImportError:  # pragma: no cover - io is always installed with the service
-        FormatError = UnsupportedFormat = ()  # type: ignore[assignment,misc]
-
-    if isinstance(exc, UnsupportedFormat):
-        return _from_typed(exc, "Unsupported format")  # type: ignore[arg-type]
-    if isinstance(exc, FormatError):
-        return _from_typed(exc, "Malformed input file")  # type: ignore[arg-type]
-    if isinstance(exc, GeosmoothError):
-        titles = (
-            (GeometryError, "Invalid geometry"),
-            (ParameterError, "Invalid parameters"),
-            (SolverError, "The input cannot be solved"),
-        )
-        title = next((t for cls, t in titles if isinstance(exc, cls)), "Invalid input")
-        return _from_typed(exc, title)
+    if isinstance(exc, GeosmoothError | FormatError):
+        return _from_typed(exc, exc.title)
     if isinstance(exc, MemoryError):
         return {
             "code": "out-of-memory",

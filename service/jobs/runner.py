@@ -19,10 +19,10 @@ import numpy as np
 from service.jobs.files import write_durable
 
 if TYPE_CHECKING:
-    from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
+    from service.core.progress import ProgressEvent
 
-__all__ = ["DEFAULT_RUNNER", "JobContext", "RunLost", "smooth_job", "target_tau"]
+__all__ = ["DEFAULT_RUNNER", "JobContext", "RunLost", "smooth_job"]
 
 DEFAULT_RUNNER = "service.jobs.runner:smooth_job"
 
@@ -50,8 +50,6 @@ class JobContext:
         Its format.
     params : SmoothingParams
         Smoothing parameters.
-    tau : float or None
-        Target ``tau`` once known (set by the job function) for relative errors in progress.
     report_progress : callable
         ``(iteration, lam, phi, tau, relative_error) -> bool`` writing to the job's row;
         ``False`` when the run lost its job.
@@ -69,51 +67,45 @@ class JobContext:
     report_progress: Callable[[int, float, float, float | None, float | None], bool]
     progress_interval: float = 0.2
     options: dict[str, Any] = field(default_factory=dict)
-    tau: float | None = None
     _last_write: float = field(default=float("-inf"), repr=False)
-    _pending: tuple[int, float, float] | None = field(default=None, repr=False)
+    _pending: ProgressEvent | None = field(default=None, repr=False)
 
-    def progress(self, iteration: int, lam: float, phi: float) -> None:
-        """Progress callback for :func:`service.core.pipeline` (throttled).
+    def progress(self, event: ProgressEvent) -> None:
+        """Progress callback for :func:`service.core.smooth` (throttled).
+
+        The engine's events carry the resolved ``tau``; events before the first lambda carry
+        no ``lam``/``phi`` and are not recorded.
 
         Raises
         ------
         RunLost
             When the job was cancelled or taken away from this run.
         """
+        if event.lam is None or event.phi is None:
+            return
         now = time.monotonic()
         if now - self._last_write < self.progress_interval:
-            self._pending = (iteration, lam, phi)
+            self._pending = event
             return
         self._last_write = now
         self._pending = None
-        rel = None
-        if self.tau:
-            rel = abs(phi - self.tau) / self.tau
-        if not self.report_progress(int(iteration), float(lam), float(phi), self.tau, rel):
+        ok = self.report_progress(
+            event.iteration, event.lam, event.phi, event.tau, event.relative_error
+        )
+        if not ok:
             raise RunLost(self.job_id)
 
     def flush_progress(self) -> None:
         """Write a progress update held back by throttling."""
         if self._pending is not None:
             self._last_write = float("-inf")
-            self.progress(*self._pending)
+            self.progress(self._pending)
 
     def write(self, name: str, data: bytes) -> Path:
         """Write an output file into the job directory durably and atomically."""
         path = self.job_dir / name
         write_durable(path, data)
         return path
-
-
-def target_tau(params: SmoothingParams, geometry: Geometry) -> float | None:
-    """``tau`` as given, or ``sum_i omega_i^2 * rms^2`` for ``rms``; ``None`` for ``lam``."""
-    if params.tau is not None:
-        return float(params.tau)
-    if params.rms is not None:
-        omega = geometry.omega()[~geometry.fixed_mask()]
-        return float(np.sum(omega**2) * params.rms**2)
-    return None
 
 
 def smooth_job(ctx: JobContext) -> dict[str, Any]:
@@ -134,7 +126,6 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
 
     weld = bool(ctx.options.get("weld", False))
     doc = read_geometry(ctx.input_path, ctx.fmt, weld=weld)
-    ctx.tau = target_tau(ctx.params, doc.geometry)
     result = smooth(doc.geometry, ctx.params, progress=ctx.progress)
     ctx.flush_progress()
     buf = io.BytesIO()

@@ -14,6 +14,7 @@ import service.core
 from service import cli
 from service.cli_progress import ProgressDisplay, format_summary
 from service.core import SmoothingParams
+from service.core.progress import ProgressEvent
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -120,11 +121,15 @@ def test_read_fixed_indices(tmp_path: Path):
     assert info.value.code == 3
 
 
+def _ev(iteration: int, lam: float, phi: float) -> ProgressEvent:
+    return ProgressEvent("search", iteration=iteration, lam=lam, phi=phi)
+
+
 def test_progress_plain_lines_vs_terminal():
     plain = io.StringIO()
     p = ProgressDisplay(plain, tau=2.0, tty=False)
-    p(1, 0.1, 3.0)
-    p(2, 0.2, 2.001)
+    p(_ev(1, 0.1, 3.0))
+    p(_ev(2, 0.2, 2.001))
     p.finish()
     lines = plain.getvalue().splitlines()
     assert len(lines) == 2 and "\r" not in plain.getvalue()
@@ -132,8 +137,8 @@ def test_progress_plain_lines_vs_terminal():
 
     term = io.StringIO()
     p = ProgressDisplay(term, tau=None, tty=True)
-    p(1, 0.5, 0.25)
-    p(2, 0.6, 0.2)
+    p(_ev(1, 0.5, 0.25))
+    p(_ev(2, 0.6, 0.2))
     p.finish()
     text = term.getvalue()
     assert text.count("\r") == 2 and text.endswith("\n") and text.count("\n") == 1
@@ -141,7 +146,7 @@ def test_progress_plain_lines_vs_terminal():
 
     quiet = io.StringIO()
     p = ProgressDisplay(quiet, tau=1.0, enabled=False, tty=True)
-    p(1, 0.5, 0.25)
+    p(_ev(1, 0.5, 0.25))
     p.finish()
     assert quiet.getvalue() == "" and p.calls == 1
 
@@ -246,7 +251,7 @@ def test_ctrl_c_exits_130_quietly(
     src = _circle_obj(tmp_path / "circle.obj")
 
     def interrupted(geometry: object, params: object, progress=None) -> None:
-        progress(1, 0.1, 0.2)
+        progress(ProgressEvent("search", tau=0.01, iteration=1, lam=0.1, phi=0.2))
         raise KeyboardInterrupt
 
     monkeypatch.setattr(service.core, "smooth", interrupted)

@@ -150,7 +150,9 @@ def test_tau_is_met_within_tolerance(name: str, geometry: Geometry) -> None:
         res = smooth(
             geometry,
             SmoothingParams(tau=tau, tolerance=tol, neighborhood=nbk),
-            progress=lambda i, lam, phi, seen=seen: seen.append((i, lam, phi)),
+            progress=lambda e, seen=seen: seen.append((e.iteration, e.lam, e.phi))
+            if e.stage == "search"
+            else None,
         )
         assert res.converged, res.history
         assert abs(res.phi - tau) / tau <= tol
@@ -378,3 +380,29 @@ def test_laplacian_is_sparse_and_normalized() -> None:
     assert sp.issparse(L)
     np.testing.assert_allclose(L.diagonal(), 1.0)
     np.testing.assert_allclose(np.asarray(L.sum(axis=1)).ravel(), 0.0, atol=1e-12)
+
+
+def test_progress_carries_the_engines_tau_from_the_start() -> None:
+    """Regression (issue 10): ``rms`` with ``fix_boundary`` on a 12 x 9 grid. The engine's tau
+    sums over the free (interior) points only; every event from ``analysis`` on carries it, so
+    progress shows the relative error the final report has."""
+    nx, ny = 12, 9
+    x, y = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="ij")
+    rng = np.random.default_rng(7)
+    P = np.column_stack([x.ravel(), y.ravel(), 0.01 * rng.standard_normal(nx * ny)])
+    idx = np.arange(nx * ny).reshape(nx, ny)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    F = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]).reshape(-1, 3)
+    events: list = []
+    res = smooth(
+        Geometry(P, faces=F), SmoothingParams(rms=0.003, fix_boundary=True), progress=events.append
+    )
+    n_free = (nx - 2) * (ny - 2)
+    assert res.tau == pytest.approx(n_free * 0.003**2, rel=1e-12)  # 6.3e-4, not 9.72e-4
+    stages = [e.stage for e in events]
+    assert stages[0] == "neighborhoods" and "analysis" in stages
+    first_tau = stages.index("analysis")
+    assert stages.index("search") > first_tau  # tau known before the first factorization
+    assert all(e.tau == res.tau for e in events[first_tau:])
+    last = [e for e in events if e.stage == "search"][-1]
+    assert last.relative_error == pytest.approx(res.relative_error, rel=1e-12)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from service.core.errors import TauOutOfRange
+from service.core.progress import ProgressEvent
 from service.jobs.runner import JobContext
 
 
@@ -55,12 +56,11 @@ def scripted(ctx: JobContext) -> dict[str, Any]:
     steps = int(spec.get("steps", 5))
     seconds = float(spec.get("seconds", 0.0))
     tau = ctx.params.tau
-    ctx.tau = tau
     phi = 10.0
     for i in range(1, steps + 1):
         time.sleep(seconds / steps)
         phi = tau + (phi - tau) / 4 if tau else phi / 2
-        ctx.progress(i, 1.0 / i, phi)
+        ctx.progress(ProgressEvent("search", tau=tau, iteration=i, lam=1.0 / i, phi=phi))
     ctx.flush_progress()
     buf = io.BytesIO()
     np.save(buf, np.arange(6, dtype=np.float64).reshape(3, 2))

@@ -16,6 +16,7 @@ from jobs_fakes import script
 from jobs_helpers import PARAMS, pid_gone, wait_for
 
 from service.core.errors import IndexOutOfRange
+from service.core.progress import ProgressEvent
 from service.io.errors import FormatError, UnsupportedFormat
 from service.jobs import JobStatus, LocalQueue, problems
 from service.jobs.files import JobFiles, is_job_id, write_durable
@@ -185,9 +186,11 @@ def test_progress_is_throttled_and_stops_a_run_that_lost_its_job(tmp_path: Path)
         return holds[0]
 
     ctx = JobContext("a" * 32, tmp_path, tmp_path / "input.json", "json", PARAMS, report, 10.0)
-    ctx.tau = 2.0
-    ctx.progress(1, 0.1, 3.0)
-    ctx.progress(2, 0.2, 2.5)  # within the interval: held back
+    ev = [ProgressEvent("search", tau=2.0, iteration=i, lam=0.1 * i, phi=p) for i, p in
+          ((1, 3.0), (2, 2.5), (3, 2.0))]  # fmt: skip
+    ctx.progress(ProgressEvent("neighborhoods"))  # no lambda yet: not recorded
+    ctx.progress(ev[0])
+    ctx.progress(ev[1])  # within the interval: held back
     assert writes == [(1, 0.5)]
     ctx.flush_progress()
     assert writes == [(1, 0.5), (2, 0.25)]
@@ -195,4 +198,4 @@ def test_progress_is_throttled_and_stops_a_run_that_lost_its_job(tmp_path: Path)
     ctx.flush_progress()  # nothing pending: no write
     with pytest.raises(RunLost):
         ctx._last_write = float("-inf")
-        ctx.progress(3, 0.3, 2.0)
+        ctx.progress(ev[2])
