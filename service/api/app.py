@@ -22,9 +22,9 @@ from service.api.schemas import (
     SmoothJsonRequest,
     SmoothJsonResponse,
 )
-from service.api.settings import Settings, get_settings
 from service.io import GEOMETRY_JSON_SCHEMA
 from service.jobs.queue import JobQueue
+from service.settings import Settings, get_settings
 
 __all__ = ["create_app"]
 

@@ -8,9 +8,9 @@ from fastapi import Depends, Path, Request
 
 from service.api.metrics import Metrics
 from service.api.problems import ApiProblem
-from service.api.settings import Settings
 from service.api.uploads import SmoothInput, read_smooth_input
 from service.jobs.queue import JobQueue, JobRecord
+from service.settings import Settings
 
 __all__ = [
     "JobDep",

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from service.api.app import create_app
-from service.api.settings import Settings
+from service.settings import Settings
 
 __all__ = ["main", "openapi_spec", "render"]
 

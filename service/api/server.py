@@ -10,7 +10,7 @@ from typing import Any
 import uvicorn
 
 from service.api.app import create_app
-from service.api.settings import Settings
+from service.settings import Settings
 
 __all__ = ["main", "serve"]
 
@@ -34,7 +34,7 @@ def serve(
     data_dir : str, optional
         Job store directory (default: setting ``data_dir``, env ``GEOSMOOTH_DATA_DIR``).
     **settings_overrides
-        Any other :class:`~service.api.settings.Settings` field.
+        Any other :class:`~service.settings.Settings` field.
     """
     overrides: dict[str, Any] = dict(settings_overrides)
     if workers is not None:

@@ -20,10 +20,10 @@ from service.api.problems import (
     problem_from_exception,
 )
 from service.api.results import REPORT_HEADER_MAX, report_header
-from service.api.settings import Settings
 from service.core.errors import IndexOutOfRange, SolverError, TauOutOfRange
 from service.core.params import SmoothingParams
 from service.io import FormatError, UnsupportedFormat
+from service.settings import Settings
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from service.api.app import create_app
 from service.api.openapi_export import openapi_spec, render
-from service.api.settings import Settings
+from service.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = ROOT / "openapi" / "openapi.json"

@@ -1,4 +1,8 @@
-"""Service settings, read from the environment (prefix ``GEOSMOOTH_``)."""
+"""Service settings, read from the environment (prefix ``GEOSMOOTH_``).
+
+Shared by the HTTP service, the job queue backends and their workers (so a worker needs no
+``service.api`` import). Each setting is one field here: its env variable, default and bounds.
+"""
 
 from __future__ import annotations
 
