@@ -9,11 +9,14 @@ from __future__ import annotations
 import os
 from functools import lru_cache
 from pathlib import Path
+from typing import Any, ClassVar, Literal
 
-from pydantic import Field
+from pydantic import Field, SecretStr, ValidationError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings", "get_settings"]
+from service.exit_codes import EXIT_USAGE
+
+__all__ = ["ConfigError", "Settings", "get_settings", "load_settings"]
 
 
 def _default_workers() -> int:
@@ -65,7 +68,138 @@ class Settings(BaseSettings):
     )
 
 
+    # --- HTTP API (service/api): address, keys, per-key bounds, connections, logs ---
+    host: str = Field(
+        default="127.0.0.1",
+        description="Address the server binds (``geosmooth serve --host`` wins). A non-loopback "
+        "address requires API keys unless ``insecure_no_auth``.",
+    )
+    port: int = Field(default=8000, ge=1, le=65535, description="TCP port the server binds.")
+    api_keys: SecretStr | None = Field(
+        default=None,
+        description="API keys, comma separated (``Authorization: Bearer <key>`` or "
+        "``X-API-Key``); each key is a tenant. Unset (and no keys file): no authentication.",
+    )
+    api_keys_file: Path | None = Field(
+        default=None,
+        description="File of API keys as sha256 hex digests, one per line, optionally followed "
+        "by a name and per-key bounds (``max_points=5000000 rate_limit=50``).",
+    )
+    insecure_no_auth: bool = Field(
+        default=False,
+        description="Allow serving a non-loopback address without API keys (explicit opt-out).",
+    )
+    allowed_hosts: str = Field(
+        default="",
+        description="Host header allow-list, comma separated (``*``: any). Default: the bound "
+        "address and localhost; any host when bound to a wildcard address (keys required).",
+    )
+    cors_origins: str = Field(
+        default="",
+        description="Origins allowed to call the API from a browser (CORS), comma separated; "
+        "empty: CORS off.",
+    )
+    rate_limit: float = Field(
+        default=20.0, gt=0, description="Requests per second per key (or client address)."
+    )
+    rate_burst: int = Field(default=100, ge=1, description="Requests a key may burst at once.")
+    max_active_jobs: int = Field(
+        default=100, ge=1, description="Queued plus running jobs per key; more get 429."
+    )
+    max_sync_per_key: int = Field(
+        default=2, ge=1, description="Concurrent POST /v1/smooth solves per key; more get 429."
+    )
+    max_faces: int = Field(default=4_000_000, ge=1, description="Largest mesh (faces) accepted.")
+    max_k: int = Field(default=64, ge=3, le=64, description="Largest ``params.k`` accepted.")
+    max_iterations: int = Field(
+        default=200, ge=1, le=500, description="Largest ``params.max_iterations`` accepted."
+    )
+    max_spectrum_points: int = Field(
+        default=3000, ge=0, description="Largest input for which ``params.spectrum`` is accepted."
+    )
+    sync_timeout: float = Field(
+        default=60.0, gt=0, description="Seconds a POST /v1/smooth may take; then it is stopped."
+    )
+    sync_memory_bytes: int = Field(
+        default=2 * 1024**3,
+        ge=64 * 1024**2,
+        description="Address space a POST /v1/smooth process may add (RLIMIT_AS).",
+    )
+    ingest_timeout: float = Field(
+        default=600.0, gt=0, description="Seconds the parse and checks of an upload may take."
+    )
+    max_connections: int = Field(
+        default=2048, ge=16, description="Open connections; more are closed at once."
+    )
+    max_requests_in_flight: int = Field(
+        default=512, ge=1, description="Requests handled at once; more get 503 + Retry-After."
+    )
+    timeout_keep_alive: float = Field(
+        default=5.0, gt=0, description="Seconds an idle keep-alive connection is kept."
+    )
+    timeout_request_header: float = Field(
+        default=10.0, gt=0, description="Seconds a client has to send a request's header."
+    )
+    timeout_body_read: float = Field(
+        default=30.0, gt=0, description="Seconds without a byte of request body before 408."
+    )
+    timeout_graceful_shutdown: float = Field(
+        default=10.0, gt=0, description="Seconds requests get to finish on SIGTERM."
+    )
+    log_level: Literal["debug", "info", "warning", "error"] = Field(
+        default="info", description="Log level."
+    )
+    log_format: Literal["json", "console"] = Field(
+        default="json", description="``json``: one JSON object per line; ``console``: text."
+    )
+
+
 @lru_cache(maxsize=1)
 def get_settings() -> Settings:
-    """Settings from the environment, read once per process."""
-    return Settings()
+    """Settings from the environment, read once per process (:class:`ConfigError` if invalid)."""
+    return load_settings()
+
+
+class ConfigError(Exception):
+    """An invalid setting; the message names its environment variable (one line).
+
+    Attributes
+    ----------
+    field : str
+        The environment variable, e.g. ``GEOSMOOTH_WORKERS``.
+    message : str
+        ``GEOSMOOTH_WORKERS='abc': Input should be a valid integer ...``.
+    """
+
+    code: ClassVar[str] = "invalid-configuration"
+    title: ClassVar[str] = "Invalid configuration"
+    status: ClassVar[int] = 500
+    exit_code: ClassVar[int] = EXIT_USAGE
+
+    def __init__(self, message: str, *, field: str) -> None:
+        super().__init__(message)
+        self.message = message
+        self.field = field
+
+    def to_dict(self) -> dict[str, object]:
+        """``{code, message, field}``."""
+        return {"code": self.code, "message": self.message, "field": self.field}
+
+
+def load_settings(**overrides: Any) -> Settings:
+    """:class:`Settings` from the environment and ``overrides``.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first invalid setting's environment variable and value.
+    """
+    try:
+        return Settings(**overrides)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        name = str(err["loc"][0]) if err.get("loc") else "settings"
+        env = f"GEOSMOOTH_{name.upper()}"
+        value = overrides.get(name, os.environ.get(env, err.get("input")))
+        shown = "***" if "key" in name else repr(value)
+        raise ConfigError(f"{env}={shown}: {err['msg']}", field=env) from None

@@ -1,18 +1,18 @@
 """RFC 9457 problem details: the one place where errors become HTTP responses.
 
-Every error the service answers with is ``application/problem+json``: core typed errors
-(:class:`~service.core.errors.GeosmoothError`), format errors of :mod:`service.io`, parameter
-validation errors (pydantic), FastAPI's own request validation errors, Starlette's HTTP errors
-(404 for unknown routes, 405, 413 ...) and, as a last resort, unexpected exceptions (500, without
-internals). :func:`problem_from_exception` is the single mapping; :func:`install_problem_handlers`
-wires it into an app.
+Every error the service answers with is ``application/problem+json``: typed errors of the
+project (core, io, jobs: any exception with class attributes ``status``/``title``/``code``, see
+:func:`service.api.errors.typed_problem`), parameter validation errors (pydantic), FastAPI's own
+request validation errors, Starlette's HTTP errors (404 for unknown routes, 405, 413 ...) and, as
+a last resort, unexpected exceptions (500, without internals). :func:`problem_from_exception` is
+the single mapping; :func:`install_problem_handlers` wires it into an app (the catch-all for
+unexpected exceptions is :class:`service.api.context.RequestContextMiddleware`, which answers
+without closing the connection).
 """
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Mapping, Sequence
-from http import HTTPStatus
+import json
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -20,107 +20,36 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
-from service.core.errors import GeosmoothError
-from service.io import FormatError, UnsupportedFormat
+from service.api.errors import ApiProblem, finite, typed_problem
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
     "ApiProblem",
+    "FiniteJSONResponse",
     "InvalidInlineGeometry",
     "InvalidParams",
     "field_errors",
     "install_problem_handlers",
+    "internal_problem",
     "problem_from_exception",
     "problem_response",
 ]
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
-_TYPE_PREFIX = "urn:geosmooth:problem:"
-# Members an error's to_dict() may not override (they are set from the error itself).
-_RESERVED = frozenset(
-    {
-        "type",
-        "title",
-        "status",
-        "detail",
-        "instance",
-        "code",
-        "message",
-        "field",
-        "errors",
-        "headers",
-    }
-)
-log = logging.getLogger("geosmooth.api")
+_PROTOCOL_CODES = {400: "malformed-request", 413: "payload-too-large", 405: "method-not-allowed"}
 
 
-class ApiProblem(Exception):
-    """An HTTP error carrying RFC 9457 problem details.
+class FiniteJSONResponse(JSONResponse):
+    """JSON response that never fails on NaN/inf: they are written as ``null``."""
 
-    Parameters
-    ----------
-    status : int
-        HTTP status code.
-    detail : str
-        Human readable explanation specific to this occurrence.
-    code : str, optional
-        Machine readable problem code; the problem ``type`` is ``urn:geosmooth:problem:<code>``
-        (``about:blank`` without one).
-    title : str, optional
-        Short summary of the problem type; default: the HTTP reason phrase.
-    field : str, optional
-        Dotted path of the input at fault, e.g. ``params.tau`` or ``file``.
-    errors : list of dict, optional
-        One entry ``{"field", "message", ...}`` per invalid input.
-    headers : mapping, optional
-        Extra response headers (e.g. ``Retry-After``).
-    **extensions
-        Further members of the problem object (e.g. ``job_id``, ``valid_range``).
-    """
-
-    def __init__(
-        self,
-        status: int,
-        detail: str,
-        *,
-        code: str | None = None,
-        title: str | None = None,
-        field: str | None = None,
-        errors: Sequence[Mapping[str, Any]] | None = None,
-        headers: Mapping[str, str] | None = None,
-        **extensions: Any,
-    ) -> None:
-        super().__init__(detail)
-        self.status = status
-        self.detail = detail
-        self.code = code
-        self.title = title or _phrase(status)
-        self.field = field
-        self.errors = [dict(e) for e in errors] if errors else None
-        self.headers = dict(headers or {})
-        self.extensions = extensions
-
-    def body(self, instance: str | None = None) -> dict[str, Any]:
-        """The problem object (JSON-ready)."""
-        out: dict[str, Any] = {
-            "type": f"{_TYPE_PREFIX}{self.code}" if self.code else "about:blank",
-            "title": self.title,
-            "status": self.status,
-            "detail": self.detail,
-        }
-        if instance:
-            out["instance"] = instance
-        if self.code:
-            out["code"] = self.code
-        if self.field:
-            out["field"] = self.field
-        if self.errors:
-            out["errors"] = self.errors
-        for key, value in self.extensions.items():
-            if value is not None:
-                out[key] = value
-        return out
+    def render(self, content: Any) -> bytes:
+        try:
+            text = json.dumps(content, ensure_ascii=False, allow_nan=False, separators=(",", ":"))
+        except ValueError:  # a non-finite float somewhere: never a 500 for that
+            text = json.dumps(finite(content), ensure_ascii=False, separators=(",", ":"))
+        return text.encode("utf-8")
 
 
 class InvalidParams(Exception):
@@ -136,22 +65,12 @@ class InvalidParams(Exception):
 
 
 class InvalidInlineGeometry(Exception):
-    """The ``geometry`` member of a JSON request body does not follow the JSON schema.
+    """The ``geometry`` member of a JSON request body does not follow the JSON schema."""
 
-    Wraps the reader's :class:`~service.io.FormatError`: inline geometry is part of the request,
-    not an uploaded file, so it is a 422 on ``geometry`` rather than a 400 on ``file``.
-    """
-
-    def __init__(self, error: FormatError) -> None:
-        super().__init__(str(error))
-        self.error = error
-
-
-def _phrase(status: int) -> str:
-    try:
-        return HTTPStatus(status).phrase
-    except ValueError:
-        return "Error"
+    def __init__(self, message: str, code: str = "format-error") -> None:
+        super().__init__(message)
+        self.message = message
+        self.code = code
 
 
 def field_errors(
@@ -180,6 +99,22 @@ def field_errors(
     return out
 
 
+def _validation(errors: list[dict[str, Any]], code: str, title: str, default: str | None) -> ApiProblem:
+    return ApiProblem(
+        422,
+        "; ".join(f"{e['field']}: {e['message']}" for e in errors),
+        code=code,
+        title=title,
+        field=errors[0]["field"] if errors else default,
+        errors=errors,
+    )
+
+
+def internal_problem() -> ApiProblem:
+    """The answer to an unexpected exception: no internals, the request id says the rest."""
+    return ApiProblem(500, "An unexpected error occurred; it has been logged.", code="internal")
+
+
 def problem_from_exception(exc: BaseException) -> ApiProblem:
     """Map any exception to its problem details (the single error mapping of the service).
 
@@ -187,11 +122,8 @@ def problem_from_exception(exc: BaseException) -> ApiProblem:
     exception                     status  notes
     ============================  ======  =================================================
     ApiProblem                    own     raised by the routers (404 job, 409, 413 ...)
-    io.UnsupportedFormat          415     ``field="format"`` (status and title: class attributes)
-    io.FormatError                400     parser message, ``field="file"``, ``line``
-    core.GeosmoothError           422     ``field``, ``indices``, extras of ``to_dict()``; the
-                                          class's ``status`` and ``title`` (TauOutOfRange:
-                                          valid_range)
+    typed error (core, io, jobs)  class   ``status``/``title``/``code`` class attributes,
+                                          ``field``, ``message``, extras of ``to_dict()``
     InvalidParams                 422     SmoothingParams; ``errors`` with ``params.<name>``
     InvalidInlineGeometry         422     JSON body ``geometry`` against the schema
     RequestValidationError        422     FastAPI query/path validation
@@ -201,75 +133,37 @@ def problem_from_exception(exc: BaseException) -> ApiProblem:
     """
     if isinstance(exc, ApiProblem):
         return exc
+    typed = typed_problem(exc)
+    if typed is not None:
+        return typed
     if isinstance(exc, InvalidInlineGeometry):
-        message = exc.error.message
+        error = {"field": "geometry", "message": exc.message, "type": exc.code}
         return ApiProblem(
-            422,
-            message,
-            code="invalid-geometry",
-            title="Invalid geometry",
-            field="geometry",
-            errors=[{"field": "geometry", "message": message, "type": exc.error.code}],
-        )
-    if isinstance(exc, FormatError):  # UnsupportedFormat (415) included
-        return ApiProblem(
-            exc.status,
-            str(exc),
-            code=exc.code,
-            title=exc.title,
-            field="format" if isinstance(exc, UnsupportedFormat) else exc.field,
-            format=None if isinstance(exc, UnsupportedFormat) else exc.fmt,
-            line=exc.line,
-        )
-    if isinstance(exc, GeosmoothError):
-        info = exc.to_dict()
-        extra = {k: v for k, v in info.items() if k not in _RESERVED}
-        return ApiProblem(
-            exc.status,
-            exc.message,
-            code=exc.code,
-            title=exc.title,
-            field=exc.field,
-            errors=[{"field": exc.field, "message": exc.message, "type": exc.code}],
-            **extra,
-        )
+            422, exc.message, code="invalid-geometry", title="Invalid geometry",
+            field="geometry", errors=[error],
+        )  # fmt: skip
     if isinstance(exc, InvalidParams):
         errors = field_errors(exc.error, "params")
-        return ApiProblem(
-            422,
-            "; ".join(f"{e['field']}: {e['message']}" for e in errors),
-            code="invalid-parameters",
-            title="Invalid parameters",
-            field=errors[0]["field"] if errors else "params",
-            errors=errors,
-        )
+        return _validation(errors, "invalid-parameters", "Invalid parameters", "params")
     if isinstance(exc, RequestValidationError):
-        errors = field_errors(exc, "")
-        return ApiProblem(
-            422,
-            "; ".join(f"{e['field']}: {e['message']}" for e in errors),
-            code="invalid-request",
-            title="Invalid request",
-            field=errors[0]["field"] if errors else None,
-            errors=errors,
-        )
+        return _validation(field_errors(exc, ""), "invalid-request", "Invalid request", None)
     if isinstance(exc, StarletteHTTPException):
-        detail = exc.detail if isinstance(exc.detail, str) else _phrase(exc.status_code)
-        code = {413: "payload-too-large", 400: "malformed-request"}.get(exc.status_code)
+        status = exc.status_code
+        detail = exc.detail if isinstance(exc.detail, str) else ApiProblem(status, "").title
         return ApiProblem(
-            exc.status_code,
+            status,
             detail,
-            code=code,
-            field="body" if exc.status_code == 400 else None,
+            code=_PROTOCOL_CODES.get(status),
+            field="body" if status == 400 else None,
             headers=exc.headers,
             max_upload_bytes=getattr(exc, "limit", None),
         )
-    return ApiProblem(500, "An unexpected error occurred; it has been logged.", code="internal")
+    return internal_problem()
 
 
 def problem_response(problem: ApiProblem, instance: str | None = None) -> JSONResponse:
     """Render a problem as an ``application/problem+json`` response."""
-    return JSONResponse(
+    return FiniteJSONResponse(
         problem.body(instance),
         status_code=problem.status,
         media_type=PROBLEM_MEDIA_TYPE,
@@ -277,23 +171,31 @@ def problem_response(problem: ApiProblem, instance: str | None = None) -> JSONRe
     )
 
 
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route serves at the request's path (for ``Allow`` of a 405)."""
+    methods: set[str] = set()
+    for route in request.app.router.routes:
+        match, _ = route.matches({**request.scope, "method": "GET"})
+        route_methods = getattr(route, "methods", None)
+        if match is not Match.NONE and route_methods:
+            methods |= set(route_methods)
+    return sorted(methods)
+
+
 async def _handle(request: Request, exc: Exception) -> JSONResponse:
     problem = problem_from_exception(exc)
-    if problem.status >= 500:
-        log.error("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
+    if problem.status == 405:
+        problem.headers["Allow"] = ", ".join(allowed_methods(request))
     return problem_response(problem, instance=request.url.path)
 
 
 def install_problem_handlers(app: FastAPI) -> None:
-    """Answer every error of ``app`` with problem details (see :func:`problem_from_exception`)."""
+    """Answer every expected error of ``app`` with problem details."""
     for exc_type in (
         ApiProblem,
         StarletteHTTPException,
         RequestValidationError,
         InvalidParams,
         InvalidInlineGeometry,
-        GeosmoothError,
-        FormatError,
-        Exception,
     ):
-        app.add_exception_handler(exc_type, _handle)
+        app.add_exception_handler(exc_type, _handle)  # type: ignore[arg-type]

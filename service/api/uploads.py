@@ -1,294 +1,237 @@
-"""Reading a smoothing request: a multipart upload or a JSON body, validated before any work.
+"""Receiving a smoothing request: the body is streamed to a spool file, never held in memory.
 
-Order of checks (cheapest first): content type, parameters (422), format (415), then the
-geometry is parsed in a worker thread (400 malformed file, 422 invalid geometry) and its size
-checked against ``max_points`` (413). Inline JSON geometry that does not follow the schema is a
-422 on ``geometry``.
-
-Parsing in the request costs little next to the upload for binary files (100K-vertex binary PLY,
-3.8 MB: ~25 ms of an ~85 ms POST) and about 1 s for the same mesh as 9.5 MB of ASCII PLY; it runs
-in a worker thread, and in exchange no malformed file is ever queued.
-
-The request body itself is size-limited while it streams in by
-:class:`service.api.limits.BodySizeLimitMiddleware`.
+``multipart/form-data`` (``file`` + ``params`` [+ ``format``, ``weld``, ``webhook_url``]) is
+parsed while it streams in: the ``file`` part goes straight to a file under the spool directory,
+the small parts (at most 64 KiB each) are kept as text. ``params`` may come as a form field *or*
+as a JSON file part (Swagger UI, ``curl -F params=@p.json;type=application/json`` and httpx
+send it that way). An ``application/json`` body (``{geometry, params, weld, webhook_url}``) is
+spooled whole. Nothing is parsed here: the geometry and the JSON body are read in a worker
+process (:mod:`service.api.ingest`), so one upload can neither stall the event loop nor blow up
+the server's memory. Bytes are counted as they arrive by
+:class:`service.api.limits.BodyLimitMiddleware`.
 """
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
-from typing import Any
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any, Literal
 
-from fastapi import Request
-from pydantic import ValidationError
-from starlette.concurrency import run_in_threadpool
-from starlette.datastructures import UploadFile
+from python_multipart.exceptions import FormParserError
+from python_multipart.multipart import MultipartParser, parse_options_header
+from starlette.requests import Request
 
-from service.api.problems import ApiProblem, InvalidInlineGeometry, InvalidParams
-from service.core.params import SmoothingParams
-from service.io import (
-    FORMATS,
-    FormatError,
-    GeometryDocument,
-    UnsupportedFormat,
-    detect_format,
-    geometry_from_json_obj,
-    read_geometry,
-)
+from service.api.errors import ApiProblem
 
-__all__ = ["SmoothInput", "read_smooth_input"]
+__all__ = ["FIELDS", "Upload", "receive_upload"]
 
-_FORM_FIELDS = frozenset({"file", "params", "format", "weld"})
-_TRUE, _FALSE = frozenset({"true", "1", "yes", "on"}), frozenset({"false", "0", "no", "off", ""})
+#: Small parts of a multipart upload besides ``file``.
+FIELDS = ("params", "format", "weld", "webhook_url")
+_SMALL_PART = 64 * 1024
 
 
-@dataclass(frozen=True)
-class SmoothInput:
-    """A validated smoothing request.
+@dataclass
+class Upload:
+    """A received request, spooled.
 
     Attributes
     ----------
-    data : bytes
-        The input file (for a JSON body: the geometry object serialized as a JSON file).
-    fmt : str
-        Input format.
+    kind : {"multipart", "json"}
+        How the request came.
+    path : Path or None
+        The uploaded file (multipart) or the whole body (json); ``None`` if no file part came.
+    size : int
+        Bytes in ``path``.
     filename : str or None
-        Uploaded file name.
-    params : SmoothingParams
-        Validated parameters.
-    document : GeometryDocument
-        The parsed input.
-    weld : bool
-        Exactly coincident vertices were welded on reading (and will be in the job).
+        The file part's name (base name only).
+    part_type : str or None
+        The file part's ``Content-Type`` (without parameters).
+    fields : dict
+        Text of the small parts (``params``, ``format``, ``weld``, ``webhook_url``).
     """
 
-    data: bytes
-    fmt: str
-    filename: str | None
-    params: SmoothingParams
-    document: GeometryDocument
-    weld: bool = False
+    kind: Literal["multipart", "json"]
+    path: Path | None = None
+    size: int = 0
+    filename: str | None = None
+    part_type: str | None = None
+    fields: dict[str, str] = field(default_factory=dict)
+
+    def discard(self) -> None:
+        """Remove the spool file (no error if it was moved away, e.g. into the job store)."""
+        if self.path is not None:
+            self.path.unlink(missing_ok=True)
 
 
-def _missing(field: str, detail: str) -> ApiProblem:
+def _invalid(field_name: str, detail: str, status: int = 422) -> ApiProblem:
+    code = "invalid-request" if status == 422 else "malformed-request"
     return ApiProblem(
-        422,
-        detail,
-        code="missing-field",
-        title="Invalid request",
-        field=field,
-        errors=[{"field": field, "message": detail, "type": "missing"}],
-    )
+        status, detail, code=code, title="Invalid request" if status == 422 else None,
+        field=field_name,
+        errors=[{"field": field_name, "message": detail, "type": code}] if status == 422 else None,
+    )  # fmt: skip
 
 
-def _params(raw: Any) -> SmoothingParams:
-    if isinstance(raw, str):
-        try:
-            raw = json.loads(raw)
-        except (json.JSONDecodeError, RecursionError) as exc:
-            why = (
-                f"{exc.msg} (char {exc.pos})"
-                if isinstance(exc, json.JSONDecodeError)
-                else "nested too deeply"
+def _spool(spool_dir: Path, suffix: str) -> tuple[Path, IO[bytes]]:
+    spool_dir.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix="upload-", suffix=suffix, dir=spool_dir)
+    return Path(name), os.fdopen(fd, "wb")
+
+
+class _Parts:
+    """Callbacks of python-multipart's streaming parser (one request)."""
+
+    def __init__(self, upload: Upload, spool_dir: Path) -> None:
+        self.upload = upload
+        self.spool_dir = spool_dir
+        self.headers: dict[bytes, bytes] = {}
+        self.header_field = bytearray()
+        self.header_value = bytearray()
+        self.name: str | None = None
+        self.text: bytearray | None = None
+        self.sink: IO[bytes] | None = None
+        self.ended = False
+
+    def callbacks(self) -> dict[str, Any]:
+        return {
+            "on_part_begin": self.part_begin,
+            "on_header_field": lambda d, s, e: self.header_field.extend(d[s:e]),
+            "on_header_value": lambda d, s, e: self.header_value.extend(d[s:e]),
+            "on_header_end": self.header_end,
+            "on_headers_finished": self.headers_finished,
+            "on_part_data": self.part_data,
+            "on_part_end": self.part_end,
+            "on_end": self.end,
+        }
+
+    def part_begin(self) -> None:
+        self.headers, self.name, self.text = {}, None, None
+
+    def header_end(self) -> None:
+        self.headers[bytes(self.header_field).lower().strip()] = bytes(self.header_value).strip()
+        self.header_field.clear()
+        self.header_value.clear()
+
+    def headers_finished(self) -> None:
+        _, disposition = parse_options_header(self.headers.get(b"content-disposition"))
+        name = disposition.get(b"name", b"").decode("utf-8", "replace")
+        filename = disposition.get(b"filename")
+        self.name = name
+        if name == "file":
+            if self.upload.path is not None:
+                raise _invalid("file", "send exactly one file part named 'file'")
+            base = (filename or b"").decode("utf-8", "replace").replace("\\", "/")
+            self.upload.filename = base.rsplit("/", 1)[-1] or None
+            ctype, _ = parse_options_header(self.headers.get(b"content-type"))
+            self.upload.part_type = ctype.decode("latin-1") or None
+            self.upload.path, self.sink = _spool(self.spool_dir, ".upload")
+        elif name in FIELDS:
+            if name in self.upload.fields:
+                raise _invalid(name, f"the part {name!r} was sent twice")
+            self.text = bytearray()
+        else:
+            shown = name or "(unnamed)"
+            raise _invalid(
+                shown, f"unknown form field {shown!r}; expected file, {', '.join(FIELDS)}"
             )
-            raise ApiProblem(
-                422,
-                f"params is not valid JSON: {why}",
-                code="invalid-parameters",
-                title="Invalid parameters",
-                field="params",
-                errors=[{"field": "params", "message": "not valid JSON", "type": "json_invalid"}],
-            ) from None
-    if not isinstance(raw, dict):
-        raise ApiProblem(
-            422,
-            'params must be a JSON object, e.g. {"tau": 0.5}',
-            code="invalid-parameters",
-            title="Invalid parameters",
-            field="params",
-            errors=[{"field": "params", "message": "must be an object", "type": "dict_type"}],
-        )
+
+    def part_data(self, data: bytes, start: int, end: int) -> None:
+        if self.sink is not None:
+            self.sink.write(data[start:end])
+            self.upload.size += end - start
+        elif self.text is not None:
+            self.text.extend(data[start:end])
+            if len(self.text) > _SMALL_PART:
+                raise _invalid(str(self.name), f"the part {self.name!r} exceeds 64 KiB", 413)
+
+    def part_end(self) -> None:
+        if self.sink is not None:
+            self.sink.close()
+            self.sink = None
+        elif self.text is not None and self.name is not None:
+            try:
+                self.upload.fields[self.name] = self.text.decode("utf-8")
+            except UnicodeDecodeError:
+                raise _invalid(self.name, f"the part {self.name!r} is not UTF-8 text") from None
+            self.text = None
+
+    def end(self) -> None:
+        self.ended = True
+
+    def close(self) -> None:
+        if self.sink is not None:
+            self.sink.close()
+            self.sink = None
+
+
+async def _multipart(request: Request, boundary: bytes, spool_dir: Path) -> Upload:
+    upload = Upload("multipart")
+    parts = _Parts(upload, spool_dir)
     try:
-        return SmoothingParams.model_validate(raw)
-    except ValidationError as exc:
-        raise InvalidParams(exc) from None  # -> 422 with params.<name>
-
-
-def _format(explicit: str | None, filename: str | None) -> str:
-    if explicit:
-        fmt = explicit.strip().lower().lstrip(".")
-        if fmt not in FORMATS:
-            raise ApiProblem(
-                415,
-                f"unsupported format {explicit!r}; use one of {', '.join(FORMATS)}",
-                code="unsupported-format",
-                title="Unsupported format",
-                field="format",
-            )
-        return fmt
-    if not filename:
-        raise ApiProblem(
-            415,
-            "cannot tell the input format: upload a file name with an extension"
-            f" or give a format field ({', '.join(FORMATS)})",
-            code="unsupported-format",
-            title="Unsupported format",
-            field="format",
-        )
-    return detect_format(filename)  # UnsupportedFormat -> 415
-
-
-def _bad_weld() -> ApiProblem:
-    return ApiProblem(
-        422,
-        "weld must be true or false",
-        code="invalid-request",
-        title="Invalid request",
-        field="weld",
-    )
-
-
-def _flag(raw: Any) -> bool:
-    """A form field's boolean (``true``/``false``, ``1``/``0``); absent means false."""
-    if raw is None:
-        return False
-    text = str(raw).strip().lower() if isinstance(raw, str) else None
-    if text in _TRUE:
-        return True
-    if text in _FALSE:
-        return False
-    raise _bad_weld()
-
-
-async def _from_multipart(
-    request: Request,
-) -> tuple[bytes, str | None, str | None, Any, bool]:
-    form = await request.form(max_files=1, max_fields=len(_FORM_FIELDS), max_part_size=1 << 20)
-    try:
-        unknown = sorted(set(form.keys()) - _FORM_FIELDS)
-        if unknown:
-            raise ApiProblem(
-                422,
-                f"unknown form field(s): {', '.join(unknown)}; expected file, params, format, weld",
-                code="invalid-request",
-                title="Invalid request",
-                field=unknown[0],
-            )
-        upload = form.get("file")
-        if not isinstance(upload, UploadFile):
-            raise _missing("file", "a file part named 'file' is required")
-        params = form.get("params")
-        if params is None:
-            raise _missing("params", "a 'params' field (JSON object) is required")
-        fmt = form.get("format")
-        weld = _flag(form.get("weld"))
-        data = await upload.read()
-        return data, upload.filename, fmt if isinstance(fmt, str) else None, params, weld
-    finally:
-        await form.close()
-
-
-async def _from_json(request: Request) -> tuple[bytes, Any, Any, bool]:
-    body = await request.body()
-    try:
-        obj = await run_in_threadpool(json.loads, body)  # large bodies: not on the event loop
-    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
-        raise ApiProblem(
-            400, f"request body is not valid JSON: {exc}", code="invalid-json", field="body"
-        ) from None
-    if not isinstance(obj, dict):
-        raise ApiProblem(
-            422,
-            "the JSON body must be an object {geometry, params}",
-            code="invalid-request",
-            field="body",
-        )
-    unknown = sorted(set(obj) - {"geometry", "params", "weld"})
-    if unknown:
-        raise ApiProblem(
-            422,
-            f"unknown member(s): {', '.join(unknown)}; expected geometry, params and weld",
-            code="invalid-request",
-            title="Invalid request",
-            field=unknown[0],
-        )
-    if "params" not in obj:
-        raise _missing("params", "a 'params' member (object) is required")
-    if not isinstance(obj.get("geometry"), dict):
-        raise _missing("geometry", "a 'geometry' member (object with points) is required")
-    weld = obj.get("weld", False)
-    if not isinstance(weld, bool):
-        raise _bad_weld()
-    data = (await run_in_threadpool(_compact, obj["geometry"])).encode()
-    return data, obj["params"], obj["geometry"], weld
-
-
-def _compact(obj: Any) -> str:
-    return json.dumps(obj, separators=(",", ":"))
-
-
-def _read_file(data: bytes, fmt: str, filename: str | None, weld: bool) -> GeometryDocument:
-    try:
-        return read_geometry(data, fmt, filename=filename, weld=weld)
-    except RecursionError:  # e.g. JSON nested thousands deep: malformed, not a server error
-        raise FormatError("the file is nested too deeply", fmt=fmt) from None
-
-
-def _inline_document(geometry: Any, weld: bool) -> GeometryDocument:
-    try:
-        return geometry_from_json_obj(geometry, weld=weld)
-    except UnsupportedFormat:
+        parser = MultipartParser(boundary, parts.callbacks())
+        async for chunk in request.stream():
+            if chunk:
+                parser.write(chunk)
+        parser.finalize()
+        if not parts.ended:
+            raise _invalid("body", "the multipart body ends before its closing boundary", 400)
+        return upload
+    except FormParserError as exc:
+        upload.discard()
+        raise _invalid("body", f"malformed multipart body: {exc}", 400) from None
+    except BaseException:
+        upload.discard()
         raise
-    except FormatError as exc:
-        raise InvalidInlineGeometry(exc) from None
+    finally:
+        parts.close()
 
 
-async def read_smooth_input(request: Request, max_points: int) -> SmoothInput:
-    """Read, validate and parse the smoothing request of ``request``.
+async def _json_body(request: Request, spool_dir: Path) -> Upload:
+    upload = Upload("json")
+    upload.path, sink = _spool(spool_dir, ".json")
+    try:
+        with sink:
+            async for chunk in request.stream():
+                sink.write(chunk)
+                upload.size += len(chunk)
+        return upload
+    except BaseException:
+        upload.discard()
+        raise
 
-    Parameters
-    ----------
-    request : Request
-        ``multipart/form-data`` (``file``, ``params``, optional ``format``) or
-        ``application/json`` (``{"geometry": {...}, "params": {...}}``).
-    max_points : int
-        Largest input accepted (points); larger gives 413.
+
+async def receive_upload(request: Request, spool_dir: Path) -> Upload:
+    """Stream the request's body to ``spool_dir`` (see the module docstring).
 
     Raises
     ------
-    ApiProblem, InvalidParams, InvalidInlineGeometry, FormatError, GeometryError
-        Mapped to problem details by :mod:`service.api.problems`.
+    ApiProblem
+        415 for another content type, 400 for a malformed multipart body, 422 for unknown,
+        repeated or missing parts, 413 for an oversized small part.
     """
-    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    if ctype == "multipart/form-data":
-        data, filename, explicit, raw_params, weld = await _from_multipart(request)
-        params = _params(raw_params)
-        fmt = _format(explicit, filename)
-        if not data:
-            raise ApiProblem(400, "the uploaded file is empty", code="format-error", field="file")
-        document = await run_in_threadpool(_read_file, data, fmt, filename, weld)
-    elif ctype == "application/json" or ctype.endswith("+json"):
-        data, raw_params, geometry, weld = await _from_json(request)
-        params = _params(raw_params)
-        filename, fmt = None, "json"
-        document = await run_in_threadpool(_inline_document, geometry, weld)
-    else:
-        raise ApiProblem(
-            415,
-            f"unsupported content type {ctype or '(none)'!r}: send multipart/form-data"
-            " (file, params[, format]) or application/json ({geometry, params})",
-            code="unsupported-media-type",
-            title="Unsupported Media Type",
-            field="content-type",
-        )
-    n = document.geometry.n
-    if n > max_points:
-        raise ApiProblem(
-            413,
-            f"the input has {n} points; this server accepts at most {max_points}",
-            code="too-many-points",
-            field="geometry.points",
-            n_points=n,
-            max_points=max_points,
-        )
-    return SmoothInput(data, fmt, filename, params, document, weld)
+    ctype, options = parse_options_header(request.headers.get("content-type"))
+    media = ctype.decode("latin-1")
+    if media == "multipart/form-data":
+        boundary = options.get(b"boundary")
+        if not boundary:
+            raise _invalid("content-type", "multipart/form-data needs a boundary parameter", 400)
+        upload = await _multipart(request, boundary, spool_dir)
+        if upload.path is None:
+            raise ApiProblem(
+                422, "a file part named 'file' is required", code="missing-field",
+                title="Invalid request", field="file",
+                errors=[{"field": "file", "message": "required", "type": "missing"}],
+            )  # fmt: skip
+        return upload
+    if media == "application/json" or media.endswith("+json"):
+        return await _json_body(request, spool_dir)
+    raise ApiProblem(
+        415,
+        f"unsupported content type {media or '(none)'!r}: send multipart/form-data"
+        " (file, params[, format]) or application/json ({geometry, params})",
+        code="unsupported-media-type",
+        title="Unsupported Media Type",
+        field="content-type",
+    )

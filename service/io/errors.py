@@ -70,5 +70,6 @@ class UnsupportedFormat(FormatError):
     """A format geosmooth does not read or write; the message says what to convert to."""
 
     code = "unsupported-format"
+    field = "format"
     title = "Unsupported format"
     status = 415

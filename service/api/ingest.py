@@ -1,0 +1,313 @@
+"""What runs in a worker process for a request: parse, check, (smooth), answer a small dict.
+
+The server process never parses geometry or JSON bodies itself: :mod:`service.api.isolation`
+starts one process per request with one of the functions below, bounded in time and address
+space, killable when the client goes away. Each returns a small JSON-ready dict; every error is
+answered as problem details (:class:`~service.api.errors.ApiProblem`), with the spool paths
+replaced by the uploaded file name (no server path ever reaches a client).
+
+Checks, cheapest first: parameters (422) and the key's bounds on them (``k``,
+``max_iterations``: 422), the format (415), the file (400 malformed, 422 invalid geometry), the
+key's size bounds (points, faces: 413; ``spectrum``: 422), and for a job the smoothing factor
+against ``(0, phi(0))`` (422, as ``POST /v1/smooth`` answers it).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import ValidationError
+
+from service.api.auth import Limits
+from service.api.errors import ApiProblem, finite
+from service.core.errors import TauOutOfRange
+from service.core.params import SmoothingParams
+from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
+from service.io.errors import FormatError, UnsupportedFormat
+from service.io.formats import detect_format, sniff_format
+
+__all__ = ["IngestRequest", "check_job", "describe_input", "smooth_input"]
+
+_TRUE, _FALSE = frozenset({"true", "1", "yes", "on"}), frozenset({"false", "0", "no", "off", ""})
+_JSON_MEMBERS = frozenset({"geometry", "params", "weld", "webhook_url"})
+
+
+@dataclass(frozen=True)
+class IngestRequest:
+    """A spooled request (picklable: sent to the worker process).
+
+    Attributes
+    ----------
+    kind : {"multipart", "json"}
+        How it came; ``path`` is the file part, or the whole JSON body.
+    path : str
+        Spool file.
+    filename, part_type : str or None
+        Name and ``Content-Type`` of the file part.
+    fields : dict
+        Text of the small multipart parts.
+    limits : Limits
+        The key's bounds.
+    work_dir : str
+        Where output files go (the spool directory).
+    params_required : bool
+        ``False``: missing ``params`` means the defaults (``POST /v1/info``).
+    out_format : str or None
+        ``POST /v1/smooth``: the answer's format (default: the input's).
+    """
+
+    kind: Literal["multipart", "json"]
+    path: str
+    filename: str | None
+    part_type: str | None
+    fields: dict[str, str]
+    limits: Limits
+    work_dir: str
+    params_required: bool = True
+    out_format: str | None = None
+
+
+@dataclass
+class _Parsed:
+    document: GeometryDocument
+    params: SmoothingParams
+    fmt: str
+    weld: bool
+    webhook_url: str | None
+    input_path: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _invalid(field_name: str, detail: str, code: str = "invalid-request",
+             title: str = "Invalid request", status: int = 422) -> ApiProblem:  # fmt: skip
+    error = {"field": field_name, "message": detail, "type": code}
+    return ApiProblem(status, detail, code=code, title=title, field=field_name, errors=[error])
+
+
+def _params(raw: Any, required: bool) -> SmoothingParams:
+    if raw is None:
+        if required:
+            raise _invalid("params", "a 'params' part or member (JSON object) is required",
+                           "missing-field")  # fmt: skip
+        return SmoothingParams.model_construct()
+    if isinstance(raw, str):
+        try:
+            raw = json.loads(raw)
+        except (ValueError, RecursionError) as exc:
+            why = exc.msg if isinstance(exc, json.JSONDecodeError) else "unreadable number/nesting"
+            raise _invalid("params", f"params is not valid JSON: {why}", "invalid-parameters",
+                           "Invalid parameters") from None  # fmt: skip
+    if not isinstance(raw, dict):
+        raise _invalid("params", 'params must be a JSON object, e.g. {"rms": 0.001}',
+                       "invalid-parameters", "Invalid parameters")  # fmt: skip
+    try:
+        return SmoothingParams.model_validate(raw)
+    except ValidationError as exc:
+        errors = [
+            {"field": ".".join(["params", *map(str, e["loc"])]).rstrip("."),
+             "message": str(e["msg"]).removeprefix("Value error, "), "type": e["type"]}
+            for e in exc.errors(include_url=False, include_input=False)
+        ]  # fmt: skip
+        detail = "; ".join(f"{e['field']}: {e['message']}" for e in errors)
+        raise ApiProblem(422, detail, code="invalid-parameters", title="Invalid parameters",
+                         field=errors[0]["field"], errors=errors) from None  # fmt: skip
+
+
+def _check_param_bounds(params: SmoothingParams, limits: Limits) -> None:
+    for name, bound in (("k", limits.max_k), ("max_iterations", limits.max_iterations)):
+        value = getattr(params, name, None)
+        if value is not None and value > bound:
+            raise _invalid(f"params.{name}", f"params.{name}={value} exceeds this key's bound "
+                           f"of {bound}", "bound-exceeded", "Invalid parameters")  # fmt: skip
+
+
+def _flag(raw: str | None) -> bool:
+    text = (raw or "").strip().lower()
+    if text in _TRUE:
+        return True
+    if text in _FALSE:
+        return False
+    raise _invalid("weld", "weld must be true or false")
+
+
+def _media_format(part_type: str | None) -> str | None:
+    if not part_type:
+        return None
+    names = [n for n, f in FORMATS.items() if f.media_type.split(";")[0] == part_type]
+    return names[0] if len(names) == 1 else None
+
+
+def _format(req: IngestRequest) -> str:
+    """Explicit ``format`` part, else the file name, the part's content type, the content."""
+    explicit = req.fields.get("format", "").strip()
+    if explicit:
+        fmt = explicit.lower().lstrip(".")
+        if fmt not in FORMATS:
+            raise UnsupportedFormat(f"unsupported format {explicit!r}; use one of "
+                                    f"{', '.join(FORMATS)}", fmt=fmt)  # fmt: skip
+        return fmt
+    if req.filename and Path(req.filename).suffix:
+        return detect_format(req.filename)  # UnsupportedFormat -> 415
+    by_type = _media_format(req.part_type)
+    if by_type is not None:
+        return by_type
+    with open(req.path, "rb") as fh:
+        head = fh.read(4096)
+    if not head.strip():
+        raise FormatError("the uploaded file is empty")
+    sniffed = sniff_format(head)
+    if sniffed is None:
+        raise UnsupportedFormat("cannot tell the input format: give the file name an extension "
+                                f"or send a format part ({', '.join(FORMATS)})")  # fmt: skip
+    return sniffed
+
+
+def _from_multipart(req: IngestRequest) -> _Parsed:
+    params = _params(req.fields.get("params"), req.params_required)
+    _check_param_bounds(params, req.limits)
+    fmt = _format(req)
+    weld = _flag(req.fields.get("weld"))
+    if Path(req.path).stat().st_size == 0:
+        raise FormatError("the uploaded file is empty", fmt=fmt)
+    try:
+        document = read_geometry(Path(req.path), fmt, filename=req.filename, weld=weld)
+    except RecursionError:
+        raise FormatError("the file is nested too deeply", fmt=fmt) from None
+    url = req.fields.get("webhook_url", "").strip() or None
+    return _Parsed(document, params, fmt, weld, url, req.path)
+
+
+def _from_json(req: IngestRequest) -> _Parsed:
+    try:
+        obj = json.loads(Path(req.path).read_bytes())
+    except (ValueError, RecursionError) as exc:
+        why = exc.msg if isinstance(exc, json.JSONDecodeError) else "unreadable number/nesting"
+        raise _invalid("body", f"request body is not valid JSON: {why}", "invalid-json",
+                       status=400) from None  # fmt: skip
+    if not isinstance(obj, dict):
+        raise _invalid("body", "the JSON body must be an object {geometry, params}")
+    unknown = sorted(set(obj) - _JSON_MEMBERS)
+    if unknown:
+        raise _invalid(unknown[0], f"unknown member(s): {', '.join(unknown)}; expected "
+                       "geometry, params, weld, webhook_url")  # fmt: skip
+    params = _params(obj.get("params"), req.params_required)
+    _check_param_bounds(params, req.limits)
+    weld, url = obj.get("weld", False), obj.get("webhook_url")
+    if not isinstance(weld, bool):
+        raise _invalid("weld", "weld must be true or false")
+    if url is not None and not isinstance(url, str):
+        raise _invalid("webhook_url", "webhook_url must be a string")
+    geometry = obj.get("geometry")
+    if not isinstance(geometry, dict):
+        raise _invalid("geometry", "a 'geometry' member (object with points) is required",
+                       "missing-field")  # fmt: skip
+    try:
+        document = geometry_from_json_obj(geometry, weld=weld)
+    except UnsupportedFormat:
+        raise
+    except (FormatError, RecursionError) as exc:
+        message = exc.message if isinstance(exc, FormatError) else "nested too deeply"
+        raise _invalid("geometry", message, "invalid-geometry", "Invalid geometry") from None
+    inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
+    inline.write_text(json.dumps(geometry, separators=(",", ":")))
+    return _Parsed(document, params, "json", weld, url, str(inline))
+
+
+def _check_size(parsed: _Parsed, max_points: int, limits: Limits) -> None:
+    geometry = parsed.document.geometry
+    n = int(geometry.n)
+    if n > max_points:
+        raise ApiProblem(413, f"the input has {n} points; this server accepts at most "
+                         f"{max_points}", code="too-many-points", field="geometry.points",
+                         n_points=n, max_points=max_points)  # fmt: skip
+    faces = 0 if geometry.faces is None else int(len(geometry.faces))
+    if faces > limits.max_faces:
+        raise ApiProblem(413, f"the input has {faces} faces; this server accepts at most "
+                         f"{limits.max_faces}", code="too-many-faces", field="geometry.faces",
+                         n_faces=faces, max_faces=limits.max_faces)  # fmt: skip
+    if parsed.params.spectrum and n > limits.max_spectrum_points:
+        raise _invalid("params.spectrum", f"the spectrum is available for inputs of at most "
+                       f"{limits.max_spectrum_points} points (this one has {n})",
+                       "bound-exceeded", "Invalid parameters")  # fmt: skip
+
+
+def _parse(req: IngestRequest, max_points: int) -> _Parsed:
+    parsed = _from_json(req) if req.kind == "json" else _from_multipart(req)
+    _check_size(parsed, max_points, req.limits)
+    return parsed
+
+
+def _check_tau(parsed: _Parsed) -> dict[str, Any] | None:
+    """``(0, phi(0))`` for ``tau`` / ``rms``, as the engine will check it (report eq. 14)."""
+    params = parsed.params
+    if params.tau is None and params.rms is None:
+        return None
+    from service.core.info import describe
+
+    info = describe(parsed.document.geometry, params)
+    phi0, (_, rms_max) = float(info["phi0"]), info["rms_range"]
+    if params.tau is not None:
+        value, bound, name = params.tau, phi0, "tau"
+    else:
+        value, bound, name = float(params.rms), float(rms_max), "rms"  # type: ignore[arg-type]
+    if not (0.0 < value < bound):
+        raise TauOutOfRange(
+            f"smoothing factor {name}={value:.6g} is out of range: it must lie in (0, "
+            f"{bound:.6g}), where the upper bound comes from phi(0), the deviation of the fully "
+            "smoothed shape",
+            field=f"params.{name}",
+            tau=value if name == "tau" else value**2,
+            tau_max=phi0 if name == "tau" else bound**2,
+        )
+    return {"phi0": phi0}
+
+
+def _size(document: GeometryDocument) -> dict[str, Any]:
+    g = document.geometry
+    faces = None if g.faces is None else int(len(g.faces))
+    return {"n": int(g.n), "dim": int(g.dim), "kind": str(g.kind), "n_faces": faces}
+
+
+def check_job(req: IngestRequest) -> dict[str, Any]:
+    """``POST /v1/jobs``: everything a job needs, checked; the input file to store."""
+    parsed = _parse(req, req.limits.max_points)
+    _check_tau(parsed)
+    return {
+        "fmt": parsed.fmt,
+        "params": parsed.params.model_dump(mode="json", exclude_none=True),
+        "weld": parsed.weld,
+        "webhook_url": parsed.webhook_url,
+        "input_path": parsed.input_path,
+        "size": _size(parsed.document),
+    }
+
+
+def smooth_input(req: IngestRequest) -> dict[str, Any]:
+    """``POST /v1/smooth``: smooth and write the answer to a file next to the spool file."""
+    from service.core import smooth
+    from service.io import write_geometry
+
+    parsed = _parse(req, min(req.limits.sync_max_points, req.limits.max_points))
+    result = smooth(parsed.document.geometry, parsed.params)
+    report = finite(result.report())
+    fmt = req.out_format or parsed.fmt
+    out = Path(req.work_dir) / (Path(req.path).stem + f".result.{fmt}")
+    if fmt == "json":
+        geometry = write_geometry(parsed.document, "json", result.points).strip()
+        text = json.dumps(report, separators=(",", ":"), allow_nan=False)
+        out.write_bytes(b'{"geometry":' + geometry + b',"report":' + text.encode() + b"}")
+    else:
+        out.write_bytes(write_geometry(parsed.document, fmt, result.points))
+    return {"path": str(out), "fmt": fmt, "report": report, "input_fmt": parsed.fmt}
+
+
+def describe_input(req: IngestRequest) -> dict[str, Any]:
+    """``POST /v1/info``: :func:`service.core.info.describe` of the input, plus its format."""
+    from service.core.info import describe
+
+    parsed = _parse(req, req.limits.max_points)
+    info = describe(parsed.document.geometry, parsed.params)
+    return finite({**info, "format": parsed.fmt})  # type: ignore[no-any-return]
