@@ -67,7 +67,6 @@ class Settings(BaseSettings):
         description="Largest input accepted by the synchronous POST /v1/smooth (points).",
     )
 
-
     # --- HTTP API (service/api): address, keys, per-key bounds, connections, logs ---
     host: str = Field(
         default="127.0.0.1",

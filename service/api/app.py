@@ -8,13 +8,18 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
-import anyio
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from starlette.concurrency import run_in_threadpool
 
-from service.api.limits import BodySizeLimitMiddleware
+from service.api.auth import KeyRing
+from service.api.context import REQUEST_ID_HEADER, RequestContextMiddleware
+from service.api.docs import document_common_answers
+from service.api.guards import AuthGate, HostGuard, InFlightLimit, OriginGuard, allowed_hosts
+from service.api.intake import Intake, clean_spool
+from service.api.limits import BodyLimitMiddleware
 from service.api.metrics import Metrics
-from service.api.problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
+from service.api.problems import PROBLEM_MEDIA_TYPE, FiniteJSONResponse, install_problem_handlers
 from service.api.routers import health, jobs, smooth
 from service.api.schemas import (
     COMPONENT_REFS,
@@ -26,19 +31,27 @@ from service.io import GEOMETRY_JSON_SCHEMA
 from service.jobs.queue import JobQueue
 from service.settings import Settings, get_settings
 
-__all__ = ["create_app"]
+__all__ = ["SECURITY_SCHEMES", "create_app"]
 
 log = logging.getLogger("geosmooth.api")
+
+SECURITY_SCHEMES: dict[str, Any] = {
+    "bearer": {"type": "http", "scheme": "bearer", "description": "Authorization: Bearer <key>"},
+    "apiKey": {"type": "apiKey", "in": "header", "name": "X-API-Key"},
+}
 
 DESCRIPTION = """\
 Smoothing of meshes, polylines and point clouds with a deviation budget: the smoothed points X
 minimise ``||L X||^2`` subject to ``sum_i omega_i^2 ||x_i - p_i||^2 = tau`` (KU Leuven TW 451).
 
-* ``POST /v1/jobs`` queues a job (PLY, OBJ, XYZ or JSON upload, or JSON inline); poll
-  ``GET /v1/jobs/{id}``, then download ``/result`` and ``/report``.
+* ``POST /v1/jobs`` queues a job (a file upload, or the geometry inline as JSON); poll
+  ``GET /v1/jobs/{id}`` or stream its ``events``, then download ``/result`` and ``/report``.
 * ``POST /v1/smooth`` answers directly for small inputs.
 
-Every error is RFC 9457 ``application/problem+json`` with ``field`` naming the input at fault.
+When the server has API keys, ``/v1`` needs one (``Authorization: Bearer <key>`` or
+``X-API-Key``); each key sees only its own jobs and has its own bounds and rate limit.
+Every error is RFC 9457 ``application/problem+json`` with ``field`` naming the input at fault;
+every answer carries ``X-Request-ID``.
 """
 
 
@@ -59,15 +72,16 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     if app.state.queue is None:
         app.state.queue = _make_queue(settings)
     queue: JobQueue = app.state.queue
-    app.state.sync_limiter = anyio.CapacityLimiter(settings.workers)
+    await run_in_threadpool(clean_spool, settings)
     await run_in_threadpool(queue.start)
     app.state.queue_started = True
-    log.info("geosmooth ready: data_dir=%s workers=%d", settings.data_dir, settings.workers)
+    log.info("server.ready", extra={"workers": settings.workers, "keys": len(app.state.keys)})
     try:
         yield
     finally:
         app.state.queue_started = False
         await run_in_threadpool(queue.stop)
+        log.info("server.stopped")
 
 
 def _openapi_with_extra_models(app: FastAPI) -> dict[str, Any]:
@@ -84,6 +98,8 @@ def _openapi_with_extra_models(app: FastAPI) -> dict[str, Any]:
             schemas.setdefault(model.__name__, schema)
         _link_components(schemas)
         _problems_for_validation_errors(spec)
+        document_common_answers(spec)
+        _document_security(spec)
         app.openapi_schema = spec
     return app.openapi_schema
 
@@ -119,6 +135,51 @@ def _problems_for_validation_errors(spec: dict[str, Any]) -> None:
     schemas.pop("ValidationError", None)
 
 
+def _document_security(spec: dict[str, Any]) -> None:
+    """API keys: optional in the spec (servers without keys accept requests without one)."""
+    spec.setdefault("components", {})["securitySchemes"] = SECURITY_SCHEMES
+    for path, operations in spec.get("paths", {}).items():
+        if path.startswith("/v1/"):
+            for operation in operations.values():
+                operation["security"] = [{"bearer": []}, {"apiKey": []}, {}]
+
+
+def _add_guards(app: FastAPI, settings: Settings, keys: KeyRing) -> None:
+    """The middleware stack, innermost first (see :mod:`service.api.guards`)."""
+    origins = [o.strip() for o in settings.cors_origins.split(",") if o.strip()]
+    app.add_middleware(
+        BodyLimitMiddleware,
+        max_bytes=settings.max_upload_bytes,
+        read_timeout=settings.timeout_body_read,
+    )
+    app.add_middleware(AuthGate, keys=keys)
+    app.add_middleware(OriginGuard, trusted_origins=origins)
+    if origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=origins,
+            allow_methods=["GET", "POST", "DELETE"],
+            allow_headers=[
+                "Authorization",
+                "X-API-Key",
+                "Content-Type",
+                "Idempotency-Key",
+                REQUEST_ID_HEADER,
+            ],
+            expose_headers=[
+                "Location",
+                "Retry-After",
+                REQUEST_ID_HEADER,
+                "X-Geosmooth-Report",
+                "Idempotent-Replayed",
+            ],
+            max_age=600,
+        )
+    app.add_middleware(HostGuard, hosts=allowed_hosts(settings.allowed_hosts, settings.host))
+    app.add_middleware(InFlightLimit, limit=settings.max_requests_in_flight)
+    app.add_middleware(RequestContextMiddleware)
+
+
 def create_app(settings: Settings | None = None, queue: JobQueue | None = None) -> FastAPI:
     """Build the geosmooth HTTP application.
 
@@ -134,9 +195,16 @@ def create_app(settings: Settings | None = None, queue: JobQueue | None = None) 
     -------
     FastAPI
         The app; nothing is started or written until its lifespan runs.
+
+    Raises
+    ------
+    ConfigError
+        An invalid setting or keys file (the message names the environment variable).
     """
     settings = settings or get_settings()
+    keys = KeyRing.from_settings(settings)
     app = FastAPI(
+        default_response_class=FiniteJSONResponse,
         title="geosmooth",
         version="0.1.0",
         summary="Smoothing of meshes, polylines and point clouds with a deviation budget.",
@@ -149,12 +217,13 @@ def create_app(settings: Settings | None = None, queue: JobQueue | None = None) 
         ],
     )
     app.state.settings = settings
+    app.state.keys = keys
     app.state.queue = queue
     app.state.queue_started = False
     app.state.metrics = Metrics(lambda: app.state.queue if app.state.queue_started else None)
-    app.state.sync_limiter = None
+    app.state.intake = Intake(settings)
     install_problem_handlers(app)
-    app.add_middleware(BodySizeLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    _add_guards(app, settings, keys)
     app.include_router(jobs.router)
     app.include_router(smooth.router)
     app.include_router(health.router)

@@ -4,8 +4,8 @@ Keys come from ``GEOSMOOTH_API_KEYS`` (comma separated, every key gets the defau
 from ``GEOSMOOTH_API_KEYS_FILE``: one key per line as the sha256 hex digest of the key, then
 optionally a name and per-key bounds, e.g.::
 
-    # sha256(key)                                                     name     bounds
-    9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08  ci-bot   max_points=5000000 rate_limit=50
+    # sha256(key), then an optional name and bounds
+    9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08 ci-bot max_points=5000000
 
 A request names its key with ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``. The
 tenant of a key is the first 16 hex digits of its sha256 digest: jobs belong to their tenant
@@ -82,7 +82,8 @@ class Limits:
             try:
                 value = float(text) if types[name] in ("float", float) else int(text)
             except ValueError:
-                raise ConfigError(f"{where}: {name}={text!r} is not a number", field=_FILE_ENV)
+                message = f"{where}: {name}={text!r} is not a number"
+                raise ConfigError(message, field=_FILE_ENV) from None
             if not value > 0:
                 raise ConfigError(f"{where}: {name} must be positive", field=_FILE_ENV)
             values[name] = value
@@ -140,7 +141,8 @@ def _file_entries(path: Path, defaults: Limits) -> dict[str, tuple[str | None, L
         lines = path.read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else "unreadable"
-        raise ConfigError(f"{_FILE_ENV}: cannot read the keys file ({why})", field=_FILE_ENV)
+        message = f"{_FILE_ENV}: cannot read the keys file ({why})"
+        raise ConfigError(message, field=_FILE_ENV) from None
     out: dict[str, tuple[str | None, Limits]] = {}
     for number, line in enumerate(lines, 1):
         words = line.split("#", 1)[0].split()

@@ -78,8 +78,7 @@ class RequestContextMiddleware:
                 raise  # half a response is out: the server must close the connection
             problem = problem_from_exception(exc)
             if problem.status >= 500:
-                log.error("request.error", exc_info=exc, method=scope["method"],
-                          path=scope["path"])  # fmt: skip
+                log.error("request.error", exc_info=exc, method=scope["method"], path=scope["path"])
                 problem.extensions["request_id"] = request_id
             await problem_response(problem, scope.get("path"))(scope, receive, send_with_id)
         finally:

@@ -12,25 +12,35 @@ __all__ = [
     "FORMAT_QUERY_DESCRIPTION",
     "JOB_SUBMIT_OPENAPI",
     "MEDIA_TYPES",
+    "PARAMS_EXAMPLE",
     "RESULT_CONTENT",
     "SMOOTH_OPENAPI",
+    "document_common_answers",
     "problem_responses",
 ]
 
 MEDIA_TYPES: dict[str, str] = {name: f.media_type for name, f in FORMATS.items()}
 
-FORMAT_QUERY_DESCRIPTION = (
-    f"Output format: {', '.join(FORMATS)} (default: the input's format)."
-)
+FORMAT_QUERY_DESCRIPTION = f"Output format: {', '.join(FORMATS)} (default: the input's format)."
 
 _DESCRIPTIONS: dict[int, str] = {
-    400: "Malformed file or body (the parser's message in ``detail``).",
-    404: "Unknown job.",
-    409: "The job has no result (yet).",
-    413: "Request body larger than ``max_upload_bytes`` or input above the point limit.",
+    400: "Malformed request, file or body (the parser's message in ``detail``), or a ``Host`` "
+    "this server does not answer for.",
+    401: "No API key, or not a valid one (keys are configured).",
+    403: "A state-changing request from another origin's page without an API key.",
+    404: "Unknown job (or another key's).",
+    408: "The request body stalled (no byte for ``timeout_body_read`` seconds).",
+    409: "The job has no result (yet), or the Idempotency-Key was used with another request.",
+    413: "Request body above ``max_upload_bytes``, input above the key's point or face bound, "
+    "or more work than one request may do (time, memory).",
     415: "Unknown file format or content type.",
-    422: "Invalid parameters or geometry; ``field`` / ``errors`` name the input at fault.",
-    503: "The job queue is not running.",
+    422: "Invalid parameters or geometry (e.g. tau outside (0, phi(0)), a bound of the key "
+    "exceeded); ``field`` / ``errors`` name the input at fault.",
+    429: "Rate limit or quota of the key exceeded; ``Retry-After`` says when to retry.",
+    500: "Unexpected error (logged; quote ``request_id``).",
+    503: "The job queue or its storage is unavailable, or the server is overloaded "
+    "(``Retry-After``).",
+    507: "The job store is out of space.",
 }
 
 
@@ -46,6 +56,45 @@ def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     }
 
 
+def _spec_answer(status: int) -> dict[str, Any]:
+    answer: dict[str, Any] = {
+        "description": _DESCRIPTIONS[status],
+        "content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+    }
+    if status in (429, 503):
+        answer["headers"] = {
+            "Retry-After": {"description": "Seconds to wait.", "schema": {"type": "integer"}}
+        }
+    return answer
+
+
+_PROBES = ("/healthz", "/readyz")
+_UNSAFE = ("post", "put", "patch", "delete")
+
+
+def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True) -> None:
+    """Add the answers any operation can give, besides its own, to every operation.
+
+    Every request can be malformed or name a foreign ``Host`` (400), stall its body (408),
+    send too large a body (413) or hit a bug (500); all but the probes can meet an overloaded
+    server (503). ``/v1`` operations need a key when keys are configured (401) and are rate
+    limited (429); state-changing ones refuse other origins without a key (403).
+    """
+    for path, operations in spec.get("paths", {}).items():
+        for method, operation in operations.items():
+            statuses = [400, 408, 413, 500]
+            if path not in _PROBES:
+                statuses.append(503)
+            if path.startswith("/v1/") and keys_possible:
+                statuses += [401, 429]
+            if method in _UNSAFE:
+                statuses.append(403)
+            answers = operation.setdefault("responses", {})
+            for status in statuses:
+                answers.setdefault(str(status), _spec_answer(status))
+            operation["responses"] = dict(sorted(answers.items()))
+
+
 RESULT_CONTENT: dict[str, Any] = {
     "application/octet-stream": {
         "schema": {"type": "string", "format": "binary"},
@@ -59,6 +108,10 @@ RESULT_CONTENT: dict[str, Any] = {
     },
 }
 
+#: Prefilled by Swagger UI's "Try it out": scale-free and mild on any input (lambda is
+#: dimensionless for the normalized Laplacian), never a tau that collapses a small model.
+PARAMS_EXAMPLE = '{"lam": 1.0}'
+
 _MULTIPART_SCHEMA: dict[str, Any] = {
     "type": "object",
     "required": ["file", "params"],
@@ -66,17 +119,26 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
         "file": {
             "type": "string",
             "format": "binary",
-            "description": "The geometry: a PLY, OBJ, XYZ or JSON file.",
+            "description": "The geometry file; its format comes from the format part, the "
+            "file name's extension, the part's Content-Type or the content.",
         },
         "params": {
             "type": "string",
-            "description": 'SmoothingParams as a JSON object, e.g. {"tau": 0.5}.',
-            "example": '{"tau": 0.5}',
+            "description": "SmoothingParams as a JSON object, sent as a text field or as a JSON "
+            "file part. Exactly one of tau, rms or lam; lam (no search) is scale-free, tau and "
+            "rms are in the input's units (see the README's 'Choosing tau').",
+            "example": PARAMS_EXAMPLE,
         },
         "format": {
             "type": "string",
             "enum": list(FORMATS),
             "description": "Input format when the file name has no telling extension.",
+        },
+        "webhook_url": {
+            "type": "string",
+            "format": "uri",
+            "description": "Where the finished job is POSTed (signed; public addresses only "
+            "unless the server allows private ones).",
         },
         "weld": {
             "type": "boolean",
@@ -94,10 +156,7 @@ def _request_body(description: str) -> dict[str, Any]:
             "required": True,
             "description": description,
             "content": {
-                "multipart/form-data": {
-                    "schema": _MULTIPART_SCHEMA,
-                    "encoding": {"params": {"contentType": "application/json"}},
-                },
+                "multipart/form-data": {"schema": _MULTIPART_SCHEMA},
                 "application/json": {
                     "schema": {"$ref": "#/components/schemas/SmoothJsonRequest"},
                     "example": SmoothJsonRequest.model_config["json_schema_extra"]["examples"][0],  # type: ignore[index]

@@ -78,9 +78,11 @@ class InFlightLimit:
             return
         if self.active >= self.limit:
             problem = ApiProblem(
-                503, f"the server is handling {self.limit} requests; retry shortly",
-                code="overloaded", headers={"Retry-After": "1"},
-            )  # fmt: skip
+                503,
+                f"the server is handling {self.limit} requests; retry shortly",
+                code="overloaded",
+                headers={"Retry-After": "1"},
+            )
             await _refuse(problem, scope, receive, send)
             return
         self.active += 1
@@ -102,16 +104,16 @@ class HostGuard:
         if self.any or host is None:  # no Host at all: not a browser, not rebinding
             return True
         name = _host_name(host)
-        return any(
-            name == h or (h.startswith("*.") and name.endswith(h[1:])) for h in self.hosts
-        )
+        return any(name == h or (h.startswith("*.") and name.endswith(h[1:])) for h in self.hosts)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "http" and not self.allowed(Headers(scope=scope).get("host")):
             problem = ApiProblem(
-                400, "the Host header names a host this server does not answer for",
-                code="host-not-allowed", field="Host",
-            )  # fmt: skip
+                400,
+                "the Host header names a host this server does not answer for",
+                code="host-not-allowed",
+                field="Host",
+            )
             await _refuse(problem, scope, receive, send)
             return
         await self.app(scope, receive, send)
@@ -153,9 +155,11 @@ class OriginGuard:
             headers = Headers(scope=scope)
             if presented_key(headers) is None and self.cross_origin(headers, scope["scheme"]):
                 problem = ApiProblem(
-                    403, "state-changing requests from another origin need an API key",
-                    code="cross-origin-refused", field="Origin",
-                )  # fmt: skip
+                    403,
+                    "state-changing requests from another origin need an API key",
+                    code="cross-origin-refused",
+                    field="Origin",
+                )
                 await _refuse(problem, scope, receive, send)
                 return
         await self.app(scope, receive, send)
@@ -199,15 +203,19 @@ class AuthGate:
             return self.keys.anonymous(client)
         if key is None:
             return ApiProblem(
-                401, "an API key is required: Authorization: Bearer <key> or X-API-Key",
-                code="unauthorized", headers={"WWW-Authenticate": 'Bearer realm="geosmooth"'},
-            )  # fmt: skip
+                401,
+                "an API key is required: Authorization: Bearer <key> or X-API-Key",
+                code="unauthorized",
+                headers={"WWW-Authenticate": 'Bearer realm="geosmooth"'},
+            )
         principal = self.keys.authenticate(key)
         if principal is None:
             return ApiProblem(
-                401, "the API key is not valid", code="invalid-api-key",
+                401,
+                "the API key is not valid",
+                code="invalid-api-key",
                 headers={"WWW-Authenticate": 'Bearer realm="geosmooth", error="invalid_token"'},
-            )  # fmt: skip
+            )
         return principal
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -227,10 +235,12 @@ class AuthGate:
             wait = self.buckets.take(principal.bucket, limits.rate_limit, limits.rate_burst)
             if wait > 0:
                 problem = ApiProblem(
-                    429, f"rate limit of {limits.rate_limit:g} requests/s exceeded",
-                    code="rate-limited", headers={"Retry-After": str(math.ceil(wait))},
+                    429,
+                    f"rate limit of {limits.rate_limit:g} requests/s exceeded",
+                    code="rate-limited",
+                    headers={"Retry-After": str(math.ceil(wait))},
                     retry_after=math.ceil(wait),
-                )  # fmt: skip
+                )
                 await _refuse(problem, scope, receive, send)
                 return
         await self.app(scope, receive, send)

@@ -81,8 +81,13 @@ class _Parsed:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def _invalid(field_name: str, detail: str, code: str = "invalid-request",
-             title: str = "Invalid request", status: int = 422) -> ApiProblem:  # fmt: skip
+def _invalid(
+    field_name: str,
+    detail: str,
+    code: str = "invalid-request",
+    title: str = "Invalid request",
+    status: int = 422,
+) -> ApiProblem:
     error = {"field": field_name, "message": detail, "type": code}
     return ApiProblem(status, detail, code=code, title=title, field=field_name, errors=[error])
 
@@ -90,38 +95,60 @@ def _invalid(field_name: str, detail: str, code: str = "invalid-request",
 def _params(raw: Any, required: bool) -> SmoothingParams:
     if raw is None:
         if required:
-            raise _invalid("params", "a 'params' part or member (JSON object) is required",
-                           "missing-field")  # fmt: skip
+            raise _invalid(
+                "params", "a 'params' part or member (JSON object) is required", "missing-field"
+            )
         return SmoothingParams.model_construct()
     if isinstance(raw, str):
         try:
             raw = json.loads(raw)
         except (ValueError, RecursionError) as exc:
             why = exc.msg if isinstance(exc, json.JSONDecodeError) else "unreadable number/nesting"
-            raise _invalid("params", f"params is not valid JSON: {why}", "invalid-parameters",
-                           "Invalid parameters") from None  # fmt: skip
+            raise _invalid(
+                "params",
+                f"params is not valid JSON: {why}",
+                "invalid-parameters",
+                "Invalid parameters",
+            ) from None
     if not isinstance(raw, dict):
-        raise _invalid("params", 'params must be a JSON object, e.g. {"rms": 0.001}',
-                       "invalid-parameters", "Invalid parameters")  # fmt: skip
+        raise _invalid(
+            "params",
+            'params must be a JSON object, e.g. {"rms": 0.001}',
+            "invalid-parameters",
+            "Invalid parameters",
+        )
     try:
         return SmoothingParams.model_validate(raw)
     except ValidationError as exc:
         errors = [
-            {"field": ".".join(["params", *map(str, e["loc"])]).rstrip("."),
-             "message": str(e["msg"]).removeprefix("Value error, "), "type": e["type"]}
+            {
+                "field": ".".join(["params", *map(str, e["loc"])]).rstrip("."),
+                "message": str(e["msg"]).removeprefix("Value error, "),
+                "type": e["type"],
+            }
             for e in exc.errors(include_url=False, include_input=False)
-        ]  # fmt: skip
+        ]
         detail = "; ".join(f"{e['field']}: {e['message']}" for e in errors)
-        raise ApiProblem(422, detail, code="invalid-parameters", title="Invalid parameters",
-                         field=errors[0]["field"], errors=errors) from None  # fmt: skip
+        raise ApiProblem(
+            422,
+            detail,
+            code="invalid-parameters",
+            title="Invalid parameters",
+            field=errors[0]["field"],
+            errors=errors,
+        ) from None
 
 
 def _check_param_bounds(params: SmoothingParams, limits: Limits) -> None:
     for name, bound in (("k", limits.max_k), ("max_iterations", limits.max_iterations)):
         value = getattr(params, name, None)
         if value is not None and value > bound:
-            raise _invalid(f"params.{name}", f"params.{name}={value} exceeds this key's bound "
-                           f"of {bound}", "bound-exceeded", "Invalid parameters")  # fmt: skip
+            raise _invalid(
+                f"params.{name}",
+                f"params.{name}={value} exceeds this key's bound of {bound}",
+                "bound-exceeded",
+                "Invalid parameters",
+            )
 
 
 def _flag(raw: str | None) -> bool:
@@ -146,8 +173,9 @@ def _format(req: IngestRequest) -> str:
     if explicit:
         fmt = explicit.lower().lstrip(".")
         if fmt not in FORMATS:
-            raise UnsupportedFormat(f"unsupported format {explicit!r}; use one of "
-                                    f"{', '.join(FORMATS)}", fmt=fmt)  # fmt: skip
+            raise UnsupportedFormat(
+                f"unsupported format {explicit!r}; use one of {', '.join(FORMATS)}", fmt=fmt
+            )
         return fmt
     if req.filename and Path(req.filename).suffix:
         return detect_format(req.filename)  # UnsupportedFormat -> 415
@@ -160,8 +188,10 @@ def _format(req: IngestRequest) -> str:
         raise FormatError("the uploaded file is empty")
     sniffed = sniff_format(head)
     if sniffed is None:
-        raise UnsupportedFormat("cannot tell the input format: give the file name an extension "
-                                f"or send a format part ({', '.join(FORMATS)})")  # fmt: skip
+        raise UnsupportedFormat(
+            "cannot tell the input format: give the file name an extension "
+            f"or send a format part ({', '.join(FORMATS)})"
+        )
     return sniffed
 
 
@@ -185,14 +215,18 @@ def _from_json(req: IngestRequest) -> _Parsed:
         obj = json.loads(Path(req.path).read_bytes())
     except (ValueError, RecursionError) as exc:
         why = exc.msg if isinstance(exc, json.JSONDecodeError) else "unreadable number/nesting"
-        raise _invalid("body", f"request body is not valid JSON: {why}", "invalid-json",
-                       status=400) from None  # fmt: skip
+        raise _invalid(
+            "body", f"request body is not valid JSON: {why}", "invalid-json", status=400
+        ) from None
     if not isinstance(obj, dict):
         raise _invalid("body", "the JSON body must be an object {geometry, params}")
     unknown = sorted(set(obj) - _JSON_MEMBERS)
     if unknown:
-        raise _invalid(unknown[0], f"unknown member(s): {', '.join(unknown)}; expected "
-                       "geometry, params, weld, webhook_url")  # fmt: skip
+        raise _invalid(
+            unknown[0],
+            f"unknown member(s): {', '.join(unknown)}; expected "
+            "geometry, params, weld, webhook_url",
+        )
     params = _params(obj.get("params"), req.params_required)
     _check_param_bounds(params, req.limits)
     weld, url = obj.get("weld", False), obj.get("webhook_url")
@@ -202,8 +236,9 @@ def _from_json(req: IngestRequest) -> _Parsed:
         raise _invalid("webhook_url", "webhook_url must be a string")
     geometry = obj.get("geometry")
     if not isinstance(geometry, dict):
-        raise _invalid("geometry", "a 'geometry' member (object with points) is required",
-                       "missing-field")  # fmt: skip
+        raise _invalid(
+            "geometry", "a 'geometry' member (object with points) is required", "missing-field"
+        )
     try:
         document = geometry_from_json_obj(geometry, weld=weld)
     except UnsupportedFormat:
@@ -220,18 +255,32 @@ def _check_size(parsed: _Parsed, max_points: int, limits: Limits) -> None:
     geometry = parsed.document.geometry
     n = int(geometry.n)
     if n > max_points:
-        raise ApiProblem(413, f"the input has {n} points; this server accepts at most "
-                         f"{max_points}", code="too-many-points", field="geometry.points",
-                         n_points=n, max_points=max_points)  # fmt: skip
-    faces = 0 if geometry.faces is None else int(len(geometry.faces))
+        raise ApiProblem(
+            413,
+            f"the input has {n} points; this server accepts at most {max_points}",
+            code="too-many-points",
+            field="geometry.points",
+            n_points=n,
+            max_points=max_points,
+        )
+    faces = 0 if geometry.faces is None else len(geometry.faces)
     if faces > limits.max_faces:
-        raise ApiProblem(413, f"the input has {faces} faces; this server accepts at most "
-                         f"{limits.max_faces}", code="too-many-faces", field="geometry.faces",
-                         n_faces=faces, max_faces=limits.max_faces)  # fmt: skip
+        raise ApiProblem(
+            413,
+            f"the input has {faces} faces; this server accepts at most {limits.max_faces}",
+            code="too-many-faces",
+            field="geometry.faces",
+            n_faces=faces,
+            max_faces=limits.max_faces,
+        )
     if parsed.params.spectrum and n > limits.max_spectrum_points:
-        raise _invalid("params.spectrum", f"the spectrum is available for inputs of at most "
-                       f"{limits.max_spectrum_points} points (this one has {n})",
-                       "bound-exceeded", "Invalid parameters")  # fmt: skip
+        raise _invalid(
+            "params.spectrum",
+            f"the spectrum is available for inputs of at most "
+            f"{limits.max_spectrum_points} points (this one has {n})",
+            "bound-exceeded",
+            "Invalid parameters",
+        )
 
 
 def _parse(req: IngestRequest, max_points: int) -> _Parsed:
@@ -267,7 +316,7 @@ def _check_tau(parsed: _Parsed) -> dict[str, Any] | None:
 
 def _size(document: GeometryDocument) -> dict[str, Any]:
     g = document.geometry
-    faces = None if g.faces is None else int(len(g.faces))
+    faces = None if g.faces is None else len(g.faces)
     return {"n": int(g.n), "dim": int(g.dim), "kind": str(g.kind), "n_faces": faces}
 
 

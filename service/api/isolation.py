@@ -86,9 +86,11 @@ def _outcome(func: Callable[[Any], Any], arg: Any, budget: int | None) -> tuple[
     except MemoryError:
         mib = f" ({budget // 2**20} MiB)" if budget else ""
         problem = ApiProblem(
-            413, f"the request needs more memory than one request may use{mib}",
-            code="too-large-to-process", memory_limit_bytes=budget,
-        )  # fmt: skip
+            413,
+            f"the request needs more memory than one request may use{mib}",
+            code="too-large-to-process",
+            memory_limit_bytes=budget,
+        )
         return "problem", problem.to_wire()
     except BaseException as exc:
         typed = typed_problem(exc)
@@ -97,8 +99,9 @@ def _outcome(func: Callable[[Any], Any], arg: Any, budget: int | None) -> tuple[
         return "internal", f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
 
 
-def _child_main(conn: Any, func: Callable[[Any], Any], arg: Any, budget: int | None,
-                redact: Mapping[str, str]) -> None:  # fmt: skip
+def _child_main(
+    conn: Any, func: Callable[[Any], Any], arg: Any, budget: int | None, redact: Mapping[str, str]
+) -> None:
     _arm_child()
     if budget:
         with contextlib.suppress(OSError, ValueError, StopIteration):
@@ -154,9 +157,11 @@ class Isolation:
         """
         reader, writer = self.ctx.Pipe(duplex=False)
         proc = self.ctx.Process(  # type: ignore[attr-defined]
-            target=_child_main, args=(writer, func, arg, memory_bytes, dict(redact or {})),
-            daemon=True, name=f"geosmooth-{what}",
-        )  # fmt: skip
+            target=_child_main,
+            args=(writer, func, arg, memory_bytes, dict(redact or {})),
+            daemon=True,
+            name=f"geosmooth-{what}",
+        )
         gone = anyio.Event()
         try:
             await anyio.to_thread.run_sync(proc.start)
@@ -172,9 +177,11 @@ class Isolation:
                 return None
             if deadline.cancelled_caught:
                 raise ApiProblem(
-                    413, f"{what} did not finish within {timeout:g} s",
-                    code=f"{what}-time-limit", time_limit_seconds=timeout,
-                )  # fmt: skip
+                    413,
+                    f"{what} did not finish within {timeout:g} s",
+                    code=f"{what}-time-limit",
+                    time_limit_seconds=timeout,
+                )
             return await anyio.to_thread.run_sync(self._answer, reader, proc, what)
         finally:
             reader.close()
@@ -194,8 +201,9 @@ class Isolation:
                     413, f"{what} was stopped: it ran out of memory", code="too-large-to-process"
                 ) from None
             log.error("request.worker_crashed", work=what, exitcode=proc.exitcode)
-            raise ApiProblem(500, "An unexpected error occurred; it has been logged.",
-                             code="internal") from None  # fmt: skip
+            raise ApiProblem(
+                500, "An unexpected error occurred; it has been logged.", code="internal"
+            ) from None
         if kind == "ok":
             return value  # type: ignore[no-any-return]
         if kind == "problem":

@@ -44,9 +44,7 @@ def _too_large(limit: int, size: int | None = None) -> ApiProblem:
     detail = f"request body exceeds the limit of {limit} bytes"
     if size is not None:
         detail = f"request body of {size} bytes exceeds the limit of {limit} bytes"
-    return ApiProblem(
-        413, detail, code="payload-too-large", max_upload_bytes=limit, headers=_CLOSE
-    )
+    return ApiProblem(413, detail, code="payload-too-large", max_upload_bytes=limit, headers=_CLOSE)
 
 
 class BodyLimitMiddleware:

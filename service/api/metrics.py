@@ -2,13 +2,13 @@
 
 Job counts, queue depth, worker use and job solve durations are read from ``JobQueue.stats()`` at
 scrape time (counts come from the job store, so they are right after a restart); synchronous
-solves of ``POST /v1/smooth`` are observed directly.
+solves of ``POST /v1/smooth`` are observed directly, in the same buckets as the jobs'.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest
@@ -20,24 +20,14 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
+from service.jobs.local import DURATION_BUCKETS
 from service.jobs.queue import JobQueue, JobStatus
 
 __all__ = ["BUCKETS", "Metrics", "QueueCollector"]
 
-BUCKETS: tuple[float, ...] = (0.01, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 300, 1800)
+#: The one bucket set of every duration histogram (job runs, synchronous solves).
+BUCKETS: tuple[float, ...] = DURATION_BUCKETS
 log = logging.getLogger("geosmooth.api")
-
-
-def _histogram(durations: Iterable[float], buckets: Sequence[float]) -> tuple[list, float]:
-    values = sorted(float(d) for d in durations)
-    out: list[tuple[str, float]] = []
-    i = 0
-    for bound in buckets:
-        while i < len(values) and values[i] <= bound:
-            i += 1
-        out.append((repr(float(bound)), float(i)))
-    out.append(("+Inf", float(len(values))))
-    return out, float(sum(values))
 
 
 class QueueCollector(Collector):
@@ -63,7 +53,7 @@ class QueueCollector(Collector):
                 stats = queue.stats()
             except Exception:  # a scrape must never fail because of the queue
                 log.exception("queue.stats() failed")
-        counts = stats.get("counts") or stats.get("by_status") or {}
+        counts = stats.get("counts") or {}
         jobs = GaugeMetricFamily(
             "geosmooth_jobs", "Jobs in the job store by status.", labels=["status"]
         )
@@ -96,16 +86,12 @@ def _solve_histogram(stats: dict[str, Any]) -> HistogramMetricFamily:
         "geosmooth_job_solve_seconds",
         "Run time of succeeded jobs in the worker (read, smooth, write), seconds.",
     )
-    cumulative = stats.get("duration_buckets")
-    if cumulative:
-        buckets = [
-            ("+Inf" if le == float("inf") else repr(float(le)), float(count))
-            for le, count in cumulative
-        ]
-        hist.add_metric([], buckets, float(stats.get("duration_sum", 0.0)))
-    else:
-        buckets, total = _histogram(stats.get("durations") or [], BUCKETS)
-        hist.add_metric([], buckets, total)
+    cumulative = stats.get("duration_buckets") or [(float("inf"), 0)]
+    buckets = [
+        ("+Inf" if le == float("inf") else repr(float(le)), float(count))
+        for le, count in cumulative
+    ]
+    hist.add_metric([], buckets, float(stats.get("duration_sum", 0.0)))
     return hist
 
 

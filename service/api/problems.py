@@ -99,7 +99,9 @@ def field_errors(
     return out
 
 
-def _validation(errors: list[dict[str, Any]], code: str, title: str, default: str | None) -> ApiProblem:
+def _validation(
+    errors: list[dict[str, Any]], code: str, title: str, default: str | None
+) -> ApiProblem:
     return ApiProblem(
         422,
         "; ".join(f"{e['field']}: {e['message']}" for e in errors),
@@ -139,9 +141,13 @@ def problem_from_exception(exc: BaseException) -> ApiProblem:
     if isinstance(exc, InvalidInlineGeometry):
         error = {"field": "geometry", "message": exc.message, "type": exc.code}
         return ApiProblem(
-            422, exc.message, code="invalid-geometry", title="Invalid geometry",
-            field="geometry", errors=[error],
-        )  # fmt: skip
+            422,
+            exc.message,
+            code="invalid-geometry",
+            title="Invalid geometry",
+            field="geometry",
+            errors=[error],
+        )
     if isinstance(exc, InvalidParams):
         errors = field_errors(exc.error, "params")
         return _validation(errors, "invalid-parameters", "Invalid parameters", "params")

@@ -5,7 +5,6 @@ Smoothing parameters are :class:`service.core.params.SmoothingParams`, reused un
 
 from __future__ import annotations
 
-from datetime import datetime
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -224,28 +223,47 @@ COMPONENT_REFS: dict[tuple[str, str], str] = {
 
 
 class JobProgress(BaseModel):
-    """Progress of a running job: the latest lambda iteration of the tau search."""
+    """Progress of a queued or running job, from its first stage on."""
 
     model_config = ConfigDict(
         populate_by_name=True,
+        extra="allow",
         json_schema_extra={
             "examples": [
-                {"iteration": 3, "lambda": 0.011, "phi": 0.47, "tau": 0.5, "relative_error": 0.06}
+                {
+                    "stage": "search",
+                    "iteration": 3,
+                    "lambda": 0.011,
+                    "phi": 0.00019,
+                    "tau": 0.0002,
+                    "relative_error": 0.05,
+                    "percent": 80.0,
+                    "eta_seconds": 0.4,
+                    "elapsed_seconds": 1.6,
+                }
             ]
         },
     )
 
-    iteration: int = Field(description="lambda iterations done so far.")
-    lam: float = Field(alias="lambda", description="Latest lambda tried.")
-    phi: float = Field(description="phi(lambda) of the latest lambda.")
-    tau: float | None = Field(default=None, description="Target smoothing factor, when known.")
+    stage: str | None = Field(
+        default=None,
+        description="queued, reading, neighborhoods, laplacian, analysis, search, postprocess, "
+        "writing or done.",
+    )
+    iteration: int | None = Field(default=None, description="lambda iterations done so far.")
+    lam: float | None = Field(default=None, alias="lambda", description="Latest lambda tried.")
+    phi: float | None = Field(default=None, description="phi(lambda) of the latest lambda.")
+    tau: float | None = Field(default=None, description="Target smoothing factor, once known.")
     relative_error: float | None = Field(
         default=None, description="|phi - tau| / tau (null when tau is not known)."
     )
+    percent: float | None = Field(default=None, description="Estimated completion, 0-100.")
+    eta_seconds: float | None = Field(default=None, description="Estimated seconds left.")
+    elapsed_seconds: float | None = Field(default=None, description="Seconds since the start.")
 
 
 class JobLinks(BaseModel):
-    """Where to find the job's status, result and report."""
+    """Where to find the job's status, result, report and events."""
 
     status: str = Field(description="GET: job status.", examples=["/v1/jobs/3f2a9c"])
     result: str = Field(
@@ -254,60 +272,70 @@ class JobLinks(BaseModel):
     report: str = Field(
         description="GET: diagnostics (when succeeded).", examples=["/v1/jobs/3f2a9c/report"]
     )
+    events: str = Field(
+        description="GET: server-sent events (progress, status).",
+        examples=["/v1/jobs/3f2a9c/events"],
+    )
+
+
+_TIME = {"format": "date-time"}
+_JOB_EXAMPLE: dict[str, Any] = {
+    "id": "3f2a9c0d4b5e6f708192a3b4c5d6e7f8",
+    "status": "running",
+    "format": "ply",
+    "filename": "bunny.ply",
+    "params": {"tau": 0.0002},
+    "weld": False,
+    "webhook_url": None,
+    "created_at": "2026-01-01T12:00:00Z",
+    "started_at": "2026-01-01T12:00:01Z",
+    "finished_at": None,
+    "expires_at": None,
+    "attempts": 1,
+    "max_attempts": 3,
+    "run_seconds": None,
+    "progress": {"stage": "search", "iteration": 3, "lambda": 0.011, "phi": 0.00019,
+                 "tau": 0.0002, "relative_error": 0.05, "percent": 80.0, "eta_seconds": 0.4,
+                 "elapsed_seconds": 1.6},
+    "report": None,
+    "error": None,
+    "links": {
+        "status": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8",
+        "result": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/result",
+        "report": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/report",
+        "events": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/events",
+    },
+}  # fmt: skip
 
 
 class Job(BaseModel):
-    """A smoothing job."""
+    """A smoothing job: exactly ``JobRecord.public_dict()`` of the queue."""
 
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "id": "3f2a9c",
-                    "status": "running",
-                    "format": "ply",
-                    "filename": "bunny.ply",
-                    "created_at": "2026-01-01T12:00:00Z",
-                    "started_at": "2026-01-01T12:00:01Z",
-                    "finished_at": None,
-                    "params": {"tau": 0.5},
-                    "progress": {
-                        "iteration": 3,
-                        "lambda": 0.011,
-                        "phi": 0.47,
-                        "tau": 0.5,
-                        "relative_error": 0.06,
-                    },
-                    "report": None,
-                    "error": None,
-                    "links": {
-                        "status": "/v1/jobs/3f2a9c",
-                        "result": "/v1/jobs/3f2a9c/result",
-                        "report": "/v1/jobs/3f2a9c/report",
-                    },
-                }
-            ]
-        }
-    )
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [_JOB_EXAMPLE]})
 
     id: str = Field(description="Job id.")
     status: JobStatusName = Field(description="queued, running, succeeded, failed or cancelled.")
-    format: str | None = Field(default=None, description="Input format (default result format).")
+    format: str = Field(description="Input format (default result format).")
     filename: str | None = Field(default=None, description="Uploaded file name, if any.")
-    created_at: datetime | None = Field(default=None, description="When the job was submitted.")
-    started_at: datetime | None = Field(default=None, description="When a worker picked it up.")
-    finished_at: datetime | None = Field(default=None, description="When it ended.")
-    params: dict[str, Any] | None = Field(default=None, description="Smoothing parameters.")
+    params: dict[str, Any] = Field(description="Smoothing parameters.")
+    weld: bool = Field(default=False, description="Coincident vertices are welded on reading.")
+    webhook_url: str | None = Field(default=None, description="Where the final job is POSTed.")
+    created_at: str = Field(description="When the job was submitted (ISO 8601 UTC).",
+                            json_schema_extra=_TIME)  # fmt: skip
+    started_at: str | None = Field(default=None, description="When its latest run started.",
+                                   json_schema_extra=_TIME)  # fmt: skip
+    finished_at: str | None = Field(default=None, description="When it ended.",
+                                    json_schema_extra=_TIME)  # fmt: skip
+    expires_at: str | None = Field(default=None, description="When a finished job and its "
+                                   "files are purged.", json_schema_extra=_TIME)  # fmt: skip
+    attempts: int = Field(default=0, description="Runs started (interrupted runs are retried).")
+    max_attempts: int = Field(default=3, description="Runs allowed before it is given up.")
+    run_seconds: float | None = Field(default=None, description="Wall time of the successful run.")
     progress: JobProgress | None = Field(
-        default=None, description="Latest lambda iteration (while running)."
+        default=None, description="Latest progress (while queued or running)."
     )
     report: ReportDict | None = Field(default=None, description="Diagnostics (when succeeded).")
     error: JobProblem | None = Field(default=None, description="Problem details (when failed).")
-    attempts: int = Field(default=0, description="Runs started (interrupted runs are retried).")
-    run_seconds: float | None = Field(default=None, description="Wall time of the successful run.")
-    expires_at: datetime | None = Field(
-        default=None, description="When a finished job and its files are purged."
-    )
     links: JobLinks = Field(description="Related resources.")
 
 
@@ -335,18 +363,11 @@ class JobList(BaseModel):
                 {
                     "items": [
                         {
-                            "id": "3f2a9c",
+                            **_JOB_EXAMPLE,
                             "status": "succeeded",
-                            "format": "ply",
-                            "filename": "bunny.ply",
-                            "created_at": "2026-01-01T12:00:00Z",
+                            "progress": None,
                             "finished_at": "2026-01-01T12:00:03Z",
-                            "params": {"tau": 0.5},
-                            "links": {
-                                "status": "/v1/jobs/3f2a9c",
-                                "result": "/v1/jobs/3f2a9c/result",
-                                "report": "/v1/jobs/3f2a9c/report",
-                            },
+                            "run_seconds": 1.9,
                         }
                     ],
                     "total": 1,

@@ -1,63 +1,197 @@
-"""Run the HTTP service with uvicorn (``geosmooth serve``)."""
+"""Run the HTTP service with uvicorn (``geosmooth serve`` calls :func:`serve`).
+
+Before anything is started, :func:`serve` reads and checks the settings (a
+:class:`~service.settings.ConfigError` names the environment variable), refuses to serve a
+non-loopback address without API keys unless told ``insecure_no_auth``
+(:func:`check_bind`), and binds the socket itself, so a port in use is a
+:class:`AddressUnavailable` error (one line, its own exit code) instead of a log line.
+
+Exit codes of ``serve`` (``exit_code`` of the errors): 0 stopped by SIGINT/SIGTERM;
+2 (``EXIT_USAGE``) invalid setting, keys file or insecure bind; 11 (``EXIT_ADDRESS``) the
+address cannot be bound (in use, not permitted, unknown host).
+"""
 
 from __future__ import annotations
 
 import argparse
-import logging
+import contextlib
+import ipaddress
+import resource
+import socket
+import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import uvicorn
 
-from service.api.app import create_app
-from service.settings import Settings
+from service.api.auth import KeyRing
+from service.api.logs import configure_logging, get_logger
+from service.api.protocol import guarded_protocol
+from service.exit_codes import EXIT_ADDRESS
+from service.settings import ConfigError, Settings, load_settings
 
-__all__ = ["main", "serve"]
+__all__ = ["AddressUnavailable", "InsecureBind", "check_bind", "is_loopback", "main", "serve"]
+
+log = get_logger("geosmooth.api")
+
+
+class InsecureBind(ConfigError):
+    """A non-loopback address without API keys, and no explicit ``insecure_no_auth``."""
+
+    code = "insecure-bind"
+    title = "Refusing to serve without authentication"
+
+
+class AddressUnavailable(ConfigError):
+    """The address cannot be bound (port in use, permission, unknown host)."""
+
+    code = "address-unavailable"
+    title = "Address unavailable"
+    exit_code: ClassVar[int] = EXIT_ADDRESS
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` only accepts connections from this machine."""
+    name = host.strip().strip("[]").lower()
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:
+        return False
+
+
+def check_bind(host: str, keys_configured: bool, insecure_no_auth: bool = False) -> None:
+    """Refuse to serve ``host`` to the network without API keys.
+
+    Raises
+    ------
+    InsecureBind
+        ``host`` is not a loopback address, no key is configured and ``insecure_no_auth`` is
+        false (``--insecure-no-auth`` / ``GEOSMOOTH_INSECURE_NO_AUTH=true``).
+    """
+    if keys_configured or insecure_no_auth or is_loopback(host):
+        return
+    raise InsecureBind(
+        f"refusing to serve {host} without API keys: set GEOSMOOTH_API_KEYS or "
+        "GEOSMOOTH_API_KEYS_FILE, or pass --insecure-no-auth to allow anyone who can reach "
+        "the port to submit, read and delete jobs",
+        field="GEOSMOOTH_HOST",
+    )
+
+
+def _bind(host: str, port: int, backlog: int) -> socket.socket:
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+        family, kind, proto, _, address = infos[0]
+        sock = socket.socket(family, kind, proto)
+    except (OSError, IndexError) as exc:
+        message = f"cannot bind {host}:{port}: {exc}"
+        raise AddressUnavailable(message, field="GEOSMOOTH_HOST") from None
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+        sock.listen(backlog)
+    except OSError as exc:
+        sock.close()
+        why = exc.strerror or str(exc)
+        message = f"cannot bind {host}:{port}: {why}"
+        raise AddressUnavailable(message, field="GEOSMOOTH_PORT") from None
+    sock.set_inheritable(True)
+    return sock
+
+
+def _raise_open_files_limit(wanted: int) -> None:
+    """Allow ``wanted`` open files (up to the hard limit): connections are files."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    target = wanted if hard == resource.RLIM_INFINITY else min(wanted, hard)
+    if soft != resource.RLIM_INFINITY and soft < target:
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+
+
+def uvicorn_config(app: Any, settings: Settings) -> uvicorn.Config:
+    """uvicorn settings of the service (connection bounds, timeouts, no access log)."""
+    return uvicorn.Config(
+        app,
+        http=guarded_protocol(settings.max_connections, settings.timeout_request_header),
+        timeout_keep_alive=int(max(1, round(settings.timeout_keep_alive))),
+        timeout_graceful_shutdown=int(max(1, round(settings.timeout_graceful_shutdown))),
+        h11_max_incomplete_event_size=16 * 1024,
+        backlog=min(4096, settings.max_connections),
+        log_config=None,
+        access_log=False,
+        proxy_headers=False,
+        server_header=False,
+        lifespan="on",
+    )
 
 
 def serve(
-    host: str = "127.0.0.1",
-    port: int = 8000,
+    host: str | None = None,
+    port: int | None = None,
     workers: int | None = None,
     data_dir: str | None = None,
+    *,
+    insecure_no_auth: bool = False,
     **settings_overrides: Any,
 ) -> None:
-    """Serve the API until interrupted (SIGINT / SIGTERM stop the queue cleanly).
+    """Serve the API until SIGINT / SIGTERM (requests get ``timeout_graceful_shutdown`` s).
 
     Parameters
     ----------
-    host, port : str, int
-        Address to listen on.
+    host, port : str, int, optional
+        Address (default: settings ``host``/``port``, ``GEOSMOOTH_HOST``/``GEOSMOOTH_PORT``).
     workers : int, optional
         Solver worker processes of the embedded job queue (default: setting ``workers``).
-        The HTTP server itself is one process: the queue is embedded in it.
     data_dir : str, optional
-        Job store directory (default: setting ``data_dir``, env ``GEOSMOOTH_DATA_DIR``).
+        Job store directory (default: setting ``data_dir``).
+    insecure_no_auth : bool
+        Serve a non-loopback address without API keys.
     **settings_overrides
         Any other :class:`~service.settings.Settings` field.
+
+    Raises
+    ------
+    ConfigError
+        Invalid settings, :class:`InsecureBind` or :class:`AddressUnavailable` (nothing was
+        started; ``exc.exit_code`` is the process's exit status).
     """
-    overrides: dict[str, Any] = dict(settings_overrides)
-    if workers is not None:
-        overrides["workers"] = workers
-    if data_dir is not None:
-        overrides["data_dir"] = data_dir
-    settings = Settings(**overrides)
-    logging.basicConfig(
-        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
-    )
+    given = {"host": host, "port": port, "workers": workers, "data_dir": data_dir}
+    overrides = {**settings_overrides, **{k: v for k, v in given.items() if v is not None}}
+    settings = load_settings(**overrides)
+    configure_logging(settings.log_level, settings.log_format)
+    keys = KeyRing.from_settings(settings)
+    check_bind(settings.host, keys.enabled, insecure_no_auth or settings.insecure_no_auth)
+    _raise_open_files_limit(settings.max_connections + 1024)
+    sock = _bind(settings.host, settings.port, min(4096, settings.max_connections))
+    from service.api.app import create_app  # after the checks: a bad config starts nothing
+
     app = create_app(settings)
-    uvicorn.run(app, host=host, port=port, log_level="info", proxy_headers=False)
+    log.info(
+        "server.start",
+        host=settings.host,
+        port=settings.port,
+        keys=len(keys),
+        workers=settings.workers,
+    )
+    uvicorn.Server(uvicorn_config(app, settings)).run(sockets=[sock])
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m service.api.server [--host H] [--port P] [--workers N] [--data-dir D]``."""
     parser = argparse.ArgumentParser(prog="python -m service.api.server", description=__doc__)
-    parser.add_argument("--host", default="127.0.0.1")
-    parser.add_argument("--port", type=int, default=8000)
+    parser.add_argument("--host", default=None)
+    parser.add_argument("--port", type=int, default=None)
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--data-dir", default=None)
+    parser.add_argument("--insecure-no-auth", action="store_true")
     ns = parser.parse_args(argv)
-    serve(ns.host, ns.port, ns.workers, ns.data_dir)
+    try:
+        serve(ns.host, ns.port, ns.workers, ns.data_dir, insecure_no_auth=ns.insecure_no_auth)
+    except ConfigError as exc:
+        print(f"geosmooth serve: {exc.message}", file=sys.stderr)
+        return int(exc.exit_code)
     return 0
 
 

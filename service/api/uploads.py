@@ -68,10 +68,13 @@ class Upload:
 def _invalid(field_name: str, detail: str, status: int = 422) -> ApiProblem:
     code = "invalid-request" if status == 422 else "malformed-request"
     return ApiProblem(
-        status, detail, code=code, title="Invalid request" if status == 422 else None,
+        status,
+        detail,
+        code=code,
+        title="Invalid request" if status == 422 else None,
         field=field_name,
         errors=[{"field": field_name, "message": detail, "type": code}] if status == 422 else None,
-    )  # fmt: skip
+    )
 
 
 def _spool(spool_dir: Path, suffix: str) -> tuple[Path, IO[bytes]]:
@@ -220,10 +223,13 @@ async def receive_upload(request: Request, spool_dir: Path) -> Upload:
         upload = await _multipart(request, boundary, spool_dir)
         if upload.path is None:
             raise ApiProblem(
-                422, "a file part named 'file' is required", code="missing-field",
-                title="Invalid request", field="file",
+                422,
+                "a file part named 'file' is required",
+                code="missing-field",
+                title="Invalid request",
+                field="file",
                 errors=[{"field": "file", "message": "required", "type": "missing"}],
-            )  # fmt: skip
+            )
         return upload
     if media == "application/json" or media.endswith("+json"):
         return await _json_body(request, spool_dir)

@@ -55,37 +55,39 @@ class LiveServer:
         workers: int = 2,
         env: Mapping[str, str] | None = None,
         port: int | None = None,
+        args: tuple[str, ...] = (),
+        headers: Mapping[str, str] | None = None,
     ) -> None:
         self.data_dir = Path(data_dir)
         self.workers = workers
         self.env = dict(env or {})
         self.port = port or free_port()
+        self.args = args
+        self.headers = dict(headers or {})
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc: subprocess.Popen[bytes] | None = None
         self.log_path = self.data_dir.parent / f"server-{self.port}.log"
 
-    def start(self, timeout: float = 60.0) -> LiveServer:
-        env = {**os.environ, **self.env, "PYTHONUNBUFFERED": "1"}
-        cmd = [
-            sys.executable,
-            "-m",
-            "service.api.server",
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(self.port),
-            "--workers",
-            str(self.workers),
-            "--data-dir",
-            str(self.data_dir),
-        ]
+    def command(self) -> list[str]:
+        return [
+            sys.executable, "-m", "service.api.server", "--port", str(self.port),
+            "--workers", str(self.workers), "--data-dir", str(self.data_dir), *self.args,
+        ]  # fmt: skip
+
+    def launch(self) -> subprocess.Popen[bytes]:
+        env = {"GEOSMOOTH_HOST": "127.0.0.1", **os.environ, **self.env, "PYTHONUNBUFFERED": "1"}
+        self.data_dir.parent.mkdir(parents=True, exist_ok=True)
         log = self.log_path.open("ab")
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=log)
+        self.proc = subprocess.Popen(self.command(), cwd=ROOT, env=env, stdout=log, stderr=log)
         log.close()
+        return self.proc
+
+    def start(self, timeout: float = 60.0) -> LiveServer:
+        proc = self.launch()
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"server exited with {self.proc.returncode}:\n{self.log()}")
+            if proc.poll() is not None:
+                raise RuntimeError(f"server exited with {proc.returncode}:\n{self.log()}")
             try:
                 if httpx.get(f"{self.url}/readyz", timeout=1.0).status_code == 200:
                     return self
@@ -94,6 +96,23 @@ class LiveServer:
             time.sleep(0.05)
         self.stop()
         raise RuntimeError(f"server not ready after {timeout} s:\n{self.log()}")
+
+    def records(self) -> list[dict[str, Any]]:
+        """The server's JSON log lines, parsed (other lines skipped)."""
+        out = []
+        for line in self.log_path.read_text(errors="replace").splitlines():
+            if line.startswith("{"):
+                try:
+                    out.append(json.loads(line))
+                except ValueError:
+                    continue
+        return out
+
+    def rss(self, with_children: bool = False) -> int:
+        """Resident memory of the server process (and its descendants), bytes."""
+        assert self.proc is not None
+        pids = {self.proc.pid} | (descendants(self.proc.pid) if with_children else set())
+        return sum(rss_of(pid) for pid in pids)
 
     def log(self) -> str:
         try:
@@ -117,8 +136,19 @@ class LiveServer:
         except subprocess.TimeoutExpired:
             self.kill()
 
-    def client(self, timeout: float = 30.0) -> httpx.Client:
-        return httpx.Client(base_url=self.url, timeout=timeout)
+    def client(self, timeout: float = 30.0, **headers: str) -> httpx.Client:
+        return httpx.Client(base_url=self.url, timeout=timeout, headers={**self.headers, **headers})
+
+
+def rss_of(pid: int) -> int:
+    """Resident set size of a live process in bytes (0 if gone)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
 
 
 def wait_done(client: httpx.Client, job_id: str, timeout: float = 60.0) -> dict[str, Any]:

@@ -13,7 +13,9 @@ from starlette.concurrency import run_in_threadpool
 
 from service.api.deps import MetricsDep, SettingsDep
 from service.api.docs import problem_responses
-from service.api.problems import ApiProblem
+from service.api.errors import ApiProblem
+from service.api.intake import spool_dir
+from service.settings import Settings
 
 __all__ = ["Health", "Readiness", "router"]
 
@@ -30,8 +32,12 @@ class Readiness(BaseModel):
     """Readiness answer."""
 
     status: str = Field(description="``ready``.", examples=["ready"])
-    queue: bool = Field(description="The job queue is started.", examples=[True])
-    data_dir_writable: bool = Field(description="The job store accepts writes.", examples=[True])
+    queue: bool = Field(description="The job queue is started and healthy.", examples=[True])
+    checks: dict[str, str] = Field(
+        description="One entry per component: ``ok`` or its condition (``storage``: ``full``, "
+        "``read-only``; ``database``: ``corrupt`` ...; ``spool``: ``not-writable``).",
+        examples=[{"storage": "ok", "database": "ok", "spool": "ok"}],
+    )
 
 
 def _writable(path: Path) -> bool:
@@ -43,6 +49,17 @@ def _writable(path: Path) -> bool:
         return True
     except OSError:
         return False
+
+
+def _readiness(request: Request, settings: Settings) -> tuple[bool, dict[str, str], str | None]:
+    if not getattr(request.app.state, "queue_started", False):
+        return False, {"queue": "not-started"}, "job queue not started"
+    health = request.app.state.queue.health()
+    checks = dict(health.checks)
+    checks["spool"] = "ok" if _writable(spool_dir(settings)) else "not-writable"
+    ok = health.ok and checks["spool"] == "ok"
+    detail = health.detail or (None if ok else "the upload spool directory is not writable")
+    return ok, checks, detail
 
 
 @router.get(
@@ -61,30 +78,23 @@ async def healthz() -> Health:
     response_model=Readiness,
     response_description="Ready to accept jobs.",
     summary="Readiness",
-    description="200 when the job queue is started and the data directory is writable, "
-    "503 problem details otherwise.",
+    description="200 when the job queue is started and its storage healthy (space left, "
+    "writable, database readable) and uploads can be spooled; 503 problem details naming the "
+    "failing component otherwise.",
     responses={503: problem_responses(503)[503] | {"description": "Not ready."}},
 )
 async def readyz(request: Request, settings: SettingsDep) -> Readiness:
-    queue_ok = bool(getattr(request.app.state, "queue_started", False))
-    dir_ok = await run_in_threadpool(_writable, Path(settings.data_dir))
-    if not (queue_ok and dir_ok):
+    ok, checks, detail = await run_in_threadpool(_readiness, request, settings)
+    if not ok:
         raise ApiProblem(
             503,
-            "not ready: "
-            + ", ".join(
-                part
-                for part, bad in (
-                    ("job queue not started", not queue_ok),
-                    ("data directory not writable", not dir_ok),
-                )
-                if bad
-            ),
+            f"not ready: {detail}",
             code="not-ready",
-            queue=queue_ok,
-            data_dir_writable=dir_ok,
+            queue=False,
+            checks=checks,
+            headers={"Retry-After": "5"},
         )
-    return Readiness(status="ready", queue=True, data_dir_writable=True)
+    return Readiness(status="ready", queue=True, checks=checks)
 
 
 @router.get(

@@ -1,14 +1,28 @@
-"""``/v1/jobs``: asynchronous smoothing jobs (submit, poll, download, cancel, list)."""
+"""``/v1/jobs``: asynchronous smoothing jobs (submit, poll, download, cancel, list).
+
+Every route is scoped to the request's tenant: a job of another key is unknown (404).
+"""
 
 from __future__ import annotations
 
-from typing import Annotated
+import time
+from pathlib import Path
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, Response
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi import APIRouter, Header, Query, Request, Response
+from fastapi.responses import FileResponse, RedirectResponse
 from starlette.concurrency import run_in_threadpool
 
-from service.api.deps import JobDep, MetricsDep, QueueDep, SmoothInputDep
+from service.api.deps import (
+    IntakeDep,
+    JobDep,
+    MetricsDep,
+    PrincipalDep,
+    QueueDep,
+    SettingsDep,
+    Tenant,
+    job_not_found,
+)
 from service.api.docs import (
     FORMAT_QUERY_DESCRIPTION,
     JOB_SUBMIT_OPENAPI,
@@ -16,15 +30,44 @@ from service.api.docs import (
     RESULT_CONTENT,
     problem_responses,
 )
-from service.api.problems import ApiProblem
+from service.api.errors import ApiProblem
+from service.api.ingest import check_job
+from service.api.logs import get_logger
+from service.api.problems import FiniteJSONResponse
 from service.api.results import render_geometry, result_name
 from service.api.schemas import Job, JobList, JobStatusName, OutputFormat, PageLinks, Report
-from service.api.views import job_location, job_view
-from service.jobs.queue import JobRecord, JobStatus
+from service.jobs.queue import JobQueue, JobRecord, JobSize, JobStatus, job_location
+from service.jobs.webhooks import check_webhook_url
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+log = get_logger("geosmooth.api")
+#: Largest offset of a job list page (SQLite integers, and no one pages further).
+MAX_OFFSET = 10**9
+
+
+def job_json(record: JobRecord, *, with_report: bool = True) -> dict[str, Any]:
+    """The API view of a job: exactly ``record.public_dict()`` (checked against ``Job``)."""
+    return record.public_dict(with_report=with_report)
+
+
+async def _active_jobs(queue: JobQueue, tenant: str | None) -> int:
+    def count() -> int:
+        return sum(queue.list(0, 1, s, tenant=tenant)[1] for s in ("queued", "running"))
+
+    return await run_in_threadpool(count)
+
+
+IdempotencyKey = Annotated[
+    str | None,
+    Header(
+        alias="Idempotency-Key",
+        max_length=200,
+        description="Retry-safe submit: the same key with the same request returns the job "
+        "created first (409 if the request differs).",
+    ),
+]
 
 
 @router.post(
@@ -34,29 +77,73 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
     response_description="Job accepted (``Location``: its status URL).",
     summary="Submit a smoothing job",
     description=(
-        "Upload a geometry (``multipart/form-data``: ``file`` + ``params`` [+ ``format``]) or "
-        "send it inline (``application/json``: ``{geometry, params}``). Parameters are validated "
-        "and the file is parsed before the job is queued, so bad input is rejected right away "
-        "(400 malformed file, 413 too large, 415 unknown format, 422 invalid parameters or "
-        "geometry). Answers 202 with the job and a ``Location`` header; poll the status link."
+        "Upload a geometry (``multipart/form-data``: ``file`` + ``params`` [+ ``format``, "
+        "``weld``, ``webhook_url``]; ``params`` as a text field or a JSON file part) or send it "
+        "inline (``application/json``: ``{geometry, params}``). Parameters are validated, the "
+        "file is parsed and the smoothing factor is checked against ``(0, phi(0))`` before the "
+        "job is queued, so bad input is rejected right away. Answers 202 with the job and a "
+        "``Location`` header; poll the status link or stream its ``events``."
     ),
     openapi_extra=JOB_SUBMIT_OPENAPI,
-    responses=problem_responses(400, 413, 415, 422, 503),
+    responses=problem_responses(400, 409, 413, 415, 422, 429, 503, 507),
 )
 async def submit_job(
-    smooth_input: SmoothInputDep, queue: QueueDep, metrics: MetricsDep, response: Response
-) -> Job:
-    record = await run_in_threadpool(
-        queue.submit,
-        smooth_input.data,
-        smooth_input.fmt,
-        smooth_input.params,
-        smooth_input.filename,
-        weld=smooth_input.weld,
-    )
-    metrics.jobs_submitted.inc()
-    response.headers["Location"] = job_location(record.id)
-    return job_view(record)
+    request: Request,
+    principal: PrincipalDep,
+    queue: QueueDep,
+    intake: IntakeDep,
+    settings: SettingsDep,
+    metrics: MetricsDep,
+    idempotency_key: IdempotencyKey = None,
+) -> Response:
+    limits = principal.limits
+    if await _active_jobs(queue, principal.tenant) >= limits.max_active_jobs:
+        raise ApiProblem(
+            429,
+            f"this key has {limits.max_active_jobs} queued or running jobs, its quota",
+            code="job-quota-exceeded",
+            headers={"Retry-After": "5"},
+            retry_after=5,
+        )
+    started = time.time()
+    upload = await intake.receive(request)
+    checked: dict[str, Any] | None = None
+    try:
+        checked = await intake.run(request, upload, principal, check_job)
+        assert checked is not None
+        if checked["webhook_url"]:
+            await run_in_threadpool(check_webhook_url, checked["webhook_url"], settings)
+        record = await run_in_threadpool(
+            lambda: queue.submit(
+                Path(checked["input_path"]),
+                checked["fmt"],
+                checked["params"],
+                upload.filename,
+                weld=checked["weld"],
+                tenant=principal.tenant,
+                webhook_url=checked["webhook_url"],
+                idempotency_key=idempotency_key,
+                size=JobSize(**checked["size"]),
+            )
+        )
+    finally:
+        upload.discard()
+        if checked is not None:
+            Path(checked["input_path"]).unlink(missing_ok=True)
+    replayed = record.created_at < started
+    if not replayed:
+        metrics.jobs_submitted.inc()
+        log.info(
+            "job.submitted",
+            job_id=record.id,
+            tenant=record.tenant,
+            format=record.fmt,
+            n_points=checked["size"]["n"],
+        )
+    headers = {"Location": job_location(record.id)}
+    if replayed:
+        headers["Idempotent-Replayed"] = "true"
+    return FiniteJSONResponse(job_json(record), status_code=202, headers=headers)
 
 
 @router.get(
@@ -65,23 +152,28 @@ async def submit_job(
     response_description="A page of jobs.",
     summary="List jobs",
     description=(
-        "Jobs newest first, paged with ``offset``/``limit`` or ``page``/``size`` (``page`` "
-        "wins when given), optionally filtered by status. Items leave out the reports."
+        "The key's jobs, newest first, paged with ``offset``/``limit`` or ``page``/``size`` "
+        "(``page`` wins when given), optionally filtered by status. Items leave out reports."
     ),
     responses=problem_responses(422, 503),
 )
 async def list_jobs(
     queue: QueueDep,
+    tenant: Tenant,
     status: Annotated[JobStatusName | None, Query(description="Only jobs in this state.")] = None,
-    offset: Annotated[int, Query(ge=0, description="Index of the first job.")] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET, description="Index of the first job.")] = 0,
     limit: Annotated[int, Query(ge=1, le=500, description="Jobs per page.")] = 50,
-    page: Annotated[int | None, Query(ge=1, description="1-based page number.")] = None,
+    page: Annotated[
+        int | None, Query(ge=1, le=MAX_OFFSET // 500, description="1-based page number.")
+    ] = None,
     size: Annotated[int | None, Query(ge=1, le=500, description="Page size with page.")] = None,
-) -> JobList:
+) -> Response:
     if page is not None or size is not None:
         limit = size or limit
         offset = ((page or 1) - 1) * limit
-    records, total = await run_in_threadpool(queue.list, offset, limit, status)
+    records, total = await run_in_threadpool(
+        lambda: queue.list(offset, limit, status, tenant=tenant)
+    )
     query = f"&status={status}" if status else ""
     links = PageLinks(
         next=f"/v1/jobs?offset={offset + limit}&limit={limit}{query}"
@@ -89,8 +181,15 @@ async def list_jobs(
         else None,
         prev=f"/v1/jobs?offset={max(0, offset - limit)}&limit={limit}{query}" if offset else None,
     )
-    items = [job_view(r, with_report=False) for r in records]
-    return JobList(items=items, total=total, offset=offset, limit=limit, links=links)
+    items = [job_json(r, with_report=False) for r in records]
+    body = {
+        "items": items,
+        "total": total,
+        "offset": offset,
+        "limit": limit,
+        "links": links.model_dump(),
+    }
+    return FiniteJSONResponse(body)
 
 
 @router.get(
@@ -99,14 +198,14 @@ async def list_jobs(
     response_description="The job.",
     summary="Job status",
     description=(
-        "The job's state. While running: ``progress`` (iteration, lambda, phi, relative error "
-        "of the latest lambda iteration). Once succeeded: the full ``report``. Once failed: "
-        "the problem details in ``error``."
+        "The job's state. While queued or running: ``progress`` (stage, iteration, lambda, phi, "
+        "tau, percent, ETA). Once succeeded: the full ``report``. Once failed: the problem "
+        "details in ``error``."
     ),
-    responses=problem_responses(404, 503),
+    responses=problem_responses(404, 422, 503),
 )
-async def get_job(job: JobDep) -> Job:
-    return job_view(job)
+async def get_job(job: JobDep) -> Response:
+    return FiniteJSONResponse(job_json(job))
 
 
 def _require_succeeded(job: JobRecord) -> None:
@@ -135,13 +234,15 @@ def _require_succeeded(job: JobRecord) -> None:
     summary="Download the smoothed geometry",
     description=(
         "The smoothed geometry of a succeeded job, written in ``format`` (default: the input's "
-        "format), with the input's vertex count, order and connectivity. 409 while the job is "
-        "queued or running (with ``Retry-After``) and for failed or cancelled jobs."
+        "format), with the input's vertex count, order and connectivity. With an object store "
+        "the answer may be a redirect (307) to a time-limited URL. 409 while the job is queued "
+        "or running (with ``Retry-After``) and for failed or cancelled jobs."
     ),
     response_class=Response,
     responses={
         200: {"description": "The smoothed geometry.", "content": RESULT_CONTENT},
-        **problem_responses(404, 409, 503),
+        307: {"description": "Redirect to a time-limited download URL of the stored result."},
+        **problem_responses(404, 409, 422, 503),
     },
 )
 async def get_result(
@@ -150,21 +251,18 @@ async def get_result(
     format: Annotated[OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)] = None,
 ) -> Response:
     _require_succeeded(job)
-    fmt = format or job.fmt
-    stored = getattr(queue, "result_file", None)  # local backend: the file the worker wrote
-    if fmt == job.fmt and callable(stored):
-        path = await run_in_threadpool(stored, job.id)
-        if path is not None:
-            name = f"{_stem(job)}.{fmt}"
-            return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=name)
+    fmt = str(format or job.fmt)
+    name = f"{result_name(job.filename, job.id)}.{fmt}"
+    url = await run_in_threadpool(queue.result_url, job.id, fmt)
+    if url is not None:
+        return RedirectResponse(url, status_code=307)
+    path = await run_in_threadpool(queue.result_file, job.id, fmt)
+    if path is not None:
+        return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=name)
     document = await run_in_threadpool(queue.result, job.id)
     if document is None:  # purged or deleted meanwhile
         raise ApiProblem(404, f"the result of job {job.id} is gone", code="result-not-found")
-    return await render_geometry(document, fmt, stem=_stem(job))
-
-
-def _stem(job: JobRecord) -> str:
-    return result_name(job.filename, job.id)
+    return await render_geometry(document, fmt, stem=result_name(job.filename, job.id))
 
 
 @router.get(
@@ -173,11 +271,11 @@ def _stem(job: JobRecord) -> str:
     response_description="The diagnostics.",
     summary="Diagnostics of a succeeded job",
     description="Exactly ``SmoothResult.report()``: lambda, phi, tau, history, timings, ...",
-    responses=problem_responses(404, 409, 503),
+    responses=problem_responses(404, 409, 422, 503),
 )
-async def get_report(job: JobDep) -> JSONResponse:
+async def get_report(job: JobDep) -> Response:
     _require_succeeded(job)
-    return JSONResponse(job.report or {})
+    return FiniteJSONResponse(job.report or {})
 
 
 @router.delete(
@@ -192,20 +290,20 @@ async def get_report(job: JobDep) -> JSONResponse:
     ),
     responses={
         204: {"description": "The finished job and its files were deleted."},
-        **problem_responses(404, 503),
+        **problem_responses(404, 422, 503),
     },
 )
-async def delete_job(job: JobDep, queue: QueueDep) -> Job | Response:
+async def delete_job(job: JobDep, queue: QueueDep, tenant: Tenant) -> Response:
     if not job.finished:
-        record = await run_in_threadpool(queue.cancel, job.id)
+        record = await run_in_threadpool(lambda: queue.cancel(job.id, tenant=tenant))
         if record is None:
-            raise ApiProblem(404, f"no job with id {job.id!r}", code="job-not-found")
-        if not record.finished:  # pragma: no cover - a queue must not leave it active
-            raise ApiProblem(500, f"job {job.id} could not be cancelled", code="internal")
+            raise job_not_found(job.id)
         if record.status is JobStatus.CANCELLED:
-            return job_view(record)
+            log.info("job.cancelled", job_id=job.id, tenant=tenant)
+            return FiniteJSONResponse(job_json(record))
         job = record  # it finished on its own meanwhile: delete it
-    deleted = await run_in_threadpool(queue.delete, job.id)
+    deleted = await run_in_threadpool(lambda: queue.delete(job.id, tenant=tenant))
     if not deleted:
-        raise ApiProblem(404, f"no job with id {job.id!r}", code="job-not-found")
+        raise job_not_found(job.id)
+    log.info("job.deleted", job_id=job.id, tenant=tenant)
     return Response(status_code=204)

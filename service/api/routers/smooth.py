@@ -1,41 +1,30 @@
-"""``POST /v1/smooth``: synchronous smoothing of small inputs."""
+"""``POST /v1/smooth``: synchronous smoothing of small inputs, in a killable worker process."""
 
 from __future__ import annotations
 
-import json
 import time
+from pathlib import Path
 from typing import Annotated
 
-import anyio
 from fastapi import APIRouter, Query, Request, Response
+from fastapi.responses import FileResponse
+from starlette.background import BackgroundTask
 
-from service.api.deps import MetricsDep, SettingsDep, SmoothInputDep
+from service.api.deps import IntakeDep, MetricsDep, PrincipalDep
 from service.api.docs import (
     FORMAT_QUERY_DESCRIPTION,
+    MEDIA_TYPES,
     RESULT_CONTENT,
     SMOOTH_OPENAPI,
     problem_responses,
 )
-from service.api.problems import ApiProblem
-from service.api.results import REPORT_HEADER, render_geometry, report_header, result_name
+from service.api.ingest import smooth_input
+from service.api.results import REPORT_HEADER, report_header, result_name
 from service.api.schemas import OutputFormat
-from service.core import Geometry, SmoothingParams, SmoothResult, smooth
-from service.io import write_geometry
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", tags=["smooth"])
-
-
-def _timed_smooth(geometry: Geometry, params: SmoothingParams) -> tuple[SmoothResult, float]:
-    start = time.perf_counter()
-    result = smooth(geometry, params)
-    return result, time.perf_counter() - start
-
-
-def _dumps(obj: object) -> bytes:
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
-
 
 _RESPONSES = {
     200: {
@@ -57,7 +46,7 @@ _RESPONSES = {
             }
         },
     },
-    **problem_responses(400, 413, 415, 422),
+    **problem_responses(400, 413, 415, 422, 429),
 }
 
 
@@ -66,10 +55,12 @@ _RESPONSES = {
     summary="Smooth a small input synchronously",
     description=(
         "Same input as ``POST /v1/jobs`` but answered directly, for inputs of at most "
-        "``sync_max_points`` points (setting ``GEOSMOOTH_SYNC_MAX_POINTS``, default 20000; "
-        "larger inputs get 413: submit a job instead). The solve runs in a worker thread, at "
-        "most ``workers`` at a time. ``format=json`` answers ``{geometry, report}``; any other "
-        "format answers the file with the report in the ``X-Geosmooth-Report`` header."
+        "``sync_max_points`` points (setting ``GEOSMOOTH_SYNC_MAX_POINTS``, default 20000) that "
+        "finish within ``sync_timeout`` seconds (default 60) and ``sync_memory_bytes`` of "
+        "memory; anything larger gets 413: submit a job instead. The solve runs in its own "
+        "process, stopped when the client disconnects. ``format=json`` answers "
+        "``{geometry, report}``; any other format answers the file with the report in the "
+        "``X-Geosmooth-Report`` header."
     ),
     response_class=Response,
     openapi_extra=SMOOTH_OPENAPI,
@@ -77,38 +68,34 @@ _RESPONSES = {
 )
 async def smooth_now(
     request: Request,
-    smooth_input: SmoothInputDep,
-    settings: SettingsDep,
+    principal: PrincipalDep,
+    intake: IntakeDep,
     metrics: MetricsDep,
     format: Annotated[OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)] = None,
 ) -> Response:
-    document = smooth_input.document
-    n = document.geometry.n
-    if n > settings.sync_max_points:
-        raise ApiProblem(
-            413,
-            f"the input has {n} points; POST /v1/smooth accepts at most"
-            f" {settings.sync_max_points}: submit a job to POST /v1/jobs instead",
-            code="too-many-points",
-            field="geometry.points",
-            n_points=n,
-            max_points=settings.sync_max_points,
-        )
-    limiter: anyio.CapacityLimiter | None = request.app.state.sync_limiter
-    result, seconds = await anyio.to_thread.run_sync(
-        _timed_smooth, document.geometry, smooth_input.params, limiter=limiter
-    )
-    metrics.sync_solve_seconds.observe(seconds)
-    report = result.report()
-    fmt = format or smooth_input.fmt
+    with intake.sync_slot(principal.bucket, principal.limits.max_sync_per_key):
+        upload = await intake.receive(request)
+        try:
+            start = time.perf_counter()
+            answer = await intake.run(
+                request,
+                upload,
+                principal,
+                smooth_input,
+                mode="sync",
+                out_format=str(format) if format else None,
+            )
+        finally:
+            upload.discard()
+    if answer is None:  # the client went away: nobody to answer
+        return Response(status_code=499)
+    metrics.sync_solve_seconds.observe(time.perf_counter() - start)
+    path, fmt = Path(answer["path"]), str(answer["fmt"])
+    cleanup = BackgroundTask(path.unlink, missing_ok=True)
     if fmt == "json":
-        geometry = await anyio.to_thread.run_sync(write_geometry, document, "json", result.points)
-        body = b"".join([b'{"geometry":', geometry.strip(), b',"report":', _dumps(report), b"}"])
-        return Response(content=body, media_type="application/json")
-    return await render_geometry(
-        document,
-        fmt,
-        stem=result_name(smooth_input.filename, "geometry"),
-        points=result.points,
-        headers={REPORT_HEADER: report_header(report)},
+        return FileResponse(path, media_type="application/json", background=cleanup)
+    headers = {REPORT_HEADER: report_header(answer["report"])}
+    name = f"{result_name(upload.filename, 'geometry')}.{fmt}"
+    return FileResponse(
+        path, media_type=MEDIA_TYPES[fmt], filename=name, headers=headers, background=cleanup
     )
