@@ -160,8 +160,12 @@ def _flag(raw: str | None) -> bool:
     raise _invalid("weld", "weld must be true or false")
 
 
+_GENERIC_TYPES = frozenset({"application/octet-stream", "text/plain", "binary/octet-stream"})
+
+
 def _media_format(part_type: str | None) -> str | None:
-    if not part_type:
+    """The format a specific part ``Content-Type`` names (generic types name none)."""
+    if not part_type or part_type.lower() in _GENERIC_TYPES:
         return None
     names = [n for n, f in FORMATS.items() if f.media_type.split(";")[0] == part_type]
     return names[0] if len(names) == 1 else None
@@ -297,19 +301,20 @@ def _check_tau(parsed: _Parsed) -> dict[str, Any] | None:
     from service.core.info import describe
 
     info = describe(parsed.document.geometry, params)
-    phi0, (_, rms_max) = float(info["phi0"]), info["rms_range"]
+    phi0, rms_max = float(info["phi0"]), float(info["rms_range"][1])
     if params.tau is not None:
-        value, bound, name = params.tau, phi0, "tau"
-    else:
-        value, bound, name = float(params.rms), float(rms_max), "rms"  # type: ignore[arg-type]
+        value, bound, name, tau = params.tau, phi0, "tau", params.tau
+    else:  # tau = rms^2 * sum(omega_i^2) over the points that can move
+        value, bound, name = float(params.rms), rms_max, "rms"  # type: ignore[arg-type]
+        tau = value**2 * (phi0 / rms_max**2) if rms_max > 0 else float("inf")
     if not (0.0 < value < bound):
         raise TauOutOfRange(
             f"smoothing factor {name}={value:.6g} is out of range: it must lie in (0, "
-            f"{bound:.6g}), where the upper bound comes from phi(0), the deviation of the fully "
-            "smoothed shape",
+            f"{bound:.6g}) for this input, where the upper bound comes from phi(0) = "
+            f"{phi0:.6g}, the deviation of the fully smoothed shape (valid_range is in tau units)",
             field=f"params.{name}",
-            tau=value if name == "tau" else value**2,
-            tau_max=phi0 if name == "tau" else bound**2,
+            tau=tau,
+            tau_max=phi0,
         )
     return {"phi0": phi0}
 

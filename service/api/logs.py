@@ -95,6 +95,23 @@ def _dumps(obj: Any, **kw: Any) -> str:
         return json.dumps(finite(obj), default=str)
 
 
+def _pass_to_stdlib() -> None:
+    """Until :func:`configure_logging` runs (library use, tests): hand events to ``logging``."""
+    structlog.configure(
+        processors=[
+            structlog.contextvars.merge_contextvars,
+            structlog.stdlib.render_to_log_kwargs,
+        ],
+        logger_factory=structlog.stdlib.LoggerFactory(),
+        wrapper_class=structlog.stdlib.BoundLogger,
+        cache_logger_on_first_use=False,
+    )
+
+
+if not structlog.is_configured():
+    _pass_to_stdlib()
+
+
 def get_logger(name: str = "geosmooth.api") -> Any:
     """A structlog logger (``log.info("event", key=value)``)."""
     return structlog.get_logger(name)

@@ -20,7 +20,7 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
-from service.jobs.local import DURATION_BUCKETS
+from service.jobs.metrics import DURATION_BUCKETS
 from service.jobs.queue import JobQueue, JobStatus
 
 __all__ = ["BUCKETS", "Metrics", "QueueCollector"]

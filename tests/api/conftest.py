@@ -15,6 +15,8 @@ SERVER_ENV = {
     "GEOSMOOTH_SYNC_MAX_POINTS": "2000",
     "GEOSMOOTH_MAX_POINTS": "300000",
     "GEOSMOOTH_JOB_TIMEOUT": "120",
+    "GEOSMOOTH_RATE_LIMIT": "100000",  # the rate limit has its own tests
+    "GEOSMOOTH_RATE_BURST": "100000",
 }
 
 

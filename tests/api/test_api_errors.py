@@ -8,8 +8,16 @@ import socket
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
-from api_helpers import LiveServer, encode, json_geometry, noisy_sphere, wait_done
+from api_helpers import (
+    LiveServer,
+    encode,
+    json_geometry,
+    noisy_plane_cloud,
+    noisy_sphere,
+    wait_done,
+)
 
 PROBLEM = "application/problem+json"
 PTS, FACES = noisy_sphere(1)
@@ -40,14 +48,18 @@ def _upload(
     ("name", "data", "needle"),
     [
         ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n", "header"),
-        ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
-         b"property float y\nproperty float z\nend_header\n0 0 0\n", ""),
+        (
+            "bad.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+            b"property float y\nproperty float z\nend_header\n0 0 0\n",
+            "",
+        ),
         ("bad.obj", b"v 0 0 0\nv 1 x 0\n", "line 2"),
         ("bad.xyz", b"0 0 0\n1 1\n", "line 2"),
         ("bad.json", b'{"points": [[0, 0, 0], ', ""),
         ("empty.xyz", b"", ""),
     ],
-)  # fmt: skip
+)
 def test_malformed_file_is_400_with_parser_message(
     client: httpx.Client, name: str, data: bytes, needle: str
 ) -> None:
@@ -91,18 +103,63 @@ def test_unknown_route_and_method(client: httpx.Client) -> None:
 # --------------------------------------------------------------------------- 409
 
 
-def test_result_of_failed_job_is_409_and_failure_is_reported(client: httpx.Client) -> None:
-    # tau far above phi(0): only the solver can tell, so the job fails (no crash).
-    r = _upload(client, "s.ply", encode("ply", PTS, FACES), json.dumps({"tau": 1e9}))
+def test_tau_above_phi0_is_422_at_submit_not_a_failed_job(client: httpx.Client) -> None:
+    before = client.get("/v1/jobs", params={"limit": 1}).json()["total"]
+    for params, field in (({"tau": 1e9}, "params.tau"), ({"rms": 1e6}, "params.rms")):
+        body = _problem(
+            _upload(client, "s.ply", encode("ply", PTS, FACES), json.dumps(params)), 422, field
+        )
+        assert body["code"] == "tau-out-of-range"
+        # the valid range is phi(0) of eq. (14): the deviation from the centroid (one part)
+        phi0 = float(np.sum((PTS - PTS.mean(axis=0)) ** 2))
+        assert body["valid_range"][1] == pytest.approx(phi0, rel=1e-9)  # in tau units
+        if field == "params.rms":  # tau = rms^2 n (unit weights), the bound is sqrt(phi0 / n)
+            assert body["tau"] == pytest.approx(1e12 * len(PTS), rel=1e-9)
+            assert f"{np.sqrt(phi0 / len(PTS)):.6g}" in body["detail"]
+    inline = {"geometry": json_geometry(PTS, FACES), "params": {"tau": 1e9}}
+    _problem(client.post("/v1/jobs", json=inline), 422, "params.tau")
+    assert client.get("/v1/jobs", params={"limit": 1}).json()["total"] == before  # none queued
+
+
+def test_result_of_unfinished_or_failed_job_is_409(
+    client: httpx.Client, server: LiveServer
+) -> None:
+    """A job whose stored input got corrupted fails; the failure is reported without paths."""
+    slow = _upload(
+        client,
+        "slow.xyz",
+        encode("xyz", noisy_plane_cloud(20000, seed=9), None),
+        json.dumps({"rms": 0.001, "tolerance": 1e-9, "max_iterations": 200}),
+    )
+    blockers = [slow.json()["id"]] + [
+        _upload(
+            client,
+            "slow.xyz",
+            encode("xyz", noisy_plane_cloud(20000, seed=s), None),
+            json.dumps({"rms": 0.001, "tolerance": 1e-9}),
+        ).json()["id"]
+        for s in (10, 11)
+    ]
+    r = _upload(client, "s.ply", encode("ply", PTS, FACES), json.dumps({"tau": 0.05}))
     assert r.status_code == 202
-    job = wait_done(client, r.json()["id"])
-    assert job["status"] == "failed"
-    error = job["error"]
-    assert error["code"] == "tau-out-of-range" and error["field"] == "params.tau"
-    assert error["type"] == "urn:geosmooth:problem:tau-out-of-range"
+    job = r.json()
+    body = _problem(client.get(f"/v1/jobs/{job['id']}/result"), 409)
+    assert body["code"] == "result-not-ready" and r.headers.get("retry-after") is None
+    stored = list((server.data_dir / "jobs" / job["id"]).glob("input.*"))
+    assert stored, "the input is stored under data_dir/jobs/<id>/"
+    stored[0].write_bytes(b"ply\nformat ascii 1.0\nelement vertex 9\nend_header\n1 2\n")
+    done = wait_done(client, job["id"], timeout=120)
+    if done["status"] == "succeeded":  # it ran before the corruption: nothing to check
+        pytest.skip("the job ran before its input could be corrupted")
+    assert done["status"] == "failed"
+    error = done["error"]
+    assert error["type"].startswith("urn:geosmooth:problem:") and error["detail"]
+    assert str(server.data_dir) not in json.dumps(error) and "/" not in error["detail"]
     body = _problem(client.get(f"/v1/jobs/{job['id']}/result"), 409)
     assert body["code"] == "no-result" and body["job_status"] == "failed"
     _problem(client.get(f"/v1/jobs/{job['id']}/report"), 409)
+    for other in blockers:
+        client.delete(f"/v1/jobs/{other}")
 
 
 # --------------------------------------------------------------------------- 413
@@ -144,7 +201,7 @@ def test_raw_chunked_upload_is_answered_413_while_still_sending(server: LiveServ
     limit = 8 * 1024 * 1024
     with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
         head = (
-            b"POST /v1/smooth HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+            b"POST /v1/smooth HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
             b"Transfer-Encoding: chunked\r\n\r\n"
         )
         sock.sendall(head)
@@ -176,7 +233,7 @@ def test_too_many_points_for_sync_smooth_is_413(client: httpx.Client) -> None:
 def test_unknown_format_is_415(client: httpx.Client) -> None:
     _problem(_upload(client, "track.gpx", b"<gpx/>"), 415, "format")
     _problem(_upload(client, "lines.geojson", b"{}"), 415, "format")
-    _problem(_upload(client, "noext", b"0 0 0\n"), 415, "format")
+    _problem(_upload(client, "noext", b"<svg/>"), 415, "format")
     _problem(_upload(client, "a.xyz", b"0 0 0\n", format="dxf"), 415, "format")
     r = client.post("/v1/jobs", content=b"0 0 0", headers={"content-type": "text/plain"})
     _problem(r, 415, "content-type")

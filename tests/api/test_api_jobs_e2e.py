@@ -134,14 +134,17 @@ def test_progress_is_reported_while_running(client: httpx.Client) -> None:
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         status = client.get(f"/v1/jobs/{job['id']}").json()
-        if status["status"] == "running" and status["progress"]:
+        if status["status"] in ("queued", "running"):
+            assert status["progress"] and status["progress"]["stage"], status  # from the start
             seen.append(status["progress"])
         if status["status"] in ("succeeded", "failed", "cancelled"):
             break
         time.sleep(0.01)
     assert status["status"] == "succeeded", status
-    assert seen, "no progress observed while running"
-    first = seen[0]
+    assert status["progress"] is None  # finished: the report says the rest
+    searching = [p for p in seen if p["stage"] == "search" and p["iteration"]]
+    assert searching, f"no lambda iteration observed while running: {seen[:3]}"
+    first = searching[0]
     assert first["iteration"] >= 1 and first["lambda"] > 0 and first["phi"] > 0
     assert first["tau"] == pytest.approx(1.0)
     assert first["relative_error"] == pytest.approx(abs(first["phi"] - 1.0) / 1.0)

@@ -15,11 +15,13 @@ from service.api.deps import MetricsDep, SettingsDep
 from service.api.docs import problem_responses
 from service.api.errors import ApiProblem
 from service.api.intake import spool_dir
+from service.api.logs import get_logger
 from service.settings import Settings
 
 __all__ = ["Health", "Readiness", "router"]
 
 router = APIRouter(tags=["operations"])
+log = get_logger("geosmooth.api")
 
 
 class Health(BaseModel):
@@ -54,11 +56,21 @@ def _writable(path: Path) -> bool:
 def _readiness(request: Request, settings: Settings) -> tuple[bool, dict[str, str], str | None]:
     if not getattr(request.app.state, "queue_started", False):
         return False, {"queue": "not-started"}, "job queue not started"
-    health = request.app.state.queue.health()
-    checks = dict(health.checks)
-    checks["spool"] = "ok" if _writable(spool_dir(settings)) else "not-writable"
-    ok = health.ok and checks["spool"] == "ok"
-    detail = health.detail or (None if ok else "the upload spool directory is not writable")
+    spool = "ok" if _writable(spool_dir(settings)) else "not-writable"
+    try:
+        health = request.app.state.queue.health()
+    except Exception:
+        log.exception("readyz.health_failed")
+        checks, ok, detail = (
+            {"queue": "health-check-failed"},
+            False,
+            "the queue's health check failed",
+        )
+    else:
+        checks, ok, detail = dict(health.checks), bool(health.ok), health.detail
+    checks["spool"] = spool
+    if spool != "ok":
+        ok, detail = False, detail or "the upload spool directory is not writable"
     return ok, checks, detail
 
 
