@@ -139,8 +139,12 @@ def _params(raw: Any, required: bool) -> SmoothingParams:
         ) from None
 
 
-def _check_param_bounds(params: SmoothingParams, limits: Limits) -> None:
-    for name, bound in (("k", limits.max_k), ("max_iterations", limits.max_iterations)):
+def _check_param_bounds(params: SmoothingParams, limits: Limits, kind: str | None = None) -> None:
+    """The key's bounds on ``max_iterations`` and, for point clouds (``kind``), on ``k``."""
+    bounds = [("max_iterations", limits.max_iterations)]
+    if kind == "cloud":
+        bounds.append(("k", limits.max_k))
+    for name, bound in bounds:
         value = getattr(params, name, None)
         if value is not None and value > bound:
             raise _invalid(
@@ -290,6 +294,7 @@ def _check_size(parsed: _Parsed, max_points: int, limits: Limits) -> None:
 def _parse(req: IngestRequest, max_points: int) -> _Parsed:
     parsed = _from_json(req) if req.kind == "json" else _from_multipart(req)
     _check_size(parsed, max_points, req.limits)
+    _check_param_bounds(parsed.params, req.limits, str(parsed.document.geometry.kind))
     return parsed
 
 

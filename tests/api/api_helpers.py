@@ -52,7 +52,7 @@ class LiveServer:
     def __init__(
         self,
         data_dir: Path,
-        workers: int = 2,
+        workers: int | None = 2,
         env: Mapping[str, str] | None = None,
         port: int | None = None,
         args: tuple[str, ...] = (),
@@ -69,10 +69,9 @@ class LiveServer:
         self.log_path = self.data_dir.parent / f"server-{self.port}.log"
 
     def command(self) -> list[str]:
-        return [
-            sys.executable, "-m", "service.api.server", "--port", str(self.port),
-            "--workers", str(self.workers), "--data-dir", str(self.data_dir), *self.args,
-        ]  # fmt: skip
+        workers = ["--workers", str(self.workers)] if self.workers is not None else []
+        cmd = [sys.executable, "-m", "service.api.server", "--port", str(self.port), *workers]
+        return [*cmd, "--data-dir", str(self.data_dir), *self.args]
 
     def launch(self) -> subprocess.Popen[bytes]:
         env = {"GEOSMOOTH_HOST": "127.0.0.1", **os.environ, **self.env, "PYTHONUNBUFFERED": "1"}
