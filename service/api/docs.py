@@ -36,6 +36,7 @@ _DESCRIPTIONS: dict[int, str] = {
     415: "Unknown file format or content type.",
     422: "Invalid parameters or geometry (e.g. tau outside (0, phi(0)), a bound of the key "
     "exceeded); ``field`` / ``errors`` name the input at fault.",
+    431: "The request header is larger than 16 KiB.",
     429: "Rate limit or quota of the key exceeded; ``Retry-After`` says when to retry.",
     500: "Unexpected error (logged; quote ``request_id``).",
     503: "The job queue or its storage is unavailable, or the server is overloaded "
@@ -76,13 +77,13 @@ def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True)
     """Add the answers any operation can give, besides its own, to every operation.
 
     Every request can be malformed or name a foreign ``Host`` (400), stall its body (408),
-    send too large a body (413) or hit a bug (500); all but the probes can meet an overloaded
-    server (503). ``/v1`` operations need a key when keys are configured (401) and are rate
+    send too large a body (413) or header (431) or hit a bug (500); all but the probes can
+    meet an overloaded server (503). ``/v1`` operations need a key when keys are configured (401) and are rate
     limited (429); state-changing ones refuse other origins without a key (403).
     """
     for path, operations in spec.get("paths", {}).items():
         for method, operation in operations.items():
-            statuses = [400, 408, 413, 500]
+            statuses = [400, 408, 413, 431, 500]
             if path not in _PROBES:
                 statuses.append(503)
             if path.startswith("/v1/") and keys_possible:

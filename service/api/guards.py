@@ -92,8 +92,14 @@ class InFlightLimit:
             self.active -= 1
 
 
+#: Largest request header accepted (all fields); more is a 431 problem.
+MAX_HEADER_BYTES = 16 * 1024
+
+
 class HostGuard:
-    """400 problem unless the ``Host`` header is allowed (``*``, exact or ``*.domain``)."""
+    """400 problem unless the ``Host`` header is allowed (``*``, exact or ``*.domain``); 431
+    for a header larger than :data:`MAX_HEADER_BYTES` (h11 only bounds incomplete headers).
+    """
 
     def __init__(self, app: ASGIApp, hosts: Iterable[str]) -> None:
         self.app = app
@@ -107,6 +113,15 @@ class HostGuard:
         return any(name == h or (h.startswith("*.") and name.endswith(h[1:])) for h in self.hosts)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and _header_bytes(scope) > MAX_HEADER_BYTES:
+            problem = ApiProblem(
+                431,
+                f"the request header exceeds {MAX_HEADER_BYTES} bytes",
+                code="header-too-large",
+                headers={"Connection": "close"},
+            )
+            await _refuse(problem, scope, receive, send)
+            return
         if scope["type"] == "http" and not self.allowed(Headers(scope=scope).get("host")):
             problem = ApiProblem(
                 400,
@@ -117,6 +132,11 @@ class HostGuard:
             await _refuse(problem, scope, receive, send)
             return
         await self.app(scope, receive, send)
+
+
+def _header_bytes(scope: Scope) -> int:
+    line = len(scope.get("raw_path") or b"") + len(scope.get("query_string") or b"")
+    return line + sum(len(k) + len(v) + 4 for k, v in scope.get("headers", ()))
 
 
 def _origin_of(url: str) -> str | None:
