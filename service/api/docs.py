@@ -78,8 +78,9 @@ def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True)
 
     Every request can be malformed or name a foreign ``Host`` (400), stall its body (408),
     send too large a body (413) or header (431) or hit a bug (500); all but the probes can
-    meet an overloaded server (503). ``/v1`` operations need a key when keys are configured (401) and are rate
-    limited (429); state-changing ones refuse other origins without a key (403).
+    meet an overloaded server (503). ``/v1`` operations need a key when keys are configured
+    (401) and are rate limited (429); state-changing ones refuse other origins without a key
+    (403).
     """
     for path, operations in spec.get("paths", {}).items():
         for method, operation in operations.items():
