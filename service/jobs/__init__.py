@@ -29,7 +29,7 @@ __all__ = [
 def make_queue(settings: Settings) -> JobQueue:
     """The backend named by ``settings.queue``: ``local`` (default) or ``rq``."""
     if settings.queue == "rq":
-        from service.jobs.rq_queue import RQQueue  # type: ignore[import-not-found]
+        from service.jobs.rq_queue import RQQueue
 
         return RQQueue.from_settings(settings)
     return LocalQueue.from_settings(settings)

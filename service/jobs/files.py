@@ -20,10 +20,20 @@ import shutil
 import time
 from pathlib import Path
 
-__all__ = ["JobFiles", "is_job_id", "move_durable", "write_durable"]
+__all__ = ["JobFiles", "is_job_id", "move_durable", "result_name", "write_durable"]
 
 _JOB_ID = re.compile(r"^[0-9a-f]{32}$")
 _FMT = re.compile(r"^[a-z0-9]{1,16}$")
+
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+def result_name(filename: str | None, default: str) -> str:
+    """``<stem>.smoothed`` for a download, from the uploaded name (only safe characters kept)."""
+    base = (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
+    stem = _UNSAFE.sub("_", base.rsplit(".", 1)[0]).strip("._")[:100]
+    return f"{stem or default}.smoothed"
 
 
 def is_job_id(job_id: object) -> bool:

@@ -9,9 +9,9 @@
   killer picking a random process. ``RLIMIT_AS`` needs no privileges and works in any container
   (cgroups would need a delegated hierarchy); it counts address space, not resident memory, so
   the limit is generous by what allocators reserve but do not touch.
-* **Threads** (:func:`thread_env`): OpenBLAS/OpenMP/MKL threads per job process, set in the
-  environment before the job processes load numpy (several jobs per machine must not each start
-  one BLAS thread per core).
+* **Threads** (:func:`limit_threads`, :func:`thread_env`): OpenBLAS/OpenMP/MKL threads per job
+  process, set at run time with threadpoolctl and in the environment of processes started
+  afterwards (several jobs per machine must not each start one BLAS thread per core).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ __all__ = [
     "check_admission",
     "default_job_memory",
     "limit_memory",
+    "limit_threads",
     "thread_env",
 ]
 
@@ -114,6 +115,17 @@ def limit_memory(limit: int | None) -> int | None:
         cap = min(cap, hard)
     resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
     return cap
+
+
+def limit_threads(threads: int) -> None:
+    """Limit every BLAS/OpenMP library loaded in this process to ``threads`` threads.
+
+    threadpoolctl finds numpy's and scipy's OpenBLAS, Debian's OpenBLAS under CHOLMOD and
+    libgomp, whatever the import order (environment variables only work before the first load).
+    """
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+    threadpool_limits(limits=max(1, int(threads)))
 
 
 def thread_env(threads: int) -> dict[str, str]:

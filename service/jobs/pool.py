@@ -267,6 +267,7 @@ class WorkerPool:
             server_pid=os.getpid(),
             progress_interval=self.progress_interval,
             memory_limit=self.memory_limit,
+            threads=self.threads,
         )
         process = self._ctx.Process(  # type: ignore[attr-defined]
             target=child.main, args=(spec,), name=f"geosmooth-job-{claim.job_id[:8]}", daemon=True

@@ -75,6 +75,7 @@ class JobContext:
     _last_write: float = field(default=float("-inf"), repr=False)
     _last_stage: str | None = field(default=None, repr=False)
     _pending: dict[str, Any] | None = field(default=None, repr=False)
+    written: list[str] = field(default_factory=list, repr=False)
 
     def __post_init__(self) -> None:
         self._tracker.tolerance = float(self.params.tolerance)
@@ -114,6 +115,8 @@ class JobContext:
         """Write an output file into the job directory durably and atomically."""
         path = self.job_dir / name
         write_durable(path, data)
+        if name not in self.written:
+            self.written.append(name)
         return path
 
 
