@@ -109,7 +109,7 @@ def _check(response: httpx.Response, what: str) -> httpx.Response:
 
 def _progress_line(job: Mapping[str, Any]) -> str | None:
     progress = job.get("progress") or None
-    if not progress:
+    if not progress or progress.get("lambda") is None:  # stages before the first lambda
         return None
     text = f"geosmooth: iteration {progress.get('iteration', '?'):>2}"
     for key, label in (("lambda", "lambda"), ("phi", "phi"), ("tau", "tau")):

@@ -1,0 +1,133 @@
+"""Resource limits of a job: the per-job memory limit, its enforcement, and BLAS threads.
+
+* **Admission** (:func:`check_admission`): before a job is accepted its peak memory is estimated
+  by the engine (``service.core.resources.estimate_resources``); above the per-job limit the job
+  is refused with :class:`~service.jobs.errors.JobTooLarge` (422, estimate and limit stated).
+* **Enforcement** (:func:`limit_memory`): every job process runs under ``RLIMIT_AS`` = its
+  address space when the job starts + the per-job limit. An estimate that was wrong makes that one
+  job fail with ``out-of-memory`` (``MemoryError``) instead of the machine swapping or the OOM
+  killer picking a random process. ``RLIMIT_AS`` needs no privileges and works in any container
+  (cgroups would need a delegated hierarchy); it counts address space, not resident memory, so
+  the limit is generous by what allocators reserve but do not touch.
+* **Threads** (:func:`limit_threads`, :func:`thread_env`): OpenBLAS/OpenMP/MKL threads per job
+  process, set at run time with threadpoolctl and in the environment of processes started
+  afterwards (several jobs per machine must not each start one BLAS thread per core).
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from service.jobs.errors import JobTooLarge
+
+if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
+    from service.jobs.queue import JobSize
+
+__all__ = [
+    "THREAD_VARIABLES",
+    "check_admission",
+    "default_job_memory",
+    "limit_memory",
+    "limit_threads",
+    "thread_env",
+]
+
+THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_GIB = 1024**3
+
+
+def physical_memory() -> int:
+    """Bytes of RAM of this machine (or of the container's cgroup limit, if lower)."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = min(total, int(text))
+    return int(total)
+
+
+def default_job_memory(workers: int) -> int:
+    """Per-job memory limit when none is configured: 80 % of the RAM shared by ``workers`` jobs.
+
+    At least 256 MiB.
+    """
+    return max(256 * 1024**2, int(0.8 * physical_memory() / max(1, workers)))
+
+
+def check_admission(size: JobSize, params: SmoothingParams, limit: int | None) -> None:
+    """Refuse a job whose estimated peak memory is above ``limit`` bytes (``None``: no limit).
+
+    Raises
+    ------
+    JobTooLarge
+        With the estimate and the limit (bytes and GiB in the message).
+    """
+    if limit is None:
+        return
+    import importlib.util
+
+    if importlib.util.find_spec("service.core.resources") is None:  # TRANSITIONAL: removed
+        return  # once core-engine's [seam] (estimate_resources) is merged into jobs
+    from service.core.resources import estimate_resources  # type: ignore[import-not-found]
+
+    est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces)
+    if est.memory_bytes <= limit:
+        return
+    raise JobTooLarge(
+        f"the job needs about {est.memory_bytes / _GIB:.2f} GiB of memory ({size.n} points,"
+        f" {est.path} solver path), above the per-job limit of {limit / _GIB:.2f} GiB",
+        field="file",
+        estimate_bytes=int(est.memory_bytes),
+        limit_bytes=int(limit),
+        estimate_seconds=float(est.seconds),
+        path=est.path,
+    )
+
+
+def _address_space() -> int:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def limit_memory(limit: int | None) -> int | None:
+    """Cap this process's address space at its current size + ``limit`` bytes.
+
+    Returns the cap set (``None`` when ``limit`` is ``None`` or the platform has no
+    ``RLIMIT_AS``). Never raises the hard limit; never lowers below what is mapped already.
+    """
+    if limit is None or not hasattr(resource, "RLIMIT_AS"):
+        return None
+    cap = _address_space() + int(limit)
+    _soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    return cap
+
+
+def limit_threads(threads: int) -> None:
+    """Limit every BLAS/OpenMP library loaded in this process to ``threads`` threads.
+
+    threadpoolctl finds numpy's and scipy's OpenBLAS, Debian's OpenBLAS under CHOLMOD and
+    libgomp, whatever the import order (environment variables only work before the first load).
+    """
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+    threadpool_limits(limits=max(1, int(threads)))
+
+
+def thread_env(threads: int) -> dict[str, str]:
+    """The environment variables that give BLAS/OpenMP ``threads`` threads per process."""
+    return {name: str(max(1, int(threads))) for name in THREAD_VARIABLES}
