@@ -189,6 +189,13 @@ class Settings(BaseSettings):
     max_spectrum_points: int = Field(
         default=3000, ge=0, description="Largest input for which ``params.spectrum`` is accepted."
     )
+    submit_exact_tau_points: int = Field(
+        default=50_000,
+        ge=0,
+        description="Largest point cloud whose tau is checked against the exact phi(0) at submit "
+        "(larger clouds: against a closed-form upper bound; building their neighbourhoods twice "
+        "would double the cost of a job).",
+    )
     sync_timeout: float = Field(
         default=60.0, gt=0, description="Seconds a POST /v1/smooth may take; then it is stopped."
     )

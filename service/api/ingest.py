@@ -23,7 +23,7 @@ from pydantic import ValidationError
 
 from service.api.auth import Limits
 from service.api.errors import ApiProblem, finite
-from service.core.errors import TauOutOfRange
+from service.api.tau_check import check_tau
 from service.core.params import SmoothingParams
 from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
 from service.io.errors import FormatError, UnsupportedFormat
@@ -57,6 +57,9 @@ class IngestRequest:
         ``False``: missing ``params`` means the defaults (``POST /v1/info``).
     out_format : str or None
         ``POST /v1/smooth``: the answer's format (default: the input's).
+    exact_tau_max_points : int
+        Largest point cloud whose ``tau`` is checked exactly at submit (see
+        :mod:`service.api.tau_check`).
     """
 
     kind: Literal["multipart", "json"]
@@ -68,6 +71,7 @@ class IngestRequest:
     work_dir: str
     params_required: bool = True
     out_format: str | None = None
+    exact_tau_max_points: int = 50_000
 
 
 @dataclass
@@ -298,32 +302,6 @@ def _parse(req: IngestRequest, max_points: int) -> _Parsed:
     return parsed
 
 
-def _check_tau(parsed: _Parsed) -> dict[str, Any] | None:
-    """``(0, phi(0))`` for ``tau`` / ``rms``, as the engine will check it (report eq. 14)."""
-    params = parsed.params
-    if params.tau is None and params.rms is None:
-        return None
-    from service.core.info import describe
-
-    info = describe(parsed.document.geometry, params)
-    phi0, rms_max = float(info["phi0"]), float(info["rms_range"][1])
-    if params.tau is not None:
-        value, bound, name, tau = params.tau, phi0, "tau", params.tau
-    else:  # tau = rms^2 * sum(omega_i^2) over the points that can move
-        value, bound, name = float(params.rms), rms_max, "rms"  # type: ignore[arg-type]
-        tau = value**2 * (phi0 / rms_max**2) if rms_max > 0 else float("inf")
-    if not (0.0 < value < bound):
-        raise TauOutOfRange(
-            f"smoothing factor {name}={value:.6g} is out of range: it must lie in (0, "
-            f"{bound:.6g}) for this input, where the upper bound comes from phi(0) = "
-            f"{phi0:.6g}, the deviation of the fully smoothed shape (valid_range is in tau units)",
-            field=f"params.{name}",
-            tau=tau,
-            tau_max=phi0,
-        )
-    return {"phi0": phi0}
-
-
 def _size(document: GeometryDocument) -> dict[str, Any]:
     g = document.geometry
     faces = None if g.faces is None else len(g.faces)
@@ -333,7 +311,7 @@ def _size(document: GeometryDocument) -> dict[str, Any]:
 def check_job(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/jobs``: everything a job needs, checked; the input file to store."""
     parsed = _parse(req, req.limits.max_points)
-    _check_tau(parsed)
+    check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
     return {
         "fmt": parsed.fmt,
         "params": parsed.params.model_dump(mode="json", exclude_none=True),

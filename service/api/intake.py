@@ -143,6 +143,7 @@ class Intake:
             work_dir=str(upload.path.parent),
             params_required=params_required,
             out_format=out_format,
+            exact_tau_max_points=self.settings.submit_exact_tau_points,
         )
         shown = upload.filename or "the upload"
         redact = {str(upload.path): shown, str(upload.path.parent): "spool"}

@@ -1,0 +1,71 @@
+"""The smoothing factor checked at submit: ``tau`` (or ``rms``) inside ``(0, phi(0))``.
+
+``phi(0)`` (report eq. 14) is the deviation of the fully smoothed shape: every connected part
+collapsed onto its weighted centroid, fixed points acting as boundary values. The engine
+computes it exactly from the Laplacian (:func:`service.core.info.describe`), which for a point
+cloud means building its neighbourhoods, the costliest stage of a run. So at submit:
+
+* meshes, curves and clouds of at most ``exact_max_points`` points get the exact check;
+* larger clouds without fixed points get the closed-form bound ``sum_i omega_i^2 ||p_i - p_w||^2``
+  about the weighted centroid ``p_w`` (one part; several parts only lower ``phi(0)``), which
+  catches every ``tau`` above it at once; a ``tau`` between the exact value and that bound
+  (only possible for a cloud in separate clusters) is found when the job runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.core.errors import TauOutOfRange
+from service.core.geometry import Geometry
+from service.core.params import SmoothingParams
+
+__all__ = ["centroid_bound", "check_tau"]
+
+
+def centroid_bound(geometry: Geometry) -> tuple[float, float]:
+    """``(sum omega^2 ||p - p_w||^2, sum omega^2)``: ``phi(0)`` of one part, and the weights."""
+    w2 = geometry.omega() ** 2
+    total = float(np.sum(w2))
+    P = geometry.points
+    scale = float(np.max(np.abs(P))) or 1.0  # scaled: no overflow for coordinates near 1e300
+    Q = P / scale
+    centre = (w2 @ Q) / total
+    return float(np.sum(w2[:, None] * (Q - centre) ** 2)) * scale**2, total
+
+
+def _range(geometry: Geometry, params: SmoothingParams, exact: bool) -> tuple[float, float]:
+    """``(phi0, sum omega^2 over the points that can move)``."""
+    if exact:
+        from service.core.info import describe
+
+        info = describe(geometry, params)
+        phi0, r = float(info["phi0"]), float(info["rms_range"][1])
+        return phi0, (phi0 / r**2 if r > 0 else 0.0)
+    return centroid_bound(geometry)
+
+
+def check_tau(geometry: Geometry, params: SmoothingParams, exact_max_points: int) -> None:
+    """Raise :class:`TauOutOfRange` when ``tau``/``rms`` cannot be met (see module docstring)."""
+    if params.tau is None and params.rms is None:
+        return
+    fixed = geometry.fixed is not None or params.fix_boundary
+    exact = geometry.kind != "cloud" or geometry.n <= exact_max_points or fixed
+    phi0, weight = _range(geometry, params, exact)
+    if params.tau is not None:
+        value, bound, name, tau = float(params.tau), phi0, "tau", float(params.tau)
+    else:  # tau = rms^2 * sum(omega_i^2) over the points that can move
+        value, name = float(params.rms), "rms"  # type: ignore[arg-type]
+        bound = float(np.sqrt(phi0 / weight)) if weight > 0 else 0.0
+        tau = value**2 * weight
+    if 0.0 < value < bound:
+        return
+    kind = "phi(0)" if exact else "an upper bound of phi(0)"
+    raise TauOutOfRange(
+        f"smoothing factor {name}={value:.6g} is out of range: it must lie in (0, {bound:.6g}) "
+        f"for this input, where the upper bound comes from {kind} = {phi0:.6g}, the deviation "
+        "of the fully smoothed shape (valid_range is in tau units)",
+        field=f"params.{name}",
+        tau=tau,
+        tau_max=phi0,
+    )
