@@ -210,6 +210,12 @@ class Settings(BaseSettings):
     max_connections: int = Field(
         default=2048, ge=16, description="Open connections; more are closed at once."
     )
+    max_connections_per_client: int = Field(
+        default=256,
+        ge=1,
+        description="Open connections per client address; a new one evicts that address's "
+        "oldest idle connection.",
+    )
     max_requests_in_flight: int = Field(
         default=512, ge=1, description="Requests handled at once; more get 503 + Retry-After."
     )

@@ -25,6 +25,7 @@ import resource
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -63,9 +64,17 @@ def _arm_child() -> None:
         threading.Thread(target=watch, daemon=True).start()
 
 
+def _status(field: str) -> int:
+    """A ``/proc/self/status`` size in bytes (``VmSize``, ``VmRSS``, ``VmHWM``); 0 if unknown."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            return next(int(ln.split()[1]) * 1024 for ln in fh if ln.startswith(field + ":"))
+    except (OSError, StopIteration, ValueError):
+        return 0
+
+
 def _limit_memory(budget: int) -> None:
-    with open("/proc/self/status", encoding="ascii") as fh:
-        vm = next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmSize:"))
+    vm = _status("VmSize")
     _, hard = resource.getrlimit(resource.RLIMIT_AS)
     soft = vm + budget
     resource.setrlimit(resource.RLIMIT_AS, (soft if hard < 0 else min(soft, hard), hard))
@@ -103,13 +112,19 @@ def _child_main(
     conn: Any, func: Callable[[Any], Any], arg: Any, budget: int | None, redact: Mapping[str, str]
 ) -> None:
     _arm_child()
+    rss_start, started = _status("VmRSS"), time.perf_counter()
     if budget:
-        with contextlib.suppress(OSError, ValueError, StopIteration):
+        with contextlib.suppress(OSError, ValueError):
             _limit_memory(budget)
     kind, value = _outcome(func, arg, budget)
     if kind == "problem":
         value = _redact(value, redact)
-    conn.send((kind, value))
+    stats = {
+        "seconds": time.perf_counter() - started,
+        "rss_start": rss_start,
+        "rss_peak": _status("VmHWM"),
+    }
+    conn.send((kind, value, stats))
     conn.close()
 
 
@@ -193,7 +208,7 @@ class Isolation:
     @staticmethod
     def _answer(reader: Any, proc: Any, what: str) -> dict[str, Any]:
         try:
-            kind, value = reader.recv()
+            kind, value, stats = reader.recv()
         except (EOFError, OSError):
             proc.join(5.0)
             if proc.exitcode == -signal.SIGKILL:
@@ -204,6 +219,15 @@ class Isolation:
             raise ApiProblem(
                 500, "An unexpected error occurred; it has been logged.", code="internal"
             ) from None
+        mib = 2**20
+        log.info(
+            "request.worker",
+            work=what,
+            outcome=kind,
+            seconds=round(stats["seconds"], 3),
+            rss_start_mib=round(stats["rss_start"] / mib, 1),
+            rss_peak_mib=round(stats["rss_peak"] / mib, 1),
+        )
         if kind == "ok":
             return value  # type: ignore[no-any-return]
         if kind == "problem":

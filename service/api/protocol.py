@@ -4,8 +4,13 @@ uvicorn has a keep-alive timeout but nothing for a connection that never finishe
 header (20,000 idle connections take a server down), and it answers malformed requests with
 plain text. :func:`guarded_protocol` returns an ``H11Protocol`` subclass that
 
-* closes a connection at once while ``max_connections`` are open (no request is read from it;
-  at most one warning per second is logged, not one per connection);
+* keeps at most ``max_connections`` open, ``max_per_client`` of them per client address: a
+  new connection evicts the oldest *idle* one (no request in progress) of its own address
+  when that address is at its bound, else the oldest idle one of any address when the server
+  is full. So a flood of idle connections from one client evicts only its own, and never
+  locks out a health probe or another client; only when every candidate is busy is the new
+  connection closed at once (at most one warning per second is logged, not one per
+  connection);
 * gives every request ``header_timeout`` seconds from its first byte (or from the connection's
   start) to complete its header, then closes the connection (slowloris);
 * answers protocol-level errors (bad request line, oversized header) as
@@ -21,7 +26,8 @@ import asyncio
 import json
 import sys
 import time
-from typing import Any
+from collections import OrderedDict
+from typing import Any, ClassVar
 
 import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
@@ -52,17 +58,42 @@ class GuardedH11Protocol(H11Protocol):
     """See the module docstring; configured by :func:`guarded_protocol`."""
 
     max_connections: int = 2048
+    max_per_client: int = 256
     header_timeout: float = 10.0
     refusals = _Refusals()
+    #: Connections without a request in progress, oldest first (one set per server class).
+    idle: ClassVar[OrderedDict[GuardedH11Protocol, None]] = OrderedDict()
+    #: Open connections per client address.
+    per_client: ClassVar[dict[str, int]] = {}
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
         self._header_timer: asyncio.TimerHandle | None = None
-        if len(self.connections) > self.max_connections:
+        self._address = self.client[0] if self.client else "-"
+        self._counted = False
+        mine = self.per_client.get(self._address, 0)
+        if mine >= self.max_per_client:
+            room = self._evict_idle(self._address)
+        else:
+            room = len(self.connections) <= self.max_connections or self._evict_idle(None)
+        if not room:
             self.refusals.add(len(self.connections))
             transport.abort()
             return
+        self.per_client[self._address] = self.per_client.get(self._address, 0) + 1
+        self._counted = True
+        self.idle[self] = None
         self._arm_header_timer()
+
+    def _evict_idle(self, address: str | None) -> bool:
+        """Close the oldest idle connection (of ``address``, if given); ``False`` if none."""
+        victim = next((c for c in self.idle if address is None or c._address == address), None)
+        if victim is None:
+            return False
+        del self.idle[victim]
+        self.refusals.add(len(self.connections))
+        victim.transport.abort()
+        return True
 
     def _arm_header_timer(self) -> None:
         if self._header_timer is None:
@@ -79,10 +110,13 @@ class GuardedH11Protocol(H11Protocol):
         super().data_received(data)
         if self.conn.their_state is not h11.IDLE:
             self._disarm_header_timer()
+            self.idle.pop(self, None)
 
     def on_response_complete(self) -> None:
         super().on_response_complete()
         self._disarm_header_timer()  # idle from here on: uvicorn's keep-alive timeout applies
+        if not self.transport.is_closing() and self.conn.their_state is h11.IDLE:
+            self.idle[self] = None
 
     def _header_expired(self) -> None:
         self._header_timer = None
@@ -91,6 +125,14 @@ class GuardedH11Protocol(H11Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm_header_timer()
+        self.idle.pop(self, None)
+        if self._counted:
+            self._counted = False
+            left = self.per_client.get(self._address, 1) - 1
+            if left > 0:
+                self.per_client[self._address] = left
+            else:
+                self.per_client.pop(self._address, None)
         super().connection_lost(exc)
 
     def send_400_response(self, msg: str) -> None:
@@ -123,14 +165,17 @@ class GuardedH11Protocol(H11Protocol):
         self.transport.close()
 
 
-def guarded_protocol(max_connections: int, header_timeout: float) -> type[Any]:
-    """An :class:`GuardedH11Protocol` subclass with these bounds (for ``uvicorn.Config``)."""
+def guarded_protocol(max_connections: int, max_per_client: int, header_timeout: float) -> type[Any]:
+    """A :class:`GuardedH11Protocol` subclass with these bounds (for ``uvicorn.Config``)."""
     return type(
         "GeosmoothH11Protocol",
         (GuardedH11Protocol,),
         {
             "max_connections": max_connections,
+            "max_per_client": max_per_client,
             "header_timeout": header_timeout,
+            "per_client": {},
             "refusals": _Refusals(),
+            "idle": OrderedDict(),
         },
     )

@@ -33,6 +33,21 @@ from service.settings import ConfigError, Settings, load_settings
 __all__ = ["AddressUnavailable", "InsecureBind", "check_bind", "is_loopback", "main", "serve"]
 
 log = get_logger("geosmooth.api")
+#: Listen backlog (the kernel caps it at net.core.somaxconn): a deep accept queue, so a
+#: connection flood does not make the kernel drop other clients' SYNs (a 1-3 s retry each).
+_BACKLOG = 4096
+#: Connections asyncio accepts per event-loop turn (it reuses uvicorn's ``backlog`` for that):
+#: small, so a flood's accepts interleave with the requests already in.
+_ACCEPT_BATCH = 64
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server, with the deep listen queue restored after its startup."""
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets=sockets)
+        for sock in sockets or []:
+            sock.listen(_BACKLOG)  # uvicorn set it to the accept batch size
 
 
 class InsecureBind(ConfigError):
@@ -114,11 +129,15 @@ def uvicorn_config(app: Any, settings: Settings) -> uvicorn.Config:
     """uvicorn settings of the service (connection bounds, timeouts, no access log)."""
     return uvicorn.Config(
         app,
-        http=guarded_protocol(settings.max_connections, settings.timeout_request_header),
+        http=guarded_protocol(
+            settings.max_connections,
+            settings.max_connections_per_client,
+            settings.timeout_request_header,
+        ),
         timeout_keep_alive=int(max(1, round(settings.timeout_keep_alive))),
         timeout_graceful_shutdown=int(max(1, round(settings.timeout_graceful_shutdown))),
         h11_max_incomplete_event_size=16 * 1024,
-        backlog=min(4096, settings.max_connections),
+        backlog=_ACCEPT_BATCH,
         log_config=None,
         access_log=False,
         proxy_headers=False,
@@ -164,7 +183,7 @@ def serve(
     keys = KeyRing.from_settings(settings)
     check_bind(settings.host, keys.enabled, insecure_no_auth or settings.insecure_no_auth)
     _raise_open_files_limit(settings.max_connections + 1024)
-    sock = _bind(settings.host, settings.port, min(4096, settings.max_connections))
+    sock = _bind(settings.host, settings.port, _BACKLOG)
     from service.api.app import create_app  # after the checks: a bad config starts nothing
 
     app = create_app(settings)
@@ -175,7 +194,7 @@ def serve(
         keys=len(keys),
         workers=settings.workers,
     )
-    uvicorn.Server(uvicorn_config(app, settings)).run(sockets=[sock])
+    _Server(uvicorn_config(app, settings)).run(sockets=[sock])
 
 
 def main(argv: Sequence[str] | None = None) -> int:
