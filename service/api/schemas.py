@@ -272,8 +272,9 @@ class JobLinks(BaseModel):
     report: str = Field(
         description="GET: diagnostics (when succeeded).", examples=["/v1/jobs/3f2a9c/report"]
     )
-    events: str = Field(
-        description="GET: server-sent events (progress, status).",
+    events: str | None = Field(
+        default=None,
+        description="GET: server-sent events (progress, status), where the server streams them.",
         examples=["/v1/jobs/3f2a9c/events"],
     )
 
