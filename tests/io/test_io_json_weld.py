@@ -80,6 +80,10 @@ def test_json_schema_constant_matches_reader_keys() -> None:
         "weights",
         "fixed",
         "comments",
+        "attributes",
+        "attribute_types",
+        "normals",
+        "precision",
     }
     json.dumps(GEOMETRY_JSON_SCHEMA)  # serialisable for OpenAPI
 

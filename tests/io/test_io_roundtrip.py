@@ -36,7 +36,7 @@ def _mesh_doc() -> GeometryDocument:
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_points_round_trip_bit_identical(fmt: str) -> None:
     doc = _mesh_doc()
-    back = read_geometry(write_geometry(doc, fmt), fmt)
+    back = read_geometry(write_geometry(doc, fmt, precision="float64"), fmt)
     assert back.geometry.points.tobytes() == doc.geometry.points.tobytes()
 
 
@@ -65,7 +65,7 @@ def test_polylines_round_trip(fmt: str) -> None:
 def test_obj_writes_closed_polyline_with_repeated_first_index() -> None:
     text = write_geometry(_mesh_doc(), "obj").decode()
     assert "l 5 6 7 5\n" in text
-    assert "f 1 2 3\nf 1 3 4\nf 2 5 3\n" in text
+    assert "f 1 2 3 4\nf 2 5 3\n" in text  # the file's own faces, not triangulated
 
 
 def test_ply_writes_polylines_as_edges() -> None:
@@ -78,7 +78,7 @@ def test_ply_writes_polylines_as_edges() -> None:
 @pytest.mark.parametrize("ascii_ply", [False, True])
 def test_ply_encodings(ascii_ply: bool) -> None:
     doc = _mesh_doc()
-    data = write_geometry(doc, "ply", ply_ascii=ascii_ply)
+    data = write_geometry(doc, "ply", ply_ascii=ascii_ply, precision="float64")
     expected = b"format ascii 1.0" if ascii_ply else b"format binary_little_endian 1.0"
     assert expected in data.split(b"end_header")[0]
     back = read_geometry(data, "ply")
@@ -88,7 +88,7 @@ def test_ply_encodings(ascii_ply: bool) -> None:
 
 def test_xyz_drops_connectivity_but_keeps_points() -> None:
     doc = _mesh_doc()
-    back = read_geometry(write_geometry(doc, "xyz"), "xyz")
+    back = read_geometry(write_geometry(doc, "xyz", precision="float64"), "xyz")
     assert back.geometry.kind == "cloud"
     assert np.array_equal(back.geometry.points, doc.geometry.points)
 
@@ -146,7 +146,7 @@ def test_xyz_refuses_1d() -> None:
 def test_write_given_points(fmt: str) -> None:
     doc = _mesh_doc()
     moved = doc.geometry.points * 3.0 + 1e-9
-    back = read_geometry(write_geometry(doc, fmt, moved), fmt)
+    back = read_geometry(write_geometry(doc, fmt, moved, precision="float64"), fmt)
     assert np.array_equal(back.geometry.points, moved)
 
 
