@@ -115,6 +115,8 @@ def read_geometry(
     """
     src = Source.of(source)
     spec = FORMATS[_resolve(src, fmt, filename)]
+    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
+        raise FormatError("the file is empty", fmt=spec.name)
     given = {k: v for k, v in options.items() if v is not None}
     for key in given:
         if key not in spec.options:
@@ -173,9 +175,7 @@ def write_geometry(
         ``points`` has the wrong shape, or a bad option.
     """
     out = io.BytesIO()
-    save_geometry(
-        doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision
-    )
+    save_geometry(doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision)
     return out.getvalue()
 
 

@@ -80,7 +80,7 @@ GEOMETRY_JSON_SCHEMA: dict[str, Any] = {
         },
         "attribute_types": {
             "description": "numpy dtype of an attribute (default float64, or int64 for"
-            " integers), e.g. {\"red\": \"uint8\"}.",
+            ' integers), e.g. {"red": "uint8"}.',
             "type": "object",
             "additionalProperties": {"type": "string", "enum": list(ATTRIBUTE_TYPES)},
         },

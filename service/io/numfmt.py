@@ -138,7 +138,7 @@ def _float32_text(values: NDArray[Any]) -> list[str]:
     """Shortest text reading back as the same float32 (6 to 9 significant digits)."""
     v32 = np.asarray(values, dtype=np.float32)
     v = v32.astype(np.float64).tolist()
-    out = ["%.6g" % x for x in v]
+    out = [f"{x:.6g}" for x in v]
     for p in (7, 8, 9):
         with np.errstate(over="ignore", invalid="ignore"):
             back = np.array(out, dtype=np.float64).astype(np.float32)

@@ -133,10 +133,7 @@ def _corner_columns(
     m = int(per_token[0]) + 1 if per_token.size else 1
     if per_token.size and (np.any(per_token != per_token[0]) or m > 3):
         return _slow_corners(texts, numbers, what).reshape(-1, 3), counts, 3
-    if m > 1:
-        spread = joined.replace(b"//", b"/0/").replace(b"/", b" ")
-    else:
-        spread = joined
+    spread = joined.replace(b"//", b"/0/").replace(b"/", b" ") if m > 1 else joined
     try:
         raw = np.array(spread.split(), dtype=np.int64)
         ok = raw.size == m * int(counts.sum()) and b"_" not in joined
@@ -182,9 +179,14 @@ def _slow_corners(texts: list[bytes], numbers: list[int], what: str) -> NDArray[
 
 
 def _resolve(
-    raw: NDArray[np.int64], before: NDArray[np.int64], total: int | None,
+    raw: NDArray[np.int64],
+    before: NDArray[np.int64],
+    total: int | None,
     numbers: NDArray[np.int64],
-    counts: NDArray[np.int64], what: str, absent_ok: bool, thing: str = "vertex",
+    counts: NDArray[np.int64],
+    what: str,
+    absent_ok: bool,
+    thing: str = "vertex",
 ) -> NDArray[np.int64]:
     """0-based indices from OBJ's 1-based / negative ones; ``-1`` for absent (0) when allowed."""
     flat = np.where(raw > 0, raw - 1, before + raw)
@@ -220,7 +222,9 @@ class _Faces:
     counts: list[NDArray[np.int64]] = field(default_factory=list)
     numbers: list[NDArray[np.int64]] = field(default_factory=list)
 
-    def add(self, acc: _Acc, texts: list[bytes], numbers: list[int], before: Any, what: str) -> None:
+    def add(
+        self, acc: _Acc, texts: list[bytes], numbers: list[int], before: Any, what: str
+    ) -> None:
         cols, counts, m = _corner_columns(texts, numbers, what)
         nums = np.asarray(numbers, dtype=np.int64)
         rep = [np.repeat(b, counts) for b in before]
@@ -251,7 +255,10 @@ class _Faces:
 
 
 def _check_upper(
-    flat: NDArray[np.int64], total: int, numbers: NDArray[np.int64], counts: NDArray[np.int64],
+    flat: NDArray[np.int64],
+    total: int,
+    numbers: NDArray[np.int64],
+    counts: NDArray[np.int64],
     what: str,
 ) -> None:
     bad = flat >= total
@@ -292,8 +299,9 @@ def _classify(lines: list[bytes]) -> tuple[dict[bytes, list[int]], dict[int, byt
     return rows, texts
 
 
-def _block(acc: _Acc, faces: _Faces, polys: _Faces, lines: list[bytes], offset: int,
-           first: int) -> None:
+def _block(
+    acc: _Acc, faces: _Faces, polys: _Faces, lines: list[bytes], offset: int, first: int
+) -> None:
     rows, texts = _classify(lines)
     starts = offset + np.concatenate([[0], np.cumsum([len(x) + 1 for x in lines])[:-1]])
     ends = starts + np.fromiter((len(x) for x in lines), dtype=np.int64, count=len(lines))
@@ -319,8 +327,8 @@ def _block(acc: _Acc, faces: _Faces, polys: _Faces, lines: list[bytes], offset: 
         acc.v_spans.append(np.column_stack([starts[vr], ends[vr]]))
     if rows[b"vn"]:
         acc.vn_spans.append(np.column_stack([starts[rows[b"vn"]], ends[rows[b"vn"]]]))
-    for key, sink, what in ((b"f", faces, "face"), (b"l", polys, "polyline")):
-        r = rows[key]
+    for kind, sink, what in ((b"f", faces, "face"), (b"l", polys, "polyline")):
+        r = rows[kind]
         if not r:
             continue
         at = np.asarray(r)

@@ -134,9 +134,7 @@ def _generated(plain: PlainDocument, out: BinaryIO) -> None:
         if normals is not None:
             cols = [(f[:, j], "%d") for j in range(3)]
             lines = _rows("f ", cols)
-            lines = [
-                "f " + " ".join(f"{t}//{t}" for t in line[2:].split()) for line in lines
-            ]
+            lines = ["f " + " ".join(f"{t}//{t}" for t in line[2:].split()) for line in lines]
             out.write(("\n".join(lines) + "\n").encode("ascii"))
         else:
             write_rows(out, [(f[:, j], "%d") for j in range(3)], prefix="f ")

@@ -181,7 +181,11 @@ def read_ply(source: Source, *, weld: bool = False) -> GeometryDocument:
         for p in vertex.properties
         if not p.is_list and p.name not in skip
     }
-    specs = dict(zip([p.name for p in vertex.properties], digits.specs(), strict=True)) if digits else {}
+    specs = (
+        dict(zip([p.name for p in vertex.properties], digits.specs(), strict=True))
+        if digits
+        else {}
+    )
     xtype = np.dtype(vertex.find("x").type)  # type: ignore[union-attr]
     precision = Precision(
         dtype="float32" if xtype == np.float32 else "float64",
@@ -202,4 +206,6 @@ def read_ply(source: Source, *, weld: bool = False) -> GeometryDocument:
         comments=header.comments,
         weld=weld,
     )
-    return doc.with_extras(attributes=attributes, normals=normals, precision=precision, layout=layout)
+    return doc.with_extras(
+        attributes=attributes, normals=normals, precision=precision, layout=layout
+    )

@@ -98,7 +98,9 @@ def _scan_lengths(
     size = len(buf)
     sizes = [np.dtype(p.type).itemsize for p in props]
     cdts = [np.dtype(endian + str(p.count_type)) if p.is_list else None for p in props]
-    lengths = [np.zeros(el.count, dtype=c.newbyteorder("=")) if c is not None else None for c in cdts]
+    lengths = [
+        np.zeros(el.count, dtype=c.newbyteorder("=")) if c is not None else None for c in cdts
+    ]
     first = lengths[0]
     if len(props) == 1 and first is not None and first.dtype == np.uint8:
         return [first], _scan_u1(buf, raw, pos, el, first, sizes[0])

@@ -1,7 +1,7 @@
 """PLY header: ``ply``, ``format``, ``element``/``property`` declarations, ``end_header``.
 
-``comment`` and ``obj_info`` lines are kept (and written back). Type names may be the classic (``uchar``,
-``int``, ``float``) or the sized spelling (``uint8``, ``int32``, ``float32``).
+``comment`` and ``obj_info`` lines are kept (and written back). Type names may be the classic
+(``uchar``, ``int``, ``float``) or the sized spelling (``uint8``, ``int32``, ``float32``).
 """
 
 from __future__ import annotations

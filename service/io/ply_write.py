@@ -69,7 +69,7 @@ def _ply_type(values: NDArray[Any]) -> tuple[str, NDArray[Any]]:
         return "u1", values.astype(np.uint8)
     if dt.kind in "iu" and dt.itemsize == 8:
         lo, hi = (int(values.min()), int(values.max())) if values.size else (0, 0)
-        if -(2**31) <= lo and hi < 2**31:
+        if lo >= -(2**31) and hi < 2**31:
             return "i4", values.astype(np.int32)
         return "f8", values.astype(np.float64)
     if dt.kind == "f" and dt.itemsize == 2:
@@ -151,7 +151,9 @@ def _elements(plain: PlainDocument, layout: PlyLayout | None) -> list[_Element]:
         f = plain.faces
         counts = np.full(len(f), 3, dtype=np.uint8)
         items = f.reshape(-1).astype(np.int32)
-        out.append(_Element("face", len(f), [_Prop("vertex_indices", "i4", items, counts, "u1", "%d")]))
+        out.append(
+            _Element("face", len(f), [_Prop("vertex_indices", "i4", items, counts, "u1", "%d")])
+        )
     edges = plain.edges()
     if edges is not None and len(edges):
         e = edges.astype(np.int32)
@@ -159,7 +161,10 @@ def _elements(plain: PlainDocument, layout: PlyLayout | None) -> list[_Element]:
             _Element(
                 "edge",
                 len(e),
-                [_Prop("vertex1", "i4", e[:, 0], spec="%d"), _Prop("vertex2", "i4", e[:, 1], spec="%d")],
+                [
+                    _Prop("vertex1", "i4", e[:, 0], spec="%d"),
+                    _Prop("vertex2", "i4", e[:, 1], spec="%d"),
+                ],
             )
         )
     return out

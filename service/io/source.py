@@ -31,9 +31,7 @@ class Source:
         self.name = name if name is not None else (path.name if path is not None else "")
 
     @classmethod
-    def of(
-        cls, source: bytes | bytearray | memoryview | str | os.PathLike[str] | Source
-    ) -> Source:
+    def of(cls, source: bytes | bytearray | memoryview | str | os.PathLike[str] | Source) -> Source:
         """Wrap bytes, a path, or an existing Source."""
         if isinstance(source, Source):
             return source
@@ -71,7 +69,7 @@ class Source:
         if self._data is not None:
             return io.BytesIO(self._data)
         assert self.path is not None
-        return open(self.path, "rb")  # noqa: SIM115 - returned to the caller
+        return open(self.path, "rb")
 
     @contextlib.contextmanager
     def as_path(self, suffix: str = "") -> Iterator[Path]:

@@ -80,9 +80,7 @@ def _start(data: bytes) -> tuple[int, list[str], list[bytes] | None, int, str | 
     return pos, comments, None, line_no, None
 
 
-def _names(
-    table: NDArray[np.float64], dims: int, header: list[bytes] | None
-) -> tuple[str, ...]:
+def _names(table: NDArray[np.float64], dims: int, header: list[bytes] | None) -> tuple[str, ...]:
     width = table.shape[1]
     if header is not None and len(header) == width:
         return tuple(w.decode("utf-8", errors="replace") for w in header)
@@ -93,9 +91,9 @@ def _names(
         norm = np.linalg.norm(extra, axis=1)
         if np.mean(np.abs(norm - 1) < 1e-3) >= 0.99:
             return (*base, *NORMALS)
-    if k in (3, 4) and len(extra) and np.all((extra == np.round(extra)) & (extra >= 0)):
-        if extra.max() <= 255:
-            return (*base, *("red", "green", "blue", "alpha")[:k])
+    integral = len(extra) and np.all((extra == np.round(extra)) & (extra >= 0))
+    if k in (3, 4) and integral and extra.max() <= 255:
+        return (*base, *("red", "green", "blue", "alpha")[:k])
     return (*base, *(f"col{j}" for j in range(dims, width)))
 
 
@@ -116,7 +114,9 @@ def _table(data: bytes, pos: int, width: int, digits: Digits) -> NDArray[np.floa
     return out[:n]
 
 
-def read_xyz(source: Source, *, weld: bool = False, xyz_dims: int | None = None) -> GeometryDocument:
+def read_xyz(
+    source: Source, *, weld: bool = False, xyz_dims: int | None = None
+) -> GeometryDocument:
     """Read an XYZ point list.
 
     Raises
@@ -159,9 +159,7 @@ def read_xyz(source: Source, *, weld: bool = False, xyz_dims: int | None = None)
         notes.append(f"kept {width - dims} extra columns per line: {', '.join(names[dims:])}")
     sep = "," if b"," in first else " "
     layout = XyzLayout(names, sep, header_text)
-    precision = Precision(
-        "float64", specs[:dims], {names[j]: specs[j] for j in range(dims, width)}
-    )
+    precision = Precision("float64", specs[:dims], {names[j]: specs[j] for j in range(dims, width)})
     doc = assemble(
         np.ascontiguousarray(table[:, :dims]), fmt="xyz", notes=notes, comments=comments, weld=weld
     )
@@ -179,7 +177,9 @@ def write_xyz(plain: PlainDocument, out: BinaryIO) -> None:
         )
     layout = plain.layout if isinstance(plain.layout, XyzLayout) else None
     specs = plain.coordinate_specs()
-    cols: list[tuple[NDArray[Any], str]] = [(plain.points[:, j], specs[j]) for j in range(plain.dim)]
+    cols: list[tuple[NDArray[Any], str]] = [
+        (plain.points[:, j], specs[j]) for j in range(plain.dim)
+    ]
     text = plain.source.precision.attribute_text
     normal_cols = []
     if plain.normals is not None:
