@@ -22,6 +22,7 @@ libE57 needs a real file, so bytes go through a temporary file.
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from dataclasses import dataclass
 from typing import Any, BinaryIO
@@ -114,7 +115,8 @@ def read_e57(source: Source, *, weld: bool = False) -> GeometryDocument:
         except FormatError:
             raise
         except Exception as exc:  # libE57 raises its own exception types on bad files
-            text = " ".join(str(exc).split())[:200] or type(exc).__name__
+            text = re.sub(r"fileName=\S*|/\S+", "", " ".join(str(exc).split()))
+            text = " ".join(text.split())[:200] or type(exc).__name__
             raise FormatError(f"E57: {text}", fmt="e57") from None
     if not parts or not sum(len(p) for p in parts):
         raise FormatError("the file holds no points", fmt="e57")

@@ -24,6 +24,7 @@ names and the other numeric attributes as extra bytes.
 from __future__ import annotations
 
 import contextlib
+import struct
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -54,14 +55,14 @@ class LasLayout:
 
 @contextlib.contextmanager
 def _laspy_errors(fmt: str) -> Any:
-    import laspy
-
     try:
         yield
     except FormatError:
         raise
-    except (laspy.LaspyException, ValueError, OSError, EOFError, IndexError, KeyError) as exc:
-        text = " ".join(str(exc).split()) or type(exc).__name__
+    except MemoryError:
+        raise
+    except Exception as exc:  # laspy and lazrs raise many kinds on bad files; report one line
+        text = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise FormatError(f"{fmt.upper()}: {text}", fmt=fmt) from None
 
 
@@ -70,16 +71,47 @@ def _decimals(scale: float) -> int | None:
     return round(k) if scale > 0 and abs(k - round(k)) < 1e-9 and round(k) >= 0 else None
 
 
+def _precheck(head: bytes, size: int, fmt: str) -> None:
+    """Counts of the public header block that laspy would trust (and loop over) must fit."""
+    header_size, offset, n_vlrs = struct.unpack_from("<HII", head, 94)
+    problem = None
+    if not 227 <= header_size <= offset <= size:
+        problem = f"header size {header_size} / point data offset {offset} outside the file"
+    elif n_vlrs * 54 > offset - header_size:
+        problem = f"{n_vlrs} VLRs cannot fit in {offset - header_size} bytes"
+    elif head[25] >= 4 and len(head) >= 247:  # LAS 1.4: extended VLRs at the end
+        start, n_evlrs = struct.unpack_from("<QI", head, 235)
+        if n_evlrs and (start > size or n_evlrs * 60 > size - start):
+            problem = f"{n_evlrs} extended VLRs cannot fit after byte {start}"
+    if problem is not None:
+        raise FormatError(f"{fmt.upper()}: malformed header: {problem}", fmt=fmt)
+
+
+def _check_count(header: Any, n: int, size: int, fmt: str) -> None:
+    """The declared point count must fit the file (no allocation from an absurd header)."""
+    record = int(header.point_format.size)
+    room = size - int(header.offset_to_point_data)
+    limit = room if not header.are_points_compressed else 1000 * max(room, 0)
+    if n * record > limit:
+        raise FormatError(
+            f"{fmt.upper()}: the header declares {n} points of {record} bytes but the file has"
+            f" {max(room, 0)} bytes of point data",
+            fmt=fmt,
+        )
+
+
 def _read(source: Source, fmt: str, weld: bool) -> GeometryDocument:
     import laspy
 
     if source.size < 227:
         raise FormatError(f"{fmt.upper()}: the file is too short for a LAS header", fmt=fmt)
+    _precheck(source.head(375), source.size, fmt)
     with _laspy_errors(fmt), source.open() as fh, laspy.open(fh, closefd=False) as reader:
         header = reader.header
         n = int(header.point_count)
         if n == 0:
             raise FormatError("the file holds no points", fmt=fmt)
+        _check_count(header, n, source.size, fmt)
         names = [d for d in header.point_format.dimension_names if d not in _COORDS]
         points = np.empty((n, 3))
         attrs: dict[str, NDArray[Any]] = {}

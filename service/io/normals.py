@@ -94,21 +94,27 @@ def corner_normals(
     return unit_rows(acc)[0]
 
 
-def cloud_normals(points: NDArray[np.float64], k: int = 16) -> NDArray[np.float64]:
-    """PCA normals from the ``k`` nearest neighbours (unoriented, unit length)."""
+def cloud_normals(
+    points: NDArray[np.float64], k: int = 16, only: NDArray[np.int64] | None = None
+) -> NDArray[np.float64]:
+    """PCA normals from the ``k`` nearest neighbours (unoriented, unit length).
+
+    ``only``: compute them for these points (their neighbours are searched among all).
+    """
     from scipy.spatial import cKDTree
 
-    p = points[:, :3]
+    p = points[:, :3] if points.shape[1] >= 3 else np.column_stack([points, np.zeros(len(points))])
     k = int(min(max(k, 3), len(p)))
     tree = cKDTree(p)
-    out = np.zeros((len(p), 3))
-    for s in range(0, len(p), _BLOCK):
-        _, idx = tree.query(p[s : s + _BLOCK], k=k)
+    query = p if only is None else p[only]
+    out = np.zeros((len(query), 3))
+    for s in range(0, len(query), _BLOCK):
+        _, idx = tree.query(query[s : s + _BLOCK], k=k)
         nb = p[np.asarray(idx).reshape(-1, k)]
         centred = nb - nb.mean(axis=1, keepdims=True)
         cov = np.einsum("nki,nkj->nij", centred, centred)
         _, vecs = np.linalg.eigh(cov)
-        out[s : s + _BLOCK] = vecs[:, :, 0]
+        out[s : s + len(vecs)] = vecs[:, :, 0]
     return unit_rows(out)[0]
 
 

@@ -33,9 +33,11 @@ _DIGIT = np.zeros(256, dtype=bool)
 _DIGIT[48:58] = True
 _NONZERO = np.zeros(256, dtype=bool)
 _NONZERO[49:58] = True
-_PLAIN = np.zeros(256, dtype=bool)  # characters of a fixed-point number
-_PLAIN[[43, 45, 46]] = True
+_PLAIN = np.zeros(256, dtype=bool)  # characters of a decimal number (with an exponent)
+_PLAIN[[43, 45, 46, 69, 101]] = True
 _PLAIN[48:58] = True
+_EXP = np.zeros(256, dtype=bool)
+_EXP[[69, 101]] = True
 
 
 class Digits:
@@ -47,6 +49,7 @@ class Digits:
         self.dmax = np.zeros(width, dtype=np.int64)
         self.smax = np.zeros(width, dtype=np.int64)
         self.other = np.zeros(width, dtype=bool)
+        self.exp = np.zeros(width, dtype=bool)
 
     def update(self, block: bytes | memoryview, first_column: int = 0) -> None:
         """Add a block of complete rows (blank lines allowed; every row has ``width`` tokens)."""
@@ -69,6 +72,9 @@ class Digits:
         last_dot = np.maximum.accumulate(np.where(raw == 46, idx, -1))[e]
         big = raw.size + 1
         next_nz = np.minimum.accumulate(np.where(_NONZERO[raw], idx, big)[::-1])[::-1][s]
+        next_e = np.minimum.accumulate(np.where(_EXP[raw], idx, big)[::-1])[::-1][s]
+        exp = next_e <= e
+        e = np.where(exp, next_e - 1, e)  # the mantissa's last character
 
         def between(cs: NDArray[np.int64], a: NDArray[np.int64], b: NDArray[np.int64]) -> Any:
             return cs[b] - np.where(a > 0, cs[np.maximum(a - 1, 0)], 0)
@@ -84,6 +90,7 @@ class Digits:
             if not m.any():
                 continue
             self.other[c] |= bool(other[m].any())
+            self.exp[c] |= bool(exp[m].any())
             self.dmin[c] = min(self.dmin[c], int(decimals[m].min()))
             self.dmax[c] = max(self.dmax[c], int(decimals[m].max()))
             self.smax[c] = max(self.smax[c], int(sig[m].max()))
@@ -94,7 +101,7 @@ class Digits:
         for c in range(self.width):
             if self.other[c] or self.smax[c] > 15 or self.smax[c] == 0:
                 out.append("%r")
-            elif self.dmin[c] == self.dmax[c]:
+            elif self.dmin[c] == self.dmax[c] and not self.exp[c]:
                 out.append(f"%.{int(self.dmax[c])}f")
             else:
                 out.append(f"%.{int(self.smax[c])}g")

@@ -87,7 +87,7 @@ def _header(data: bytes) -> tuple[dict[str, list[str]], list[str], int, int]:
         if key in fields:
             raise _fail(f"{key} given twice", number)
         fields[key] = values
-    for key in ("FIELDS", "SIZE", "TYPE", "POINTS", "DATA"):
+    for key in ("DATA", "FIELDS", "SIZE", "TYPE", "POINTS"):
         if key not in fields:
             raise _fail(f"the header has no {key} line")
     return fields, lines, pos, number

@@ -134,6 +134,19 @@ class PlainDocument:
         return spec if spec is not None else default_spec(self.attributes[name].dtype)
 
 
+def _nearest(
+    points: NDArray[np.float64], missing: NDArray[np.bool_], lost: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """For each point in ``lost``, the nearest point that is not ``missing``."""
+    from scipy.spatial import cKDTree
+
+    have = np.flatnonzero(~missing)
+    if have.size == 0:
+        return lost
+    _, j = cKDTree(points[have]).query(points[lost], k=1)
+    return np.asarray(have[np.asarray(j)], dtype=np.int64)
+
+
 def _normals(
     doc: GeometryDocument, points: NDArray[np.float64], faces: NDArray[np.int64] | None
 ) -> NDArray[np.float64] | None:
@@ -142,10 +155,17 @@ def _normals(
         return None
     if faces is not None and len(faces):
         new = mesh_normals(points, faces)
+        new = orient_globally(new, old)
         missing = ~np.any(new != 0, axis=1)
-        if missing.any():  # vertices in no face keep their input normal
-            new[missing] = unit_rows(np.asarray(old, dtype=np.float64)[missing])[0]
-        return orient_globally(new, old)
+        if missing.any():  # vertices in no face keep their input normal, else a PCA one
+            kept, ok = unit_rows(np.asarray(old, dtype=np.float64)[missing])
+            if not ok.all():  # no input normal either: PCA, oriented like the nearest vertex
+                lost = np.flatnonzero(missing)[~ok]
+                kept[~ok] = orient_pointwise(
+                    cloud_normals(points, only=lost), new[_nearest(points, missing, lost)]
+                )
+            new[missing] = kept
+        return new
     return orient_pointwise(cloud_normals(points), old)
 
 
