@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from io_builders import ply_bytes
 
-from service.io import FORMATS, FormatError, UnsupportedFormat, read_geometry
+from service.io import FORMATS, FormatError, read_geometry
 
 XYZ3 = [("float", "x"), ("float", "y"), ("float", "z")]
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
@@ -232,10 +232,12 @@ def test_json_schema_errors(obj: bytes, message: str) -> None:
         read_geometry(obj, "json")
 
 
-def test_geojson_in_a_json_file_is_refused_helpfully() -> None:
+def test_geojson_in_a_json_file_is_read_as_geojson() -> None:
     data = b'{"type": "FeatureCollection", "features": []}'
-    with pytest.raises(UnsupportedFormat, match="GeoJSON is not supported"):
+    with pytest.raises(FormatError, match="GeoJSON has no LineString"):
         read_geometry(data, filename="coast.json")
+    line = b'{"type": "LineString", "coordinates": [[4.7, 50.9], [4.71, 50.91]]}'
+    assert read_geometry(line, filename="track.json").source_format == "geojson"
 
 
 def test_errors_are_one_line_and_serialisable() -> None:
