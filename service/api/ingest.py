@@ -258,9 +258,7 @@ def _from_json(req: IngestRequest) -> _Parsed:
     except (FormatError, RecursionError) as exc:
         message = exc.message if isinstance(exc, FormatError) else "nested too deeply"
         raise _invalid("geometry", message, "invalid-geometry", "Invalid geometry") from None
-    inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
-    inline.write_text(json.dumps(geometry, separators=(",", ":")))
-    return _Parsed(document, params, "json", weld, url, str(inline))
+    return _Parsed(document, params, "json", weld, url, req.path, {"geometry": geometry})
 
 
 def _check_size(parsed: _Parsed, max_points: int, limits: Limits) -> None:
@@ -309,9 +307,14 @@ def _size(document: GeometryDocument) -> dict[str, Any]:
 
 
 def check_job(req: IngestRequest) -> dict[str, Any]:
-    """``POST /v1/jobs``: everything a job needs, checked; the input file to store."""
+    """``POST /v1/jobs``: everything a job needs, checked; the input file to store (an inline
+    geometry is written as a JSON file next to the spooled body, once every check passed)."""
     parsed = _parse(req, req.limits.max_points)
     check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
+    if "geometry" in parsed.extra:
+        inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
+        inline.write_text(json.dumps(parsed.extra["geometry"], separators=(",", ":")))
+        parsed.input_path = str(inline)
     return {
         "fmt": parsed.fmt,
         "params": parsed.params.model_dump(mode="json", exclude_none=True),

@@ -1,7 +1,9 @@
-"""Fixtures of the HTTP tests: one live server shared by the module tests, fresh ones on demand."""
+"""Fixtures of the HTTP tests: live servers shared by the session (plain, keyed, tight), fresh
+ones on demand."""
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -28,6 +30,59 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     """A real uvicorn server (subprocess, 127.0.0.1, free port, temp data dir, 3 workers)."""
     data_dir = tmp_path_factory.mktemp("api") / "data"
     live = LiveServer(data_dir, workers=3, env=SERVER_ENV).start()
+    try:
+        yield live
+    finally:
+        live.stop()
+
+
+#: API keys of the keyed server: two from GEOSMOOTH_API_KEYS, one (carol, tight bounds) from a
+#: keys file of sha256 digests, one for the schemathesis run.
+KEYS = {"alice": "alice-key-0001", "bob": "bob-key-0002", "carol": "carol-key-0003",
+        "fuzz": "schemathesis-key-0004"}  # fmt: skip
+
+#: Short timeouts, small connection bounds and a trusted CORS origin.
+TIGHT_ENV = {
+    "GEOSMOOTH_TIMEOUT_REQUEST_HEADER": "2",
+    "GEOSMOOTH_TIMEOUT_BODY_READ": "2",
+    "GEOSMOOTH_TIMEOUT_GRACEFUL_SHUTDOWN": "3",
+    "GEOSMOOTH_MAX_CONNECTIONS": "500",
+    "GEOSMOOTH_MAX_CONNECTIONS_PER_CLIENT": "200",
+    "GEOSMOOTH_SYNC_MAX_POINTS": "60000",
+    "GEOSMOOTH_SYNC_TIMEOUT": "3",
+    "GEOSMOOTH_MAX_UPLOAD_BYTES": str(64 * 1024 * 1024),
+    "GEOSMOOTH_CORS_ORIGINS": "https://app.example",
+}
+
+
+@pytest.fixture(scope="session")
+def keyed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A server with API keys (see :data:`KEYS`)."""
+    root = tmp_path_factory.mktemp("keys")
+    keys_file = root / "keys.txt"
+    digest = hashlib.sha256(KEYS["carol"].encode()).hexdigest()
+    keys_file.write_text(
+        "# sha256 digest, name, bounds\n"
+        f"{digest} carol max_points=100 max_k=8 rate_limit=2 rate_burst=3 "
+        "max_active_jobs=1 max_upload_bytes=200000\n"
+    )
+    env = {
+        **SERVER_ENV,
+        "GEOSMOOTH_API_KEYS": f"{KEYS['alice']}, {KEYS['bob']},{KEYS['fuzz']}",
+        "GEOSMOOTH_API_KEYS_FILE": str(keys_file),
+    }
+    live = LiveServer(root / "data", workers=2, env=env).start()
+    try:
+        yield live
+    finally:
+        live.stop()
+
+
+@pytest.fixture(scope="session")
+def tight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A server with short timeouts, small connection bounds and CORS (see :data:`TIGHT_ENV`)."""
+    root = tmp_path_factory.mktemp("tight")
+    live = LiveServer(root / "data", workers=2, env={**SERVER_ENV, **TIGHT_ENV}).start()
     try:
         yield live
     finally:

@@ -10,7 +10,6 @@ from typing import Any
 import pytest
 from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
-from service.jobs.errors import IdempotencyConflict, JobTooLarge, StorageFull
 from starlette.exceptions import HTTPException
 
 from service.api.app import create_app
@@ -25,6 +24,7 @@ from service.api.results import REPORT_HEADER_MAX, report_header
 from service.core.errors import IndexOutOfRange, SolverError, TauOutOfRange
 from service.core.params import SmoothingParams
 from service.io import FormatError, UnsupportedFormat
+from service.jobs.errors import IdempotencyConflict, JobTooLarge, StorageFull
 from service.settings import ConfigError, Settings
 
 with warnings.catch_warnings():
@@ -121,8 +121,9 @@ def test_any_typed_error_maps_generically_and_config_errors_stay_internal() -> N
 
 
 def test_non_finite_numbers_never_break_a_problem_or_a_json_answer() -> None:
-    exc = TauOutOfRange("nothing can move", field="params.tau", tau=float("nan"),
-                        tau_max=float("inf"))  # fmt: skip
+    exc = TauOutOfRange(
+        "nothing can move", field="params.tau", tau=float("nan"), tau_max=float("inf")
+    )
     body = problem_from_exception(exc).body()
     assert body["valid_range"] == [0.0, None] and body["tau"] is None
     assert json.loads(FiniteJSONResponse({"a": [1.0, float("-inf")]}).body) == {"a": [1.0, None]}

@@ -7,13 +7,13 @@ from __future__ import annotations
 import hashlib
 import subprocess
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 from api_helpers import LiveServer, json_geometry, noisy_plane_cloud, noisy_sphere, wait_done
+from conftest import KEYS
 
 from service.api.auth import KeyRing
 from service.api.server import InsecureBind, check_bind
@@ -22,34 +22,11 @@ from service.settings import Settings
 
 PROBLEM = "application/problem+json"
 PTS, FACES = noisy_sphere(1)
-ALICE, BOB, CAROL = "alice-key-0001", "bob-key-0002", "carol-key-0003"
+ALICE, BOB, CAROL = KEYS["alice"], KEYS["bob"], KEYS["carol"]
 
 
 def _digest(key: str) -> str:
     return hashlib.sha256(key.encode()).hexdigest()
-
-
-@pytest.fixture(scope="module")
-def keyed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    """Keys from the variable (alice, bob) and from a hashed keys file (carol: tight bounds)."""
-    root = tmp_path_factory.mktemp("keys")
-    keys_file = root / "keys.txt"
-    keys_file.write_text(
-        "# sha256 digest, name, bounds\n"
-        f"{_digest(CAROL)} carol max_points=100 max_k=8 rate_limit=2 rate_burst=3 "
-        "max_active_jobs=1 max_upload_bytes=200000\n"
-    )
-    env = {
-        "GEOSMOOTH_API_KEYS": f"{ALICE}, {BOB}",
-        "GEOSMOOTH_API_KEYS_FILE": str(keys_file),
-        "GEOSMOOTH_RATE_LIMIT": "1000",
-        "GEOSMOOTH_RATE_BURST": "1000",
-    }
-    live = LiveServer(root / "data", workers=2, env=env).start()
-    try:
-        yield live
-    finally:
-        live.stop()
 
 
 def _as(server: LiveServer, key: str | None, header: str = "bearer") -> httpx.Client:

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import socket
-from collections.abc import Callable
 from typing import Any
 
 import httpx
@@ -64,15 +63,12 @@ def test_cross_origin_writes_without_a_key_are_refused(client: httpx.Client) -> 
     assert client.post("/v1/jobs", files=files, data=form, headers=keyed).status_code == 202
 
 
-def test_cors_is_off_by_default_and_configurable(
-    client: httpx.Client, make_server: Callable[..., LiveServer]
-) -> None:
+def test_cors_is_off_by_default_and_configurable(client: httpx.Client, tight: LiveServer) -> None:
     preflight = {"Origin": "https://app.example", "Access-Control-Request-Method": "POST"}
     r = client.options("/v1/jobs", headers=preflight)
     assert "access-control-allow-origin" not in r.headers
     assert "access-control-allow-origin" not in client.get("/v1/jobs", headers=preflight).headers
-    live = make_server(workers=1, GEOSMOOTH_CORS_ORIGINS="https://app.example")
-    with live.client() as c:
+    with tight.client() as c:  # GEOSMOOTH_CORS_ORIGINS=https://app.example
         r = c.options(
             "/v1/jobs", headers={**preflight, "Access-Control-Request-Headers": "x-api-key"}
         )
@@ -84,8 +80,12 @@ def test_cors_is_off_by_default_and_configurable(
         r = c.options("/v1/jobs", headers={**preflight, "Origin": "https://evil.example"})
         assert r.headers.get("access-control-allow-origin") != "https://evil.example"
         files = {"file": ("s.ply", encode("ply", PTS, FACES))}
-        r = c.post("/v1/jobs", files=files, data={"params": '{"tau": 0.05}'},
-                   headers={"Origin": "https://app.example"})  # fmt: skip
+        r = c.post(
+            "/v1/jobs",
+            files=files,
+            data={"params": '{"tau": 0.05}'},
+            headers={"Origin": "https://app.example"},
+        )
         assert r.status_code == 202  # a trusted origin may write
 
 
@@ -168,10 +168,18 @@ def test_unexpected_errors_do_not_reach_the_server(tmp_path: Any) -> None:
         sent.append(message)
 
     scope = {
-        "type": "http", "method": "GET", "path": "/v1/jobs/abc", "raw_path": b"/v1/jobs/abc",
-        "query_string": b"", "headers": [(b"host", b"localhost")], "client": ("127.0.0.1", 1),
-        "server": ("127.0.0.1", 80), "scheme": "http", "root_path": "", "http_version": "1.1",
-    }  # fmt: skip
+        "type": "http",
+        "method": "GET",
+        "path": "/v1/jobs/abc",
+        "raw_path": b"/v1/jobs/abc",
+        "query_string": b"",
+        "headers": [(b"host", b"localhost")],
+        "client": ("127.0.0.1", 1),
+        "server": ("127.0.0.1", 80),
+        "scheme": "http",
+        "root_path": "",
+        "http_version": "1.1",
+    }
     anyio.run(app, scope, receive, send)  # returns normally: nothing for the server to close
     assert sent[0]["status"] == 500
     body = json.loads(sent[1]["body"])
@@ -245,9 +253,11 @@ def test_request_id_is_echoed_and_logged_as_json(client: httpx.Client, server: L
     assert len(generated) == 32
     weird = client.get("/healthz", headers={"X-Request-ID": "bad id\twith spaces"})
     assert weird.headers["x-request-id"] != "bad id\twith spaces"
-    job = client.post("/v1/jobs", json={"geometry": json_geometry(PTS, FACES),
-                                        "params": {"tau": 0.05}},
-                      headers={"X-Request-ID": "submit-7"}).json()  # fmt: skip
+    job = client.post(
+        "/v1/jobs",
+        json={"geometry": json_geometry(PTS, FACES), "params": {"tau": 0.05}},
+        headers={"X-Request-ID": "submit-7"},
+    ).json()
     records = server.records()
     lines = [r for r in records if r.get("request_id") == "trace-42.a"]
     assert any(r["event"] == "request" and r["status"] == 404 for r in lines), lines

@@ -26,11 +26,25 @@ from service.core.result import SmoothResult
 
 REPORT_KEYS = set(
     SmoothResult(
-        points=np.zeros((1, 3)), lam=1.0, phi=0.0, tau=None, relative_error=None, converged=True,
-        iterations=0, factorizations=0, history=[], deviation=np.zeros(1), rms_deviation=0.0,
-        max_deviation=0.0, timings={}, solver="", laplacian="", weights="", kind="",
+        points=np.zeros((1, 3)),
+        lam=1.0,
+        phi=0.0,
+        tau=None,
+        relative_error=None,
+        converged=True,
+        iterations=0,
+        factorizations=0,
+        history=[],
+        deviation=np.zeros(1),
+        rms_deviation=0.0,
+        max_deviation=0.0,
+        timings={},
+        solver="",
+        laplacian="",
+        weights="",
+        kind="",
     ).report()
-)  # fmt: skip
+)
 
 
 def _input(fmt: str, seed: int = 0) -> tuple[bytes, np.ndarray, float]:
@@ -163,8 +177,12 @@ def test_concurrent_submissions(client: httpx.Client, server: Any) -> None:
                     fmt = formats[i % 4]
                     data, pts, tau = _input(fmt, seed=100 + i)
                     if i % 5 == 4:  # some as JSON bodies
-                        body = {"geometry": json.loads(encode("json", pts, None if fmt == "xyz"
-                                else noisy_sphere(2)[1])), "params": {"tau": tau}}  # fmt: skip
+                        body = {
+                            "geometry": json.loads(
+                                encode("json", pts, None if fmt == "xyz" else noisy_sphere(2)[1])
+                            ),
+                            "params": {"tau": tau},
+                        }
                         r = c.post("/v1/jobs", json=body)
                         fmt = "json"
                     else:

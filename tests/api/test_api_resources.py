@@ -18,31 +18,9 @@ from typing import Any
 import httpx
 import pytest
 from api_helpers import LiveServer, cpu_ticks, descendants, encode, noisy_plane_cloud
+from conftest import TIGHT_ENV
 
 MIB = 2**20
-FAST_TIMEOUTS = {
-    "GEOSMOOTH_TIMEOUT_REQUEST_HEADER": "2",
-    "GEOSMOOTH_TIMEOUT_BODY_READ": "2",
-    "GEOSMOOTH_TIMEOUT_GRACEFUL_SHUTDOWN": "3",
-    "GEOSMOOTH_MAX_CONNECTIONS": "500",
-    "GEOSMOOTH_MAX_CONNECTIONS_PER_CLIENT": "200",
-    "GEOSMOOTH_SYNC_MAX_POINTS": "60000",
-    "GEOSMOOTH_SYNC_TIMEOUT": "3",
-    "GEOSMOOTH_MAX_UPLOAD_BYTES": str(64 * MIB),
-}
-
-
-@pytest.fixture(scope="module")
-def tight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    """A server with short timeouts and a small connection limit."""
-    from conftest import SERVER_ENV
-
-    root = tmp_path_factory.mktemp("tight")
-    live = LiveServer(root / "data", workers=2, env={**SERVER_ENV, **FAST_TIMEOUTS}).start()
-    try:
-        yield live
-    finally:
-        live.stop()
 
 
 class HealthPoller:
@@ -119,8 +97,11 @@ def test_parsing_runs_outside_the_server_and_healthz_keeps_answering(
     before = server.rss()
     with HealthPoller(server.url, interval=0.05) as poller:
         for _ in range(2):
-            r = client.post("/v1/jobs", files={"file": ("big.xyz", data)},
-                            data={"params": json.dumps({"lam": 1.0, "neighborhood": "knn"})})  # fmt: skip
+            r = client.post(
+                "/v1/jobs",
+                files={"file": ("big.xyz", data)},
+                data={"params": json.dumps({"lam": 1.0, "neighborhood": "knn"})},
+            )
             assert r.status_code == 202, r.text
             client.delete(f"/v1/jobs/{r.json()['id']}")
     assert not poller.failures and poller.latencies
@@ -212,8 +193,11 @@ def test_twenty_thousand_idle_connections_do_not_lock_out_healthz(tight: LiveSer
     with HealthPoller(tight.url, interval=0.1) as poller:
         flood = subprocess.run(
             [sys.executable, "-c", FLOOD, str(tight.port), "20000", "14000"],
-            capture_output=True, text=True, timeout=120, check=True,
-        )  # fmt: skip
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=True,
+        )
         peak = tight.rss()
     assert int(flood.stdout) == 20_000
     assert not poller.failures, poller.failures[:5]
@@ -243,8 +227,10 @@ def test_slow_headers_and_bodies_are_cut_off(tight: LiveServer) -> None:
         assert sock.recv(1024) == b""  # closed by the server
         assert time.monotonic() - start < 6
     with socket.create_connection(("127.0.0.1", tight.port), timeout=10) as sock:
-        sock.sendall(b"POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json"
-                     b"\r\nContent-Length: 1000\r\n\r\n{\"geometry\": ")  # fmt: skip
+        sock.sendall(
+            b"POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json"
+            b'\r\nContent-Length: 1000\r\n\r\n{"geometry": '
+        )
         answer = sock.recv(65536)
     assert answer.startswith(b"HTTP/1.1 408"), answer[:200]
     assert b"application/problem+json" in answer and b"connection: close" in answer.lower()
@@ -253,10 +239,12 @@ def test_slow_headers_and_bodies_are_cut_off(tight: LiveServer) -> None:
 def test_sigterm_stops_the_server_within_its_deadline(
     make_server: Callable[..., LiveServer], tmp_path: Path
 ) -> None:
-    live = make_server(tmp_path / "store", workers=1, **FAST_TIMEOUTS)
+    live = make_server(tmp_path / "store", workers=1, **TIGHT_ENV)
     sock = socket.create_connection(("127.0.0.1", live.port), timeout=10)
-    sock.sendall(b"POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json"
-                 b"\r\nContent-Length: 100000\r\n\r\n{")  # fmt: skip
+    sock.sendall(
+        b"POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json"
+        b"\r\nContent-Length: 100000\r\n\r\n{"
+    )
     stop = threading.Event()
 
     def trickle() -> None:  # a slow upload in flight: a byte every second

@@ -13,47 +13,55 @@ import json
 import subprocess
 import sys
 from collections import Counter
-from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
 from api_helpers import ROOT, LiveServer
+from conftest import KEYS
 
-KEY = "schemathesis-key"
+KEY = KEYS["fuzz"]
 MAX_EXAMPLES = 25
 
 
-@pytest.fixture(scope="module")
-def fuzzed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    from conftest import SERVER_ENV
-
-    root = tmp_path_factory.mktemp("st")
-    env = {**SERVER_ENV, "GEOSMOOTH_API_KEYS": KEY}
-    live = LiveServer(root / "data", workers=2, env=env).start()
-    try:
-        yield live
-    finally:
-        live.stop()
-
-
-def test_schemathesis_finds_nothing(fuzzed: LiveServer, tmp_path: Path) -> None:
+def test_schemathesis_finds_nothing(keyed: LiveServer, tmp_path: Path) -> None:
     st = Path(sys.executable).with_name("st")
     reports = tmp_path / "reports"
     command = [
-        str(st), "run", str(ROOT / "openapi" / "openapi.json"), "--url", fuzzed.url,
-        "--phases", "examples,coverage,fuzzing,stateful", "--seed", "1",
-        "--max-examples", str(MAX_EXAMPLES), "--checks", "all",
-        "--exclude-checks", "positive_data_acceptance", "--workers", "2",
-        "--request-timeout", "60", "-H", f"Authorization: Bearer {KEY}",
-        "--report", "json,har", "--report-dir", str(reports), "--no-color",
-    ]  # fmt: skip
+        str(st),
+        "run",
+        str(ROOT / "openapi" / "openapi.json"),
+        "--url",
+        keyed.url,
+        "--phases",
+        "examples,coverage,fuzzing,stateful",
+        "--seed",
+        "1",
+        "--max-examples",
+        str(MAX_EXAMPLES),
+        "--checks",
+        "all",
+        "--exclude-checks",
+        "positive_data_acceptance",
+        "--workers",
+        "2",
+        "--request-timeout",
+        "60",
+        "-H",
+        f"Authorization: Bearer {KEY}",
+        "--report",
+        "json,har",
+        "--report-dir",
+        str(reports),
+        "--no-color",
+    ]
     run = subprocess.run(command, capture_output=True, text=True, timeout=170, cwd=tmp_path)
     summary = json.loads(next(reports.glob("json-*.json")).read_text())
     har = json.loads(next(reports.glob("har-*.json")).read_text())
     entries = har["log"]["entries"]
     statuses = Counter(e["response"]["status"] for e in entries)
-    print(f"schemathesis: {len(entries)} requests, statuses {dict(sorted(statuses.items()))}, "
-          f"{summary['test_cases']}")  # fmt: skip
+    print(
+        f"schemathesis: {len(entries)} requests, statuses {dict(sorted(statuses.items()))}, "
+        f"{summary['test_cases']}"
+    )
     assert run.returncode == 0 and not summary["failures"], run.stdout[-6000:]
     assert all(phase["status"] == "success" for phase in summary["phases"].values()), summary
     assert len(entries) >= 500 and not any(s >= 500 for s in statuses)
