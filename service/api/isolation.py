@@ -50,9 +50,10 @@ def _arm_child() -> None:
         from multiprocessing import forkserver
 
         server = forkserver._forkserver  # type: ignore[attr-defined]
-        if server._forkserver_alive_fd is not None:
-            os.close(server._forkserver_alive_fd)
-            server._forkserver_alive_fd = None
+        fd = getattr(server, "_forkserver_alive_fd", None)
+        if fd is not None:
+            os.close(fd)
+            setattr(server, "_forkserver_alive_fd", None)  # noqa: B010 (private attribute)
     parent = multiprocessing.parent_process()
     if parent is not None and parent.sentinel is not None:
         sentinel = parent.sentinel
@@ -90,8 +91,8 @@ def _redact(wire: dict[str, Any], redact: Mapping[str, str]) -> dict[str, Any]:
 def _outcome(func: Callable[[Any], Any], arg: Any, budget: int | None) -> tuple[str, Any]:
     try:
         return "ok", func(arg)
-    except ApiProblem as problem:
-        return "problem", problem.to_wire()
+    except ApiProblem as raised:
+        return "problem", raised.to_wire()
     except MemoryError:
         mib = f" ({budget // 2**20} MiB)" if budget else ""
         problem = ApiProblem(

@@ -17,13 +17,16 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal, cast
 
 from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import Request
 
 from service.api.errors import ApiProblem
+
+if TYPE_CHECKING:
+    from python_multipart.multipart import MultipartCallbacks
 
 __all__ = ["FIELDS", "Upload", "receive_upload"]
 
@@ -173,7 +176,7 @@ async def _multipart(request: Request, boundary: bytes, spool_dir: Path) -> Uplo
     upload = Upload("multipart")
     parts = _Parts(upload, spool_dir)
     try:
-        parser = MultipartParser(boundary, parts.callbacks())
+        parser = MultipartParser(boundary, cast("MultipartCallbacks", parts.callbacks()))
         async for chunk in request.stream():
             if chunk:
                 parser.write(chunk)
