@@ -97,18 +97,16 @@ def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True)
             operation["responses"] = dict(sorted(answers.items()))
 
 
+#: Every media type a result can have (from the formats of the io registry).
 RESULT_CONTENT: dict[str, Any] = {
-    "application/octet-stream": {
-        "schema": {"type": "string", "format": "binary"},
-        "example": "ply\nformat ascii 1.0\nelement vertex 3\n...",
-    },
-    "model/obj": {"schema": {"type": "string"}, "example": "v 0 0 0\nv 1 0 0.05\n..."},
-    "text/plain": {"schema": {"type": "string"}, "example": "0 0 0\n1 0 0.05\n"},
-    "application/json": {
-        "schema": {"type": "object"},
-        "example": {"points": [[0, 0, 0], [1, 0, 0.05]]},
-    },
+    media: (
+        {"schema": {"$ref": "#/components/schemas/GeometryJson"}}
+        if media == "application/json"
+        else {"schema": {"type": "string", "format": "binary"}}
+    )
+    for media in dict.fromkeys(f.media_type.split(";")[0].strip() for f in FORMATS.values())
 }
+
 
 #: Prefilled by Swagger UI's "Try it out": scale-free and mild on any input (lambda is
 #: dimensionless for the normalized Laplacian), never a tau that collapses a small model.

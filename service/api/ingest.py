@@ -331,6 +331,7 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
     from service.io import write_geometry
 
     parsed = _parse(req, min(req.limits.sync_max_points, req.limits.max_points))
+    check_tau(parsed.document.geometry, parsed.params, 0, analyse=False)
     result = smooth(parsed.document.geometry, parsed.params)
     report = finite(result.report())
     fmt = req.out_format or parsed.fmt

@@ -45,9 +45,33 @@ def _range(geometry: Geometry, params: SmoothingParams, exact: bool) -> tuple[fl
     return centroid_bound(geometry)
 
 
-def check_tau(geometry: Geometry, params: SmoothingParams, exact_max_points: int) -> None:
-    """Raise :class:`TauOutOfRange` when ``tau``/``rms`` cannot be met (see module docstring)."""
-    if params.tau is None and params.rms is None:
+def _numeric(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def check_tau(
+    geometry: Geometry, params: SmoothingParams, exact_max_points: int, *, analyse: bool = True
+) -> None:
+    """Raise :class:`TauOutOfRange` when ``tau``/``rms`` cannot be met (see module docstring).
+
+    ``analyse=False`` (``POST /v1/smooth``, where the engine checks the range itself) only
+    checks that ``rms`` resolves to a positive, finite ``tau`` (``rms = 5e-324`` underflows).
+    Non-numeric targets (an automatic ``tau``) have no range to check.
+    """
+    if not (_numeric(params.tau) or _numeric(params.rms)):
+        return
+    if not analyse:
+        if _numeric(params.rms):
+            _, weight = centroid_bound(geometry)
+            tau = float(params.rms) ** 2 * weight  # type: ignore[arg-type]
+            if not (0.0 < tau < float("inf")):
+                raise TauOutOfRange(
+                    f"rms={params.rms:.6g} gives the smoothing factor tau={tau:.6g}, which is not "
+                    "a positive finite number",
+                    field="params.rms",
+                    tau=tau,
+                    tau_max=float("nan"),
+                )
         return
     fixed = geometry.fixed is not None or params.fix_boundary
     exact = geometry.kind != "cloud" or geometry.n <= exact_max_points or fixed
@@ -58,7 +82,7 @@ def check_tau(geometry: Geometry, params: SmoothingParams, exact_max_points: int
         value, name = float(params.rms), "rms"  # type: ignore[arg-type]
         bound = float(np.sqrt(phi0 / weight)) if weight > 0 else 0.0
         tau = value**2 * weight
-    if 0.0 < value < bound:
+    if 0.0 < value < bound and 0.0 < tau < float("inf"):
         return
     kind = "phi(0)" if exact else "an upper bound of phi(0)"
     raise TauOutOfRange(

@@ -2,9 +2,12 @@
 all phases, fixed seed, bounded examples): no 5xx, no response outside the spec, every error
 problem+json.
 
-``positive_data_acceptance`` is left out: the spec says what a request looks like, not which
-files are geometry (a schema-valid PNG upload is rightly a 400), so that check would flag the
-service for rejecting bad input.
+Two checks are left out, each for a documented behaviour:
+
+* ``positive_data_acceptance``: the spec says what a request looks like, not which files are
+  geometry (a schema-valid PNG upload is rightly a 400);
+* ``use_after_free``: ``DELETE`` of a queued or running job *cancels* it and answers the
+  cancelled job (200), which stays readable; only a finished job is deleted (204, then 404).
 """
 
 from __future__ import annotations
