@@ -16,78 +16,18 @@ are kept per client address.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import hmac
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from service.api.bounds import BoundError, Limits
 from service.settings import ConfigError, Settings
 
 __all__ = ["KeyRing", "Limits", "Principal", "key_digest", "presented_key", "tenant_of"]
 
 _HEX = frozenset("0123456789abcdef")
-
-
-@dataclass(frozen=True)
-class Limits:
-    """Bounds of one key (defaults: the settings of the same names; see the API README).
-
-    Attributes
-    ----------
-    max_upload_bytes : int
-        Largest request body (413).
-    max_points, max_faces : int
-        Largest input of ``POST /v1/jobs`` (413).
-    sync_max_points : int
-        Largest input of ``POST /v1/smooth`` (413).
-    max_k, max_iterations : int
-        Largest ``params.k`` and ``params.max_iterations`` (422).
-    max_spectrum_points : int
-        Largest input for which ``params.spectrum`` may be asked (422).
-    rate_limit, rate_burst : float, int
-        Token bucket of the key's requests (429).
-    max_active_jobs : int
-        Queued plus running jobs of the key (429).
-    max_sync_per_key : int
-        Concurrent ``POST /v1/smooth`` of the key (429).
-    """
-
-    max_upload_bytes: int
-    max_points: int
-    max_faces: int
-    sync_max_points: int
-    max_k: int
-    max_iterations: int
-    max_spectrum_points: int
-    rate_limit: float
-    rate_burst: int
-    max_active_jobs: int
-    max_sync_per_key: int
-
-    @classmethod
-    def from_settings(cls, settings: Settings) -> Limits:
-        """The default bounds."""
-        return cls(**{f.name: getattr(settings, f.name) for f in dataclasses.fields(cls)})
-
-    def with_overrides(self, overrides: Mapping[str, str], where: str) -> Limits:
-        """These bounds with ``name=value`` overrides (a :class:`ConfigError` names ``where``)."""
-        types = {f.name: f.type for f in dataclasses.fields(self)}
-        values: dict[str, Any] = {}
-        for name, text in overrides.items():
-            if name not in types:
-                raise ConfigError(f"{where}: unknown bound {name!r}", field=_FILE_ENV)
-            try:
-                value = float(text) if types[name] in ("float", float) else int(text)
-            except ValueError:
-                message = f"{where}: {name}={text!r} is not a number"
-                raise ConfigError(message, field=_FILE_ENV) from None
-            if not value > 0:
-                raise ConfigError(f"{where}: {name} must be positive", field=_FILE_ENV)
-            values[name] = value
-        return dataclasses.replace(self, **values)
 
 
 @dataclass(frozen=True)
@@ -154,7 +94,10 @@ def _file_entries(path: Path, defaults: Limits) -> dict[str, tuple[str | None, L
             raise ConfigError(f"{where}: expected a sha256 hex digest first", field=_FILE_ENV)
         name = next((w for w in words[1:] if "=" not in w), None)
         bounds = dict(w.split("=", 1) for w in words[1:] if "=" in w)
-        out[digest] = (name, defaults.with_overrides(bounds, where))
+        try:
+            out[digest] = (name, defaults.with_overrides(bounds))
+        except BoundError as exc:
+            raise ConfigError(f"{where}: {exc}", field=_FILE_ENV) from None
     return out
 
 

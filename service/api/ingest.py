@@ -21,7 +21,7 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
-from service.api.auth import Limits
+from service.api.bounds import Limits
 from service.api.errors import ApiProblem, finite
 from service.api.tau_check import check_tau
 from service.core.params import SmoothingParams
