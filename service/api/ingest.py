@@ -29,7 +29,14 @@ from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_g
 from service.io.errors import FormatError, UnsupportedFormat
 from service.io.formats import detect_format, sniff_format
 
-__all__ = ["IngestRequest", "check_job", "describe_input", "smooth_input"]
+__all__ = [
+    "IngestRequest",
+    "ParsedRequest",
+    "check_job",
+    "describe_input",
+    "parse_request",
+    "smooth_input",
+]
 
 _TRUE, _FALSE = frozenset({"true", "1", "yes", "on"}), frozenset({"false", "0", "no", "off", ""})
 _JSON_MEMBERS = frozenset({"geometry", "params", "weld", "webhook_url"})
@@ -60,6 +67,8 @@ class IngestRequest:
     exact_tau_max_points : int
         Largest point cloud whose ``tau`` is checked exactly at submit (see
         :mod:`service.api.tau_check`).
+    options : dict
+        Endpoint-specific options of the worker function (e.g. ``preview`` of ``/v1/info``).
     """
 
     kind: Literal["multipart", "json"]
@@ -72,10 +81,13 @@ class IngestRequest:
     params_required: bool = True
     out_format: str | None = None
     exact_tau_max_points: int = 50_000
+    options: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
-class _Parsed:
+class ParsedRequest:
+    """A parsed, checked request: the document, parameters and the small parts."""
+
     document: GeometryDocument
     params: SmoothingParams
     fmt: str
@@ -207,7 +219,7 @@ def _format(req: IngestRequest) -> str:
     return sniffed
 
 
-def _from_multipart(req: IngestRequest) -> _Parsed:
+def _from_multipart(req: IngestRequest) -> ParsedRequest:
     params = _params(req.fields.get("params"), req.params_required)
     _check_param_bounds(params, req.limits)
     fmt = _format(req)
@@ -219,10 +231,10 @@ def _from_multipart(req: IngestRequest) -> _Parsed:
     except RecursionError:
         raise FormatError("the file is nested too deeply", fmt=fmt) from None
     url = req.fields.get("webhook_url", "").strip() or None
-    return _Parsed(document, params, fmt, weld, url, req.path)
+    return ParsedRequest(document, params, fmt, weld, url, req.path)
 
 
-def _from_json(req: IngestRequest) -> _Parsed:
+def _from_json(req: IngestRequest) -> ParsedRequest:
     try:
         obj = json.loads(Path(req.path).read_bytes())
     except (ValueError, RecursionError) as exc:
@@ -258,10 +270,10 @@ def _from_json(req: IngestRequest) -> _Parsed:
     except (FormatError, RecursionError) as exc:
         message = exc.message if isinstance(exc, FormatError) else "nested too deeply"
         raise _invalid("geometry", message, "invalid-geometry", "Invalid geometry") from None
-    return _Parsed(document, params, "json", weld, url, req.path, {"geometry": geometry})
+    return ParsedRequest(document, params, "json", weld, url, req.path, {"geometry": geometry})
 
 
-def _check_size(parsed: _Parsed, max_points: int, limits: Limits) -> None:
+def _check_size(parsed: ParsedRequest, max_points: int, limits: Limits) -> None:
     geometry = parsed.document.geometry
     n = int(geometry.n)
     if n > max_points:
@@ -293,9 +305,14 @@ def _check_size(parsed: _Parsed, max_points: int, limits: Limits) -> None:
         )
 
 
-def _parse(req: IngestRequest, max_points: int) -> _Parsed:
+def parse_request(req: IngestRequest, max_points: int | None = None) -> ParsedRequest:
+    """Parse and check a spooled request (in a worker process; see the module docstring).
+
+    ``max_points`` defaults to the key's ``max_points``. Routers with their own worker function
+    (e.g. ``POST /v1/info``) start from this.
+    """
     parsed = _from_json(req) if req.kind == "json" else _from_multipart(req)
-    _check_size(parsed, max_points, req.limits)
+    _check_size(parsed, req.limits.max_points if max_points is None else max_points, req.limits)
     _check_param_bounds(parsed.params, req.limits, str(parsed.document.geometry.kind))
     return parsed
 
@@ -309,7 +326,7 @@ def _size(document: GeometryDocument) -> dict[str, Any]:
 def check_job(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/jobs``: everything a job needs, checked; the input file to store (an inline
     geometry is written as a JSON file next to the spooled body, once every check passed)."""
-    parsed = _parse(req, req.limits.max_points)
+    parsed = parse_request(req, req.limits.max_points)
     check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
     if "geometry" in parsed.extra:
         inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
@@ -330,7 +347,7 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
     from service.core import smooth
     from service.io import write_geometry
 
-    parsed = _parse(req, min(req.limits.sync_max_points, req.limits.max_points))
+    parsed = parse_request(req, min(req.limits.sync_max_points, req.limits.max_points))
     check_tau(parsed.document.geometry, parsed.params, 0, analyse=False)
     result = smooth(parsed.document.geometry, parsed.params)
     report = finite(result.report())
@@ -346,9 +363,17 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
 
 
 def describe_input(req: IngestRequest) -> dict[str, Any]:
-    """``POST /v1/info``: :func:`service.core.info.describe` of the input, plus its format."""
+    """``POST /v1/info``: :func:`service.core.info.describe` of the input, plus what the reader
+    saw (``format``, ``filename``, ``n_polylines``, ``notes``, ``weld``)."""
     from service.core.info import describe
 
-    parsed = _parse(req, req.limits.max_points)
+    parsed = parse_request(req)
     info = describe(parsed.document.geometry, parsed.params)
-    return finite({**info, "format": parsed.fmt})  # type: ignore[no-any-return]
+    info.update(
+        format=parsed.fmt,
+        filename=req.filename,
+        n_polylines=len(parsed.document.polylines),
+        notes=list(parsed.document.notes),
+        weld=parsed.weld,
+    )
+    return finite(info)  # type: ignore[no-any-return]

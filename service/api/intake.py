@@ -130,6 +130,7 @@ class Intake:
         mode: Literal["ingest", "sync"] = "ingest",
         params_required: bool = True,
         out_format: str | None = None,
+        options: dict[str, Any] | None = None,
     ) -> dict[str, Any] | None:
         """``func`` on the spooled upload in a worker process (``None``: the client left)."""
         assert upload.path is not None
@@ -144,6 +145,7 @@ class Intake:
             params_required=params_required,
             out_format=out_format,
             exact_tau_max_points=self.settings.submit_exact_tau_points,
+            options=dict(options or {}),
         )
         shown = upload.filename or "the upload"
         redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
