@@ -231,6 +231,9 @@ class Settings(BaseSettings):
     timeout_graceful_shutdown: float = Field(
         default=10.0, gt=0, description="Seconds requests get to finish on SIGTERM."
     )
+    job_log_interval: float = Field(
+        default=1.0, gt=0, le=60, description="Seconds between looks for job events to log."
+    )
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         default="info", description="Log level."
     )

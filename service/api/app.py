@@ -17,6 +17,7 @@ from service.api.context import REQUEST_ID_HEADER, RequestContextMiddleware
 from service.api.docs import document_common_answers
 from service.api.guards import AuthGate, HostGuard, InFlightLimit, OriginGuard, allowed_hosts
 from service.api.intake import Intake, clean_spool
+from service.api.job_events import JobEventLog
 from service.api.limits import BodyLimitMiddleware
 from service.api.metrics import Metrics
 from service.api.problems import PROBLEM_MEDIA_TYPE, FiniteJSONResponse, install_problem_handlers
@@ -70,11 +71,14 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     await run_in_threadpool(clean_spool, settings)
     await run_in_threadpool(queue.start)
     app.state.queue_started = True
+    events = JobEventLog(queue, settings.job_log_interval)
+    await run_in_threadpool(events.start)
     log.info("server.ready", extra={"workers": settings.workers, "keys": len(app.state.keys)})
     try:
         yield
     finally:
         app.state.queue_started = False
+        await run_in_threadpool(events.stop)
         await run_in_threadpool(queue.stop)
         log.info("server.stopped")
 

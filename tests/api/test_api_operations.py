@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 
 import httpx
 from api_helpers import LiveServer, json_geometry, noisy_sphere, wait_done
@@ -98,3 +99,30 @@ def test_metrics(client: httpx.Client, server: LiveServer) -> None:
     assert _sample(text, "geosmooth_sync_solve_seconds_count") >= 1
     assert _sample(text, "geosmooth_jobs_submitted_total") >= 1
     assert json.loads(client.get("/openapi.json").text)["info"]["title"] == "geosmooth"
+
+
+def test_job_events_are_logged_with_job_id(client: httpx.Client, server: LiveServer) -> None:
+    """submitted (API), started/progress/succeeded (watcher) and cancelled, as JSON lines."""
+    done = _submit(client)
+    wait_done(client, done)
+    pts = noisy_sphere(4)[0]  # 2562 points, a tight tolerance: runs long enough to be seen
+    body = {
+        "geometry": json_geometry(pts, noisy_sphere(4)[1]),
+        "params": {"tau": 0.5, "tolerance": 1e-9, "max_iterations": 200},
+    }
+    cancelled = client.post("/v1/jobs", json=body).json()["id"]
+    client.delete(f"/v1/jobs/{cancelled}")
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        events = {(r.get("event"), r.get("job_id")) for r in server.records()}
+        if {
+            ("job.submitted", done),
+            ("job.succeeded", done),
+            ("job.cancelled", cancelled),
+        } <= events:
+            break
+        time.sleep(0.2)
+    assert ("job.submitted", done) in events and ("job.succeeded", done) in events, events
+    assert ("job.cancelled", cancelled) in events
+    lines = [r for r in server.records() if r.get("job_id") == done]
+    assert all(r["level"] and r["timestamp"] for r in lines)
