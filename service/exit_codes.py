@@ -34,10 +34,22 @@ EXIT_REJECTED = 8
 EXIT_JOB_FAILED = 9
 EXIT_CANCELLED = 10
 
-#: Further statuses of ``geosmooth submit``, set by ``service.client.submit``.
+#: Further statuses of ``geosmooth submit`` (``service.cli.submit``).
 SUBMIT_EXIT_CODES: dict[int, str] = {
     EXIT_UNREACHABLE: "submit: the server cannot be reached",
     EXIT_REJECTED: "submit: the server rejected the input or the parameters",
     EXIT_JOB_FAILED: "submit: the job failed on the server",
     EXIT_CANCELLED: "submit: the job was cancelled",
+}
+
+EXIT_SERVE = 11
+EXIT_CONFIG = 12
+
+#: Further statuses of ``geosmooth serve``. A configuration error class (settings) carries
+#: ``exit_code = EXIT_CONFIG`` and names the environment variable in its message.
+SERVE_EXIT_CODES: dict[int, str] = {
+    EXIT_SERVE: "serve: the service cannot start (the address is in use or not permitted, or "
+    "its startup failed; the message says which)",
+    EXIT_CONFIG: "serve: invalid configuration (the message names the GEOSMOOTH_* environment "
+    "variable)",
 }

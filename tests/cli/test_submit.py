@@ -25,7 +25,7 @@ from api_helpers import (
     phi,
 )
 
-from service.client import (
+from service.exit_codes import (
     EXIT_CANCELLED,
     EXIT_JOB_FAILED,
     EXIT_REJECTED,
