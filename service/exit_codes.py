@@ -42,14 +42,11 @@ SUBMIT_EXIT_CODES: dict[int, str] = {
     EXIT_CANCELLED: "submit: the job was cancelled",
 }
 
-EXIT_SERVE = 11
-EXIT_CONFIG = 12
+EXIT_ADDRESS = 11
 
-#: Further statuses of ``geosmooth serve``. A configuration error class (settings) carries
-#: ``exit_code = EXIT_CONFIG`` and names the environment variable in its message.
+#: Further statuses of ``geosmooth serve`` (``service.api.server``).
 SERVE_EXIT_CODES: dict[int, str] = {
-    EXIT_SERVE: "serve: the service cannot start (the address is in use or not permitted, or "
-    "its startup failed; the message says which)",
-    EXIT_CONFIG: "serve: invalid configuration (the message names the GEOSMOOTH_* environment "
-    "variable)",
+    EXIT_USAGE: "serve: invalid setting (the message names the GEOSMOOTH_ variable), keys "
+    "file, or a non-loopback address without API keys (see --insecure-no-auth)",
+    EXIT_ADDRESS: "serve: the address cannot be bound (port in use, permission, unknown host)",
 }

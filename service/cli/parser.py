@@ -52,7 +52,8 @@ def _wrap(text: str) -> str:
 def _epilog(*extra: Mapping[int, str]) -> str:
     table = dict(EXIT_CODES)
     for more in extra:
-        table.update(more)
+        for code, text in more.items():
+            table[code] = f"{table[code]}; {text}" if code in table else text
     codes = "\n".join(
         textwrap.fill(text, 78, initial_indent=f"  {code:>3}  ", subsequent_indent=" " * 7)
         for code, text in sorted(table.items())

@@ -2,7 +2,7 @@
 
 Before the service starts, the command checks what it can name precisely: the options, the
 settings from the environment (a bad ``GEOSMOOTH_*`` variable is one line naming it, exit
-status 12) and the address (in use or not permitted: exit status 11, where uvicorn would exit
+status 2) and the address (in use or not permitted: exit status 11, where uvicorn would exit
 with its own status 3, which ``geosmooth`` documents as "input file missing").
 """
 
@@ -13,7 +13,7 @@ import os
 import socket
 from typing import TextIO
 
-from service.exit_codes import EXIT_CONFIG, EXIT_OK, EXIT_SERVE, EXIT_USAGE
+from service.exit_codes import EXIT_ADDRESS, EXIT_OK, EXIT_USAGE
 
 from .errors import CliError, os_reason
 
@@ -37,7 +37,7 @@ def check_settings(**overrides: object) -> None:
             shown = f"{var}={os.environ[var]!r}" if var in os.environ else var
             msg = str(error.get("msg", "invalid value")).replace("Input should be", "must be")
             parts.append(f"{shown}: {msg}")
-        raise CliError("invalid configuration: " + "; ".join(parts), EXIT_CONFIG) from exc
+        raise CliError("invalid configuration: " + "; ".join(parts), EXIT_USAGE) from exc
 
 
 def check_address(host: str, port: int) -> None:
@@ -49,7 +49,7 @@ def check_address(host: str, port: int) -> None:
             sock.bind((host, port))
         except OSError as exc:
             reason = exc.strerror if isinstance(exc, socket.gaierror) else os_reason(exc)
-            raise CliError(f"cannot listen on {host}:{port}: {reason}", EXIT_SERVE) from exc
+            raise CliError(f"cannot listen on {host}:{port}: {reason}", EXIT_ADDRESS) from exc
 
 
 def run(ns: argparse.Namespace, err: TextIO) -> int:
@@ -71,6 +71,6 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
         raise CliError(
             f"the service on {ns.host}:{ns.port} could not start (uvicorn exited with "
             f"{exc.code}; see the log above)",
-            EXIT_SERVE,
+            EXIT_ADDRESS,
         ) from exc
     return EXIT_OK

@@ -201,6 +201,11 @@ class AsyncClient:
 
     # ------------------------------------------------------------------ waiting
 
+    @property
+    def uses_events(self) -> bool | None:
+        """Whether the service streams job events (``None`` until a wait found out)."""
+        return self._events
+
     def _has_events(self) -> bool:
         """Whether the service has (or may have) the events stream."""
         return self._events is not False
@@ -291,9 +296,9 @@ class AsyncClient:
         job = await self.submit(
             source, params, fmt=fmt, filename=filename, weld=weld, **param_values
         )
-        if progress is not None:
-            progress(job)
         try:
+            if progress is not None:
+                progress(job)
             job = await self.wait(job.id, progress=progress, timeout=timeout, job=job)
         except NotFound:
             raise

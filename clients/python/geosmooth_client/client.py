@@ -271,6 +271,11 @@ class Client:
 
     # ------------------------------------------------------------------ waiting
 
+    @property
+    def uses_events(self) -> bool | None:
+        """Whether the service streams job events (``None`` until a wait found out)."""
+        return self._events
+
     def _has_events(self) -> bool:
         """Whether the service has (or may have) the events stream."""
         return self._events is not False
@@ -390,9 +395,9 @@ class Client:
             As :meth:`submit` and :meth:`wait`.
         """
         job = self.submit(source, params, fmt=fmt, filename=filename, weld=weld, **param_values)
-        if progress is not None:
-            progress(job)
         try:
+            if progress is not None:
+                progress(job)
             job = self.wait(job.id, progress=progress, timeout=timeout, job=job)
         except KeyboardInterrupt as exc:
             raise JobInterrupted(job.id, self._cancel_quietly(job.id)) from exc
