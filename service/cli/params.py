@@ -66,15 +66,26 @@ def _field_help(name: str) -> str:
     return text
 
 
+def _literals(annotation: object) -> list[object]:
+    """The members of a ``Literal`` (or of several, in a union); other types as themselves."""
+    if typing.get_origin(annotation) is typing.Literal:
+        return list(typing.get_args(annotation))
+    args = typing.get_args(annotation)
+    if not args:
+        return [annotation]
+    return [m for a in args if a is not type(None) for m in _literals(a)]
+
+
 def _choices(info: FieldInfo) -> tuple[str, ...] | None:
-    args = typing.get_args(info.annotation)
-    return args if args and all(isinstance(a, str) for a in args) else None
+    """The names a field takes (``{normalized,curvature,feature}``), if it takes only names."""
+    members = _literals(info.annotation)
+    return tuple(members) if members and all(isinstance(m, str) for m in members) else None  # type: ignore[arg-type]
 
 
 def add_smoothing_options(parser: argparse.ArgumentParser) -> None:
     """Add one option per :class:`SmoothingParams` field (defaults stay in the model)."""
     target = parser.add_argument_group(
-        "smoothing target (at most one)",
+        "smoothing target",
         textwrap.fill(
             "tau is the budget for the weighted sum of squared displacements (report eq. 3 and "
             "15); it must lie in (0, phi(0)), phi(0) being the deviation from the weighted "

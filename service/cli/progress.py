@@ -8,13 +8,16 @@ summary reads a :meth:`service.core.SmoothResult.report` dictionary (local, or a
 
 from __future__ import annotations
 
+import argparse
+import time
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, TextIO
 
 if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
     from service.core.progress import ProgressEvent
 
-__all__ = ["ProgressDisplay", "format_summary"]
+__all__ = ["ProgressDisplay", "format_summary", "show_summary"]
 
 
 def _g(value: float | None, digits: int = 4) -> str:
@@ -214,3 +217,29 @@ def format_summary(
     warnings: Sequence[str] = report.get("warnings") or []
     lines.extend(f"  warning: {w}" for w in warnings)
     return "\n".join(lines)
+
+
+def show_summary(
+    display: ProgressDisplay,
+    report: Mapping[str, Any],
+    ns: argparse.Namespace,
+    params: SmoothingParams,
+    started: float,
+    **extra: Any,
+) -> None:
+    """The summary of a finished ``smooth`` or ``submit`` run, below its progress lines.
+
+    ``started`` is a :func:`time.perf_counter` reading; ``extra`` goes to
+    :func:`format_summary` (``details``, ``notes``, ``wall_label``). Nothing with ``--quiet``.
+    """
+    if not display.enabled:
+        return
+    text = format_summary(
+        report,
+        source=ns.input,
+        target=ns.output,
+        wall_seconds=time.perf_counter() - started,
+        tolerance=params.tolerance if params.lam is None else None,
+        **extra,
+    )
+    display.note(text)

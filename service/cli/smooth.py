@@ -26,7 +26,7 @@ from .errors import CliError, os_reason
 from .output import check_format, check_writable, output_format, write_json_report, write_output
 from .params import params_from_args
 from .parser import version
-from .progress import ProgressDisplay, format_summary
+from .progress import ProgressDisplay, show_summary
 
 if TYPE_CHECKING:
     from service.core.errors import TauOutOfRange
@@ -199,16 +199,6 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
             wall_seconds=time.perf_counter() - started,
         )
         write_json_report(ns.report, report)
-    if not ns.quiet:
-        summary = format_summary(
-            report,
-            source=ns.input,
-            target=ns.output,
-            wall_seconds=time.perf_counter() - started,
-            tolerance=params.tolerance if params.lam is None else None,
-            details=_details(doc),
-            notes=doc.notes,
-        )
-        progress.note(summary)
+    show_summary(progress, report, ns, params, started, details=_details(doc), notes=doc.notes)
     return EXIT_OK
 

@@ -28,7 +28,7 @@ from service.exit_codes import (
 from .errors import CliError, os_reason
 from .output import check_writable, output_format, write_json_report, write_output
 from .params import params_from_args
-from .progress import ProgressDisplay, format_summary
+from .progress import ProgressDisplay, show_summary
 
 if TYPE_CHECKING:
     from geosmooth_client import Job
@@ -109,7 +109,7 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     """Run ``geosmooth submit``; returns the exit status (errors are raised)."""
     from geosmooth_client import JobInterrupted
 
-    started = time.monotonic()
+    started = time.perf_counter()
     params = params_from_args(ns)
     out_fmt = output_format(ns.output, ns.format)
     check_writable(ns.output, "output")
@@ -136,14 +136,5 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     write_output(ns.output, data, "output")
     if ns.report:
         write_json_report(ns.report, report)
-    if not ns.quiet:
-        summary = format_summary(
-            report,
-            source=ns.input,
-            target=ns.output,
-            wall_seconds=time.monotonic() - started,
-            wall_label="upload, queue, smooth, download",
-            tolerance=params.tolerance if params.lam is None else None,
-        )
-        display.note(summary)
+    show_summary(display, report, ns, params, started, wall_label="upload, queue, smooth, download")
     return EXIT_OK

@@ -3,10 +3,7 @@
 :class:`Client` and :class:`AsyncClient` only send what this module builds and feed it what
 they receive, so the two stay alike by construction:
 
-* :class:`Upload` turns a path, bytes, a geometry mapping or a points array plus parameters into
-  the multipart form of ``POST /v1/jobs``; its file part is a :class:`TrackedFile`, which knows
-  whether the whole file went out and stops the upload when asked (Ctrl-C before the end of the
-  body leaves no job on the server: the service never sees a complete request).
+* :class:`~geosmooth_client._upload.Upload` builds ``POST /v1/jobs`` (see that module).
 * :class:`RetryPolicy` says whether and when to send a request again.
 * :class:`Watch` follows a job from events or from polled states, calls the progress callback
   on each change and tells when the job is finished.
@@ -14,29 +11,21 @@ they receive, so the two stay alike by construction:
 
 from __future__ import annotations
 
-import io
-import json
-import os
-import threading
 import time
-import uuid
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import IO, Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import httpx
 
 from geosmooth_client.errors import ConnectionFailed, WaitTimeout, error_from_response
 from geosmooth_client.models import Job, JobProgress
-from geosmooth_client.sse import ServerSentEvent
+from geosmooth_client.sse import ServerSentEvent, SSEDecoder
 
 __all__ = [
+    "ClientBase",
     "ProgressCallback",
     "RetryPolicy",
-    "TrackedFile",
-    "Upload",
-    "UploadAborted",
     "Watch",
     "check",
     "job_path",
@@ -48,6 +37,7 @@ ProgressCallback = Callable[[Job], None]
 
 USER_AGENT = "geosmooth-client/0.1.0"
 JOBS = "/v1/jobs"
+EVENTS_READ_TIMEOUT = 45.0  # the service pings every 15 s
 
 
 def job_path(job_id: str, tail: str = "") -> str:
@@ -70,170 +60,51 @@ def transport_error(url: str, exc: httpx.TransportError) -> ConnectionFailed:
     return ConnectionFailed(url, reason)
 
 
-# --------------------------------------------------------------------------- upload
+# --------------------------------------------------------------------------- clients
 
 
-class UploadAborted(Exception):
-    """Raised inside the upload when it is stopped before the end of the file."""
+class ClientBase:
+    """What :class:`Client` and :class:`AsyncClient` hold alike (parameters: see Client)."""
 
-
-class TrackedFile(io.RawIOBase):
-    """A readable file that knows whether it was read to the end, and can stop a read.
-
-    Parameters
-    ----------
-    raw : binary file
-        The data (an open file or a ``BytesIO``).
-    """
-
-    def __init__(self, raw: IO[bytes]) -> None:
-        super().__init__()
-        self._raw = raw
-        self._lock = threading.Lock()
-        self._stopped = False
-        self.sent = False  # every byte of the file was handed to the connection
-
-    def stop(self) -> bool:
-        """Make the next read raise :class:`UploadAborted`; returns whether it was all sent.
-
-        Atomic with :meth:`read`: when it returns ``False``, the end of the file is never
-        read, so the request body is never complete and the service makes no job of it.
-        """
-        with self._lock:
-            self._stopped = True
-            return self.sent
-
-    def readable(self) -> bool:
-        return True
-
-    def seekable(self) -> bool:
-        return True
-
-    def fileno(self) -> int:  # lets httpx find the length (a Content-Length, not chunks)
-        return self._raw.fileno()
-
-    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
-        return self._raw.seek(offset, whence)
-
-    def tell(self) -> int:
-        return self._raw.tell()
-
-    def read(self, size: int = -1) -> bytes:
-        with self._lock:
-            if self._stopped and not self.sent:
-                raise UploadAborted("upload stopped")
-            chunk = self._raw.read(size)
-            if not chunk:
-                self.sent = True
-            return chunk
-
-    def readinto(self, buffer: Any) -> int:  # pragma: no cover - httpx calls read()
-        data = self.read(len(buffer))
-        buffer[: len(data)] = data
-        return len(data)
-
-    def close(self) -> None:
-        self._raw.close()
-        super().close()
-
-
-def _jsonable(value: Any) -> Any:
-    """numpy arrays and scalars to lists and numbers (no numpy import needed)."""
-    if hasattr(value, "tolist") and not isinstance(value, str | bytes):
-        return value.tolist()
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
-
-
-def params_dict(params: Any, overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """Smoothing parameters as a JSON object: a mapping or a pydantic model, plus keywords.
-
-    ``None`` values are left out (the service's defaults apply).
-    """
-    if params is None:
-        base: dict[str, Any] = {}
-    elif isinstance(params, Mapping):
-        base = dict(params)
-    elif hasattr(params, "model_dump"):
-        base = params.model_dump(mode="json", exclude_unset=True)
-    else:
-        raise TypeError(f"params must be a mapping or a pydantic model, not {type(params)}")
-    base.update(overrides)
-    return {k: _jsonable(v) for k, v in base.items() if v is not None}
-
-
-@dataclass(frozen=True)
-class Upload:
-    """One ``POST /v1/jobs`` multipart request, re-sendable (a retry opens the data again).
-
-    Build it with :meth:`build`; :meth:`request` gives the keyword arguments of one attempt.
-    """
-
-    opener: Callable[[], IO[bytes]]
-    filename: str
-    form: dict[str, str]
-    idempotency_key: str = field(default_factory=lambda: uuid.uuid4().hex)
-
-    @classmethod
-    def build(
-        cls,
-        source: Any,
-        params: Mapping[str, Any],
+    def __init__(
+        self,
+        url: str,
+        api_key: str | None,
         *,
-        fmt: str | None = None,
-        filename: str | None = None,
-        weld: bool = False,
-        webhook_url: str | None = None,
-        idempotency_key: str | None = None,
-    ) -> Upload:
-        """Validate the input locally and prepare the form.
+        retry: RetryPolicy | None,
+        reconnect_seconds: float,
+        cancel_grace: float,
+    ) -> None:
+        self.url = url.rstrip("/")
+        self.retry = retry or RetryPolicy()
+        self.reconnect_seconds = reconnect_seconds
+        self.cancel_grace = cancel_grace
+        self.headers = {"User-Agent": USER_AGENT}
+        if api_key:
+            self.headers["Authorization"] = f"Bearer {api_key}"
+        self._events: bool | None = None  # None: not tried yet; False: the service has none
 
-        Parameters
-        ----------
-        source : path, bytes, mapping or array_like
-            A file path; the file's bytes (give ``fmt`` or a ``filename`` with an extension
-            unless the service can tell the format from the content); a geometry in the JSON
-            format's schema (``{"points": ..., "faces": ...}``, numpy arrays allowed); or the
-            points themselves, an ``(n, s)`` array-like (a point cloud).
-        """
-        form = {"params": json.dumps(dict(params), allow_nan=False)}
-        if isinstance(source, str | os.PathLike):
-            path = Path(source)
-            if not path.is_file():
-                raise FileNotFoundError(2, "No such file", str(path))
-            opener: Callable[[], IO[bytes]] = lambda: path.open("rb")  # noqa: E731
-            name = filename or path.name
-        elif isinstance(source, bytes | bytearray | memoryview):
-            data = bytes(source)
-            opener = lambda: io.BytesIO(data)  # noqa: E731
-            name = filename or (f"input.{fmt}" if fmt else "input")
-        else:
-            geometry = source if isinstance(source, Mapping) else {"points": source}
-            text = json.dumps(_jsonable(geometry), allow_nan=False, separators=(",", ":"))
-            data = text.encode("utf-8")
-            opener = lambda: io.BytesIO(data)  # noqa: E731
-            name, fmt = filename or "geometry.json", fmt or "json"
-        if fmt:
-            form["format"] = fmt
-        if weld:
-            form["weld"] = "true"
-        if webhook_url:
-            form["webhook_url"] = webhook_url
-        key = idempotency_key or uuid.uuid4().hex
-        return cls(opener=opener, filename=name, form=form, idempotency_key=key)
+    @property
+    def uses_events(self) -> bool | None:
+        """Whether the service streams job events (``None`` until a wait found out)."""
+        return self._events
 
-    def request(self) -> tuple[TrackedFile, dict[str, Any]]:
-        """The file part of one attempt and the ``httpx`` keyword arguments that send it."""
-        body = TrackedFile(self.opener())
-        kwargs = {
-            "data": self.form,
-            "files": {"file": (self.filename, body, "application/octet-stream")},
-            "headers": {"Idempotency-Key": self.idempotency_key},
+    def _has_events(self) -> bool:
+        return self._events is not False
+
+    def _events_request(self, watch: Watch, connect: float | None) -> dict[str, Any]:
+        """Keyword arguments of one ``GET /v1/jobs/{id}/events`` (resuming after the last id)."""
+        headers = {"Accept": "text/event-stream"}
+        if watch.last_event_id is not None:
+            headers["Last-Event-ID"] = watch.last_event_id
+        left = watch.remaining()
+        read = EVENTS_READ_TIMEOUT if left is None else min(EVENTS_READ_TIMEOUT, left + 0.1)
+        return {
+            "method": "GET",
+            "url": job_path(watch.job_id, "/events"),
+            "headers": headers,
+            "timeout": httpx.Timeout(connect, read=read),
         }
-        return body, kwargs
 
 
 # --------------------------------------------------------------------------- retries
@@ -311,6 +182,7 @@ class Watch:
         self.reconnect = reconnect
         self.job = job
         self.last_event_id: str | None = None
+        self._decoder = SSEDecoder()
         self._down_since: float | None = None
         self._shown: tuple[Any, ...] | None = None if job is None else _key(job)
 
@@ -337,6 +209,16 @@ class Watch:
             if self.progress is not None:
                 self.progress(job)
         return job if job.finished else None
+
+    def new_stream(self) -> None:
+        """A new connection to the events stream begins."""
+        self._decoder = SSEDecoder()
+
+    def on_line(self, line: str) -> Job | None:
+        """A line of the events stream; returns the job once a final ``status`` arrives."""
+        event = self._decoder.feed(line)
+        self.last_event_id = self._decoder.last_event_id or self.last_event_id
+        return None if event is None else self.on_event(event)
 
     def on_event(self, event: ServerSentEvent) -> Job | None:
         """An event of the stream; returns the job once a final ``status`` arrives."""

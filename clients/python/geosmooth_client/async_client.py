@@ -17,27 +17,24 @@ import httpx
 
 from geosmooth_client._protocol import (
     JOBS,
-    USER_AGENT,
+    ClientBase,
     ProgressCallback,
     RetryPolicy,
-    Upload,
     Watch,
     check,
     job_path,
-    params_dict,
     transport_error,
 )
+from geosmooth_client._upload import Upload, params_dict
 from geosmooth_client.errors import ConnectionFailed, NotFound
 from geosmooth_client.models import Job, JobList, Report
 from geosmooth_client.result import AsyncResult
-from geosmooth_client.sse import SSEDecoder
 
 __all__ = ["AsyncClient"]
 
-_EVENTS_READ_TIMEOUT = 45.0
 
 
-class AsyncClient:
+class AsyncClient(ClientBase):
     """A connection to one geosmooth service, for asyncio code.
 
     The parameters are those of :class:`Client` (``transport``: an
@@ -55,16 +52,15 @@ class AsyncClient:
         cancel_grace: float = 30.0,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        headers = {"User-Agent": USER_AGENT}
-        if api_key:
-            headers["Authorization"] = f"Bearer {api_key}"
-        self.url = url.rstrip("/")
-        self.retry = retry or RetryPolicy()
-        self.reconnect_seconds = reconnect_seconds
-        self.cancel_grace = cancel_grace
-        self._events: bool | None = None
+        super().__init__(
+            url,
+            api_key,
+            retry=retry,
+            reconnect_seconds=reconnect_seconds,
+            cancel_grace=cancel_grace,
+        )
         self._http = httpx.AsyncClient(
-            base_url=self.url, headers=headers, timeout=timeout, transport=transport
+            base_url=self.url, headers=self.headers, timeout=timeout, transport=transport
         )
 
     async def __aenter__(self) -> AsyncClient:
@@ -201,15 +197,6 @@ class AsyncClient:
 
     # ------------------------------------------------------------------ waiting
 
-    @property
-    def uses_events(self) -> bool | None:
-        """Whether the service streams job events (``None`` until a wait found out)."""
-        return self._events
-
-    def _has_events(self) -> bool:
-        """Whether the service has (or may have) the events stream."""
-        return self._events is not False
-
     async def wait(
         self,
         job_id: str,
@@ -249,29 +236,21 @@ class AsyncClient:
         return Job.from_dict(check(response).json())
 
     async def _read_events(self, watch: Watch) -> Job | None:
-        headers = {"Accept": "text/event-stream"}
-        if watch.last_event_id is not None:
-            headers["Last-Event-ID"] = watch.last_event_id
-        left = watch.remaining()
-        read = _EVENTS_READ_TIMEOUT if left is None else min(_EVENTS_READ_TIMEOUT, left + 0.1)
-        timeout = httpx.Timeout(self._http.timeout.connect, read=read)
-        decoder = SSEDecoder()
-        url = job_path(watch.job_id, "/events")
+        request = self._events_request(watch, self._http.timeout.connect)
         try:
-            async with self._http.stream("GET", url, headers=headers, timeout=timeout) as response:
+            async with self._http.stream(**request) as response:
                 if response.status_code == 404:
                     await response.aread()
-                    job = await self._get_once(watch.job_id)  # NotFound for an unknown job
+                    job = await self._get_once(watch.job_id)
                     self._events = False
                     return watch.on_job(job)
                 if not response.is_success:
                     await response.aread()
                     check(response)
                 self._events = True
+                watch.new_stream()
                 async for line in response.aiter_lines():
-                    event = decoder.feed(line)
-                    watch.last_event_id = decoder.last_event_id
-                    final = watch.on_event(event) if event is not None else None
+                    final = watch.on_line(line)
                     if final is not None:
                         return final
         except httpx.TransportError as exc:
@@ -285,17 +264,12 @@ class AsyncClient:
         source: Any,
         params: Any = None,
         *,
-        fmt: str | None = None,
-        filename: str | None = None,
-        weld: bool = False,
         progress: ProgressCallback | None = None,
         timeout: float | None = None,
-        **param_values: Any,
+        **submit_options: Any,
     ) -> AsyncResult:
         """See :meth:`Client.smooth`; cancelling the task cancels the job."""
-        job = await self.submit(
-            source, params, fmt=fmt, filename=filename, weld=weld, **param_values
-        )
+        job = await self.submit(source, params, **submit_options)
         try:
             if progress is not None:
                 progress(job)

@@ -24,27 +24,24 @@ import httpx
 
 from geosmooth_client._protocol import (
     JOBS,
-    USER_AGENT,
+    ClientBase,
     ProgressCallback,
     RetryPolicy,
-    Upload,
     Watch,
     check,
     job_path,
-    params_dict,
     transport_error,
 )
+from geosmooth_client._upload import Upload, params_dict
 from geosmooth_client.errors import ConnectionFailed, JobInterrupted, NotFound
 from geosmooth_client.models import Job, JobList, Report
 from geosmooth_client.result import Result
-from geosmooth_client.sse import SSEDecoder
 
 __all__ = ["Client"]
 
-_EVENTS_READ_TIMEOUT = 45.0  # the service pings every 15 s
 
 
-class Client:
+class Client(ClientBase):
     """A connection to one geosmooth service.
 
     Parameters
@@ -77,16 +74,15 @@ class Client:
         cancel_grace: float = 30.0,
         transport: httpx.BaseTransport | None = None,
     ) -> None:
-        headers = {"User-Agent": USER_AGENT}
-        if api_key:
-            headers["Authorization"] = f"Bearer {api_key}"
-        self.url = url.rstrip("/")
-        self.retry = retry or RetryPolicy()
-        self.reconnect_seconds = reconnect_seconds
-        self.cancel_grace = cancel_grace
-        self._events: bool | None = None  # None: not tried yet; False: the service has none
+        super().__init__(
+            url,
+            api_key,
+            retry=retry,
+            reconnect_seconds=reconnect_seconds,
+            cancel_grace=cancel_grace,
+        )
         self._http = httpx.Client(
-            base_url=self.url, headers=headers, timeout=timeout, transport=transport
+            base_url=self.url, headers=self.headers, timeout=timeout, transport=transport
         )
 
     # ------------------------------------------------------------------ plumbing
@@ -271,15 +267,6 @@ class Client:
 
     # ------------------------------------------------------------------ waiting
 
-    @property
-    def uses_events(self) -> bool | None:
-        """Whether the service streams job events (``None`` until a wait found out)."""
-        return self._events
-
-    def _has_events(self) -> bool:
-        """Whether the service has (or may have) the events stream."""
-        return self._events is not False
-
     def wait(
         self,
         job_id: str,
@@ -336,29 +323,21 @@ class Client:
 
     def _read_events(self, watch: Watch) -> Job | None:
         """Read the events stream until the job is final or the stream ends."""
-        headers = {"Accept": "text/event-stream"}
-        if watch.last_event_id is not None:
-            headers["Last-Event-ID"] = watch.last_event_id
-        left = watch.remaining()
-        read = _EVENTS_READ_TIMEOUT if left is None else min(_EVENTS_READ_TIMEOUT, left + 0.1)
-        timeout = httpx.Timeout(self._http.timeout.connect, read=read)
-        decoder = SSEDecoder()
+        request = self._events_request(watch, self._http.timeout.connect)
         try:
-            url = job_path(watch.job_id, "/events")
-            with self._http.stream("GET", url, headers=headers, timeout=timeout) as response:
-                if response.status_code == 404:
+            with self._http.stream(**request) as response:
+                if response.status_code == 404:  # an unknown job (NotFound), or no events
                     response.read()
-                    job = self._get_once(watch.job_id)  # NotFound for an unknown job
+                    job = self._get_once(watch.job_id)
                     self._events = False
                     return watch.on_job(job)
                 if not response.is_success:
                     response.read()
                     check(response)
                 self._events = True
+                watch.new_stream()
                 for line in response.iter_lines():
-                    event = decoder.feed(line)
-                    watch.last_event_id = decoder.last_event_id
-                    final = watch.on_event(event) if event is not None else None
+                    final = watch.on_line(line)
                     if final is not None:
                         return final
         except httpx.TransportError as exc:
@@ -372,18 +351,16 @@ class Client:
         source: Any,
         params: Any = None,
         *,
-        fmt: str | None = None,
-        filename: str | None = None,
-        weld: bool = False,
         progress: ProgressCallback | None = None,
         timeout: float | None = None,
-        **param_values: Any,
+        **submit_options: Any,
     ) -> Result:
         """Submit, wait, and return the :class:`Result` of a succeeded job.
 
-        ``source``, ``params``, ``fmt``, ``filename``, ``weld`` and ``**param_values`` are those
-        of :meth:`submit`; ``progress`` and ``timeout`` those of :meth:`wait`. If the call ends
-        without a result (Ctrl-C, timeout), the job is cancelled on the service.
+        ``source``, ``params`` and ``**submit_options`` (``fmt``, ``filename``, ``weld``, the
+        parameter values such as ``tau=0.5``) are those of :meth:`submit`; ``progress`` and
+        ``timeout`` those of :meth:`wait`. If the call ends without a result (Ctrl-C, timeout),
+        the job is cancelled on the service.
 
         Raises
         ------
@@ -394,7 +371,7 @@ class Client:
         WaitTimeout, ApiError, ConnectionFailed
             As :meth:`submit` and :meth:`wait`.
         """
-        job = self.submit(source, params, fmt=fmt, filename=filename, weld=weld, **param_values)
+        job = self.submit(source, params, **submit_options)
         try:
             if progress is not None:
                 progress(job)
