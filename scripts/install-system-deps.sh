@@ -13,8 +13,7 @@ set -euo pipefail
 build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc)
 python_pkgs=(python3-dev python3-venv)  # Debian's python3 needs these for venv + C extensions
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
-test_pkgs=(iproute2)  # `ss`: tests/cli watch the bytes of an upload on the wire
-pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}" "${test_pkgs[@]}")
+pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
 case "${1:-}" in
   --build) pkgs=("${build_pkgs[@]}") ;;
