@@ -110,13 +110,21 @@ def test_submit_rejected_input(live: LiveServer, tmp_path: Path) -> None:
     assert not (tmp_path / "o.xyz").exists()
 
 
-def test_submit_failed_job(live: LiveServer, tmp_path: Path) -> None:
-    pts, faces = noisy_sphere(1)
-    src = tmp_path / "s.obj"
-    src.write_bytes(encode("obj", pts, faces))
-    done = _run(src, "--server", live.url, "-o", tmp_path / "o.obj", "--tau", "1e9")
+def test_submit_failed_job(tmp_path: Path) -> None:
+    """A job that fails on the server (here: over the server's time limit per job; invalid
+    parameters are refused before a job exists) ends with exit status 9 and the reason."""
+    env = {"GEOSMOOTH_JOB_TIMEOUT": "0.3"}
+    server = LiveServer(tmp_path / "data", workers=1, env=env).start()
+    try:
+        src = tmp_path / "slow.xyz"
+        src.write_bytes(encode("xyz", noisy_plane_cloud(30000, seed=45), None))
+        slow = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "48"]
+        done = _run(src, "--server", server.url, "-o", tmp_path / "o.xyz", *slow)
+    finally:
+        server.stop()
     assert done.returncode == EXIT_JOB_FAILED, done.stderr
-    assert "failed" in done.stderr.splitlines()[-1]
+    last = done.stderr.splitlines()[-1]
+    assert last.startswith("geosmooth: error: job ") and "failed: Job timed out" in last, last
 
 
 def test_submit_unreachable_server(tmp_path: Path) -> None:

@@ -130,11 +130,18 @@ class JobLinks:
     status: str
     result: str
     report: str
+    events: str | None = None
+    extra: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> JobLinks:
+        values, extra = _split(cls, data)
+        return cls(**values, extra=extra)
 
     @classmethod
     def for_job(cls, job_id: str) -> JobLinks:
         base = f"/v1/jobs/{job_id}"
-        return cls(base, f"{base}/result", f"{base}/report")
+        return cls(base, f"{base}/result", f"{base}/report", f"{base}/events")
 
 
 class Report(Mapping[str, Any]):
@@ -203,6 +210,9 @@ class Job:
     run_seconds: float | None = None
     expires_at: datetime | None = None
     links: JobLinks | None = None
+    max_attempts: int | None = None
+    weld: bool | None = None
+    webhook_url: str | None = None
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @classmethod
@@ -220,7 +230,7 @@ class Job:
         if values.get("report") is not None:
             values["report"] = Report(values["report"])
         if values.get("links") is not None:
-            values["links"] = JobLinks(**values["links"])
+            values["links"] = JobLinks.from_dict(values["links"])
         values["attempts"] = int(values.get("attempts") or 0)
         values["run_seconds"] = _float(values.get("run_seconds"))
         return cls(**values, extra=extra)
