@@ -10,13 +10,16 @@ to is replaced and the link stays a link. Anything that is not a regular file (`
 
 from __future__ import annotations
 
+import argparse
 import contextlib
+import inspect
 import json
 import math
 import os
 import stat
 import sys
 import tempfile
+import typing
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -24,14 +27,17 @@ from typing import Any
 from service.exit_codes import EXIT_OUTPUT, EXIT_USAGE
 
 from .errors import CliError, os_reason
+from .params import literal_names
 
 __all__ = [
     "check_format",
     "check_writable",
+    "given_writer_options",
     "output_format",
     "write_file",
     "write_json_report",
     "write_output",
+    "writer_options",
 ]
 
 
@@ -75,6 +81,29 @@ def output_format(output: str, explicit: str | None) -> str | None:
     if output != "-" and Path(output).suffix:
         raise CliError(f"cannot tell the output format from {output!r}; give --format", EXIT_USAGE)
     return None
+
+
+def writer_options() -> dict[str, tuple[tuple[str, ...], str]]:
+    """Options of :func:`service.io.write_geometry` that take a name, with their default.
+
+    The keyword-only parameters typed as a ``Literal`` (``normals``, ``precision``): the
+    ``smooth`` command offers each as ``--name``, so a writer option added in ``service.io``
+    appears on the command line by itself.
+    """
+    from service.io import write_geometry
+
+    hints = typing.get_type_hints(write_geometry)
+    out = {}
+    for name, parameter in inspect.signature(write_geometry).parameters.items():
+        choices = literal_names(hints.get(name))
+        if parameter.kind is parameter.KEYWORD_ONLY and choices:
+            out[name] = (choices, str(parameter.default))
+    return out
+
+
+def given_writer_options(ns: argparse.Namespace) -> dict[str, str]:
+    """The writer options given on the command line (the writer's defaults apply otherwise)."""
+    return {name: getattr(ns, name) for name in writer_options() if getattr(ns, name, None)}
 
 
 # --------------------------------------------------------------------------- writing

@@ -23,7 +23,13 @@ from service.exit_codes import EXIT_USAGE
 
 from .errors import CliError
 
-__all__ = ["TARGET_FIELDS", "add_smoothing_options", "option_name", "params_from_args"]
+__all__ = [
+    "TARGET_FIELDS",
+    "add_smoothing_options",
+    "literal_names",
+    "option_name",
+    "params_from_args",
+]
 
 #: The ways to pick lambda: mutually exclusive options. Whether one is required is the model's
 #: business (its validator), not argparse's.
@@ -76,10 +82,12 @@ def _literals(annotation: object) -> list[object]:
     return [m for a in args if a is not type(None) for m in _literals(a)]
 
 
-def _choices(info: FieldInfo) -> tuple[str, ...] | None:
-    """The names a field takes (``{normalized,curvature,feature}``), if it takes only names."""
-    members = _literals(info.annotation)
-    return tuple(members) if members and all(isinstance(m, str) for m in members) else None  # type: ignore[arg-type]
+def literal_names(annotation: object) -> tuple[str, ...] | None:
+    """The names a type allows (``{normalized,curvature,feature}``), if it allows only names."""
+    members = _literals(annotation)
+    if members and all(isinstance(m, str) for m in members):
+        return tuple(str(m) for m in members)
+    return None
 
 
 def add_smoothing_options(parser: argparse.ArgumentParser) -> None:
@@ -112,7 +120,7 @@ def add_smoothing_options(parser: argparse.ArgumentParser) -> None:
                 *flags, dest=name, action=action, default=None, help=_field_help(name)
             )
             continue
-        choices = _choices(info)
+        choices = literal_names(info.annotation)
         metavar = "{" + ",".join(choices) + "}" if choices else _METAVARS.get(name, name.upper())
         opts.add_argument(*flags, dest=name, metavar=metavar, default=None, help=_field_help(name))
 

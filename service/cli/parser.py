@@ -15,6 +15,7 @@ from typing import NoReturn
 from service.exit_codes import EXIT_CODES, EXIT_USAGE, SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
 
 from .errors import CliError
+from .output import writer_options
 from .params import add_smoothing_options
 
 __all__ = ["build_parser", "version"]
@@ -25,6 +26,14 @@ _EXAMPLES = (
     "geosmooth serve --port 8000",
     "geosmooth submit bunny.ply --server http://127.0.0.1:8000 -o out.ply --tau 2e-4",
 )
+
+
+#: Help of the writer options (``service.io.write_geometry``'s keyword arguments).
+_WRITER_HELP = {
+    "normals": "normals of the input: recomputed from the smoothed geometry, or left out",
+    "precision": "coordinates as the input stored them (type, or digits for text formats), or "
+    "forced to float32 / float64",
+}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -128,6 +137,11 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
     more.add_argument(
         "--ascii", action="store_true", help="write ASCII PLY [default: binary little-endian]"
     )
+    for name, (choices, default) in writer_options().items():
+        more.add_argument(
+            "--" + name.replace("_", "-"), dest=name, choices=choices,
+            help=_WRITER_HELP.get(name, "writer option") + f" [default: {default}]",
+        )  # fmt: skip
 
 
 def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:

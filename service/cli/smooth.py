@@ -23,7 +23,14 @@ from service.core.params import SmoothingParams
 from service.exit_codes import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE
 
 from .errors import CliError, os_reason
-from .output import check_format, check_writable, output_format, write_json_report, write_output
+from .output import (
+    check_format,
+    check_writable,
+    given_writer_options,
+    output_format,
+    write_json_report,
+    write_output,
+)
 from .params import params_from_args
 from .parser import version
 from .progress import ProgressDisplay, show_summary
@@ -182,7 +189,8 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     finally:
         progress.finish()
     try:
-        data = write_geometry(doc, out_fmt, points=result.points, ply_ascii=ns.ascii)
+        options = given_writer_options(ns)
+        data = write_geometry(doc, out_fmt, points=result.points, ply_ascii=ns.ascii, **options)
     except FormatError as exc:  # the format cannot hold this geometry: an output problem
         raise CliError(f"cannot write {out_fmt}: {exc.message}", EXIT_OUTPUT) from exc
     write_output(ns.output, data, "output")
