@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import httpx
 
@@ -35,6 +35,7 @@ __all__ = [
 #: Called with the job each time its status or progress changes.
 ProgressCallback = Callable[[Job], None]
 
+H = TypeVar("H", httpx.Client, httpx.AsyncClient)
 USER_AGENT = "geosmooth-client/0.1.0"
 JOBS = "/v1/jobs"
 EVENTS_READ_TIMEOUT = 45.0  # the service pings every 15 s
@@ -63,17 +64,22 @@ def transport_error(url: str, exc: httpx.TransportError) -> ConnectionFailed:
 # --------------------------------------------------------------------------- clients
 
 
-class ClientBase:
-    """What :class:`Client` and :class:`AsyncClient` hold alike (parameters: see Client)."""
+class ClientBase(Generic[H]):
+    """What :class:`Client` and :class:`AsyncClient` hold alike (parameters: see Client).
+
+    A subclass opens its ``httpx`` client (sync or async) in :meth:`_connect`.
+    """
 
     def __init__(
         self,
         url: str,
-        api_key: str | None,
+        api_key: str | None = None,
         *,
-        retry: RetryPolicy | None,
-        reconnect_seconds: float,
-        cancel_grace: float,
+        timeout: float = 60.0,
+        retry: RetryPolicy | None = None,
+        reconnect_seconds: float = 30.0,
+        cancel_grace: float = 30.0,
+        transport: Any = None,
     ) -> None:
         self.url = url.rstrip("/")
         self.retry = retry or RetryPolicy()
@@ -83,6 +89,10 @@ class ClientBase:
         if api_key:
             self.headers["Authorization"] = f"Bearer {api_key}"
         self._events: bool | None = None  # None: not tried yet; False: the service has none
+        self._http: H = self._connect(timeout, transport)
+
+    def _connect(self, timeout: float, transport: Any) -> H:
+        raise NotImplementedError
 
     @property
     def uses_events(self) -> bool | None:

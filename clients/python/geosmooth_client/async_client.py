@@ -19,7 +19,6 @@ from geosmooth_client._protocol import (
     JOBS,
     ClientBase,
     ProgressCallback,
-    RetryPolicy,
     Watch,
     check,
     job_path,
@@ -34,32 +33,17 @@ __all__ = ["AsyncClient"]
 
 
 
-class AsyncClient(ClientBase):
+class AsyncClient(ClientBase[httpx.AsyncClient]):
     """A connection to one geosmooth service, for asyncio code.
 
     The parameters are those of :class:`Client` (``transport``: an
     :class:`httpx.AsyncBaseTransport`).
     """
 
-    def __init__(
-        self,
-        url: str,
-        api_key: str | None = None,
-        *,
-        timeout: float = 60.0,
-        retry: RetryPolicy | None = None,
-        reconnect_seconds: float = 30.0,
-        cancel_grace: float = 30.0,
-        transport: httpx.AsyncBaseTransport | None = None,
-    ) -> None:
-        super().__init__(
-            url,
-            api_key,
-            retry=retry,
-            reconnect_seconds=reconnect_seconds,
-            cancel_grace=cancel_grace,
-        )
-        self._http = httpx.AsyncClient(
+    def _connect(
+        self, timeout: float, transport: httpx.AsyncBaseTransport | None
+    ) -> httpx.AsyncClient:
+        return httpx.AsyncClient(
             base_url=self.url, headers=self.headers, timeout=timeout, transport=transport
         )
 

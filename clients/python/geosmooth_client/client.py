@@ -26,7 +26,6 @@ from geosmooth_client._protocol import (
     JOBS,
     ClientBase,
     ProgressCallback,
-    RetryPolicy,
     Watch,
     check,
     job_path,
@@ -41,7 +40,7 @@ __all__ = ["Client"]
 
 
 
-class Client(ClientBase):
+class Client(ClientBase[httpx.Client]):
     """A connection to one geosmooth service.
 
     Parameters
@@ -63,25 +62,8 @@ class Client(ClientBase):
         Passed to :class:`httpx.Client` (e.g. a Unix socket transport).
     """
 
-    def __init__(
-        self,
-        url: str,
-        api_key: str | None = None,
-        *,
-        timeout: float = 60.0,
-        retry: RetryPolicy | None = None,
-        reconnect_seconds: float = 30.0,
-        cancel_grace: float = 30.0,
-        transport: httpx.BaseTransport | None = None,
-    ) -> None:
-        super().__init__(
-            url,
-            api_key,
-            retry=retry,
-            reconnect_seconds=reconnect_seconds,
-            cancel_grace=cancel_grace,
-        )
-        self._http = httpx.Client(
+    def _connect(self, timeout: float, transport: httpx.BaseTransport | None) -> httpx.Client:
+        return httpx.Client(
             base_url=self.url, headers=self.headers, timeout=timeout, transport=transport
         )
 
