@@ -8,6 +8,7 @@ body leaves no job on the service, which never sees a complete request.
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -151,7 +152,8 @@ class Upload:
         if isinstance(source, str | os.PathLike):
             path = Path(source)
             if not path.is_file():
-                raise FileNotFoundError(2, "No such file", str(path))
+                why = "Not a regular file" if path.exists() else "No such file or directory"
+                raise OSError(errno.EINVAL if path.exists() else errno.ENOENT, why, str(path))
             opener: Callable[[], IO[bytes]] = lambda: path.open("rb")  # noqa: E731
             name = filename or path.name
         elif isinstance(source, bytes | bytearray | memoryview):

@@ -203,12 +203,12 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
                 return final
 
     async def _follow(self, watch: Watch, poll_interval: float) -> Job | None:
-        if self._events is not False:
+        """One look at the job: its events stream until it ends, or one poll."""
+        if self._has_events():
             final = await self._read_events(watch)
-            if final is not None or self._has_events():
-                return final
-        final = watch.on_job(await self._get_once(watch.job_id))
-        if final is None:
+        else:
+            final = watch.on_job(await self._get_once(watch.job_id))
+        if final is None:  # a poll, or a stream that ended early: pause before the next look
             await asyncio.sleep(watch.sleep_time(poll_interval))
         return final
 
