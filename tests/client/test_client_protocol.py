@@ -11,6 +11,7 @@ import _thread
 import asyncio
 import json
 import threading
+import time
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -183,6 +184,7 @@ def test_rate_limit_and_auth_problems_are_typed() -> None:
 
 def _slow_reader(log: list[str]) -> Route:
     async def slow(request: Request) -> Response:
+        log.append("started")
         try:
             async for _ in request.stream():
                 await asyncio.sleep(0.02)
@@ -195,24 +197,30 @@ def _slow_reader(log: list[str]) -> Route:
     return Route("/v1/jobs", slow, methods=["POST"])
 
 
+def _when(log: list[str], entry: str, timeout: float = 30.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while entry not in log and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return entry in log
+
+
 def test_ctrl_c_in_the_middle_of_an_upload_makes_no_job() -> None:
     log: list[str] = []
     data = b"0 0 0\n" * 4_000_000  # 24 MB, read at a few MB/s: the upload takes seconds
+
+    def interrupt_once_uploading() -> None:
+        if _when(log, "started"):
+            time.sleep(0.2)
+            _thread.interrupt_main()  # as Ctrl-C: SIGINT's handler runs in the main thread
+
     with ScriptedServer([_slow_reader(log)]) as server, Client(server.url) as client:
-        timer = threading.Timer(0.5, _thread.interrupt_main)
-        timer.start()
-        try:
-            with pytest.raises(JobInterrupted) as info:
-                client.submit(data, fmt="xyz", tau=1)
-        finally:
-            timer.cancel()
+        threading.Thread(target=interrupt_once_uploading, daemon=True).start()
+        with pytest.raises(JobInterrupted) as info:
+            client.submit(data, fmt="xyz", tau=1)
         assert (info.value.job_id, info.value.status) == (None, "not-created")
         assert info.value.stopped and "no job was created" in str(info.value)
-        for _ in range(100):
-            if log:
-                break
-            threading.Event().wait(0.05)
-    assert log == ["disconnected"]
+        assert _when(log, "disconnected")
+    assert log == ["started", "disconnected"]
 
 
 def test_cancelling_an_async_upload_makes_no_job() -> None:
@@ -221,15 +229,15 @@ def test_cancelling_an_async_upload_makes_no_job() -> None:
     async def run() -> None:
         async with AsyncClient(server.url) as client:
             task = asyncio.ensure_future(client.submit(b"0 0 0\n" * 4_000_000, fmt="xyz", tau=1))
-            await asyncio.sleep(0.5)
+            while "started" not in log:
+                await asyncio.sleep(0.01)
+            await asyncio.sleep(0.2)
             task.cancel()
             with pytest.raises(asyncio.CancelledError):
                 await task
-            for _ in range(100):
-                if log:
-                    return
-                await asyncio.sleep(0.05)
+            while "disconnected" not in log:
+                await asyncio.sleep(0.01)
 
     with ScriptedServer([_slow_reader(log)]) as server:
-        asyncio.run(run())
-    assert log == ["disconnected"]
+        asyncio.run(asyncio.wait_for(run(), 30))
+    assert log == ["started", "disconnected"]
