@@ -41,11 +41,11 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
 _SEP = "\n"
 _EXAMPLE = (
-    "id: 1\nevent: status\ndata: {\"id\": \"3f2a9c\", \"status\": \"running\", ...}\n\n"
-    "id: 2\nevent: progress\ndata: {\"stage\": \"search\", \"iteration\": 3, "
-    "\"lambda\": 0.011, \"phi\": 0.47, \"tau\": 0.5, ...}\n\n"
+    'id: 1\nevent: status\ndata: {"id": "3f2a9c", "status": "running", ...}\n\n'
+    'id: 2\nevent: progress\ndata: {"stage": "search", "iteration": 3, '
+    '"lambda": 0.011, "phi": 0.47, "tau": 0.5, ...}\n\n'
     ": ping\n\n"
-    "id: 7\nevent: status\ndata: {\"id\": \"3f2a9c\", \"status\": \"succeeded\", ...}\n\n"
+    'id: 7\nevent: status\ndata: {"id": "3f2a9c", "status": "succeeded", ...}\n\n'
 )
 
 

@@ -38,6 +38,21 @@ router = APIRouter(prefix="/v1", tags=["smooth"])
 class Preview(BaseModel):
     """The geometry for display, in the file's vertex order."""
 
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "origin": [0.5, 0.5, 0.0],
+                    "n_points": 3,
+                    "dimension": 3,
+                    "positions": "AAAAvwAAAL8AAAAAAAAAPwAAAL8AAAAAAAAAvwAAAD8AAAAA",
+                    "faces": "AAAAAAEAAAACAAAA",
+                    "segments": None,
+                }
+            ]
+        }
+    )
+
     origin: list[float] = Field(description="Added to ``positions`` to get the coordinates.")
     n_points: int = Field(description="Vertices (the file's count, also when welded).")
     dimension: int = Field(description="Coordinates per point in the file.")

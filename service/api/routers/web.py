@@ -39,6 +39,31 @@ _FAVICON = "/static/favicon.svg"
 router = APIRouter(include_in_schema=False)
 _static = StaticFiles(directory=STATIC_DIR, check_dir=False)
 
+#: Content-Security-Policy of the HTML pages: the browser itself refuses every other origin.
+#: (ReDoc 2.5.4 shows its logo from its CDN as an <img>; this policy is what stops that request,
+#: and the bundle then hides the image.) Inline scripts: FastAPI's docs pages and the page's
+#: import map; inline styles: Swagger UI, ReDoc and three.js set them.
+CSP = "; ".join(
+    [
+        "default-src 'self'",
+        "script-src 'self' 'unsafe-inline'",
+        "style-src 'self' 'unsafe-inline'",
+        "img-src 'self' data: blob:",
+        "font-src 'self' data:",
+        "connect-src 'self'",
+        "worker-src 'self' blob:",
+        "frame-ancestors 'self'",
+        "base-uri 'self'",
+        "form-action 'self'",
+    ]
+)
+
+
+def _html(response: Response) -> Response:
+    response.headers["Content-Security-Policy"] = CSP
+    response.headers["Cache-Control"] = "no-cache"
+    return response
+
 
 def _cache_control(path: str) -> str:
     """Vendored files never change under a versioned path; the page's own files revalidate."""
@@ -46,9 +71,9 @@ def _cache_control(path: str) -> str:
 
 
 @router.get("/", response_class=HTMLResponse)
-async def index() -> FileResponse:
+async def index() -> Response:
     """The web page."""
-    return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+    return _html(FileResponse(STATIC_DIR / "index.html", media_type="text/html"))
 
 
 @router.get("/static/{path:path}")
@@ -102,31 +127,35 @@ async def config(settings: SettingsDep) -> dict[str, Any]:
 
 
 @router.get("/docs")
-async def swagger_ui(request: Request) -> HTMLResponse:
+async def swagger_ui(request: Request) -> Response:
     """Swagger UI from the vendored swagger-ui-dist."""
-    return get_swagger_ui_html(
-        openapi_url=request.app.openapi_url,
-        title=f"{request.app.title} - Swagger UI",
-        oauth2_redirect_url="/docs/oauth2-redirect",
-        swagger_js_url=f"{_VENDOR}/{SWAGGER_UI}/swagger-ui-bundle.js",
-        swagger_css_url=f"{_VENDOR}/{SWAGGER_UI}/swagger-ui.css",
-        swagger_favicon_url=_FAVICON,
+    return _html(
+        get_swagger_ui_html(
+            openapi_url=request.app.openapi_url,
+            title=f"{request.app.title} - Swagger UI",
+            oauth2_redirect_url="/docs/oauth2-redirect",
+            swagger_js_url=f"{_VENDOR}/{SWAGGER_UI}/swagger-ui-bundle.js",
+            swagger_css_url=f"{_VENDOR}/{SWAGGER_UI}/swagger-ui.css",
+            swagger_favicon_url=_FAVICON,
+        )
     )
 
 
 @router.get("/docs/oauth2-redirect")
-async def swagger_ui_redirect() -> HTMLResponse:
+async def swagger_ui_redirect() -> Response:
     """OAuth2 redirect page of Swagger UI."""
-    return get_swagger_ui_oauth2_redirect_html()
+    return _html(get_swagger_ui_oauth2_redirect_html())
 
 
 @router.get("/redoc")
-async def redoc(request: Request) -> HTMLResponse:
+async def redoc(request: Request) -> Response:
     """ReDoc from the vendored standalone bundle, without Google fonts."""
-    return get_redoc_html(
-        openapi_url=request.app.openapi_url,
-        title=f"{request.app.title} - ReDoc",
-        redoc_js_url=f"{_VENDOR}/{REDOC}/redoc.standalone.js",
-        redoc_favicon_url=_FAVICON,
-        with_google_fonts=False,
+    return _html(
+        get_redoc_html(
+            openapi_url=request.app.openapi_url,
+            title=f"{request.app.title} - ReDoc",
+            redoc_js_url=f"{_VENDOR}/{REDOC}/redoc.standalone.js",
+            redoc_favicon_url=_FAVICON,
+            with_google_fonts=False,
+        )
     )

@@ -36,11 +36,19 @@ export function showInputView(info) {
   return { geom, plan, viewer: v };
 }
 
-function showLegend(vmax) {
+function showLegend(scale, vmax) {
   $("#legend").hidden = false;
   $("#legend-min").textContent = "0";
-  $("#legend-mid").textContent = fmt(vmax / 2, 3);
-  $("#legend-max").textContent = fmt(vmax, 3);
+  $("#legend-mid").textContent = fmt(scale / 2, 3);
+  $("#legend-max").textContent = scale < vmax ? `≥ ${fmt(scale, 3)}` : fmt(scale, 3);
+}
+
+/** The colour scale's top: the 99th percentile, so that a few outliers do not darken the rest. */
+function colourScale(dev, vmax) {
+  if (dev.length < 100) return vmax;
+  const sorted = Float32Array.from(dev).sort();
+  const p99 = sorted[Math.floor(0.99 * (sorted.length - 1))];
+  return p99 > 0 ? p99 : vmax;
 }
 
 /** Line segments of a JSON geometry: its edges and its polylines' consecutive pairs. */
@@ -80,10 +88,11 @@ export async function loadResultView(job, input) {
     const after = resultPositions(json, geom.origin);
     const dev = deviations(geom.positions, after);
     const vmax = dev.reduce((m, x) => (x > m ? x : m), 0);
+    const scale = colourScale(dev, vmax);
     v.show({ kind: input.info.kind, dimension: geom.dimension, before: take(geom.positions, plan.keep),
       after: take(after, plan.keep), faces: plan.faces, segments: plan.segments,
-      deviation: takeMax(dev, plan.of, plan.keep.length), vmax }, { refit: false });
-    showLegend(vmax);
+      deviation: takeMax(dev, plan.of, plan.keep.length), vmax: scale }, { refit: false });
+    showLegend(scale, vmax);
     const rms = Math.sqrt(dev.reduce((s, x) => s + x * x, 0) / Math.max(1, dev.length));
     const note = $("#viewer-note");
     note.textContent = `${decimationNote(geom, plan)} Deviation per point: RMS ${fmt(rms)}, max ${fmt(vmax)} (data units).`.trim();

@@ -163,6 +163,7 @@ function openJob(job) {
 
 function follow(job, input) {
   state.job = { id: job.id, input, done: false };
+  document.body.dataset.jobId = job.id;
   clearReport();
   $("#pane-after").dataset.resultLoaded = "false";
   state.progress.reset(`job ${job.id.slice(0, 8)}: ${job.status}`);

@@ -40,7 +40,8 @@ export class ProgressView {
 
   showProgress(p, job) {
     const tolerance = job?.params?.tolerance || 1e-3;
-    if (p.stage) $("#p-stage").textContent = STAGE_LABELS[p.stage] || p.stage;
+    const stage = p.stage || (p.iteration ? "search" : null); // a record without a stage: the lambda search
+    if (stage) $("#p-stage").textContent = STAGE_LABELS[stage] || stage;
     if (p.iteration !== undefined) $("#p-iteration").textContent = fmt(p.iteration);
     $("#p-lambda").textContent = fmt(p.lambda, 6);
     $("#p-phi").textContent = p.tau ? `${fmt(p.phi, 6)} vs τ = ${fmt(p.tau, 6)}` : fmt(p.phi, 6);

@@ -12,7 +12,9 @@ const VIRIDIS = [
   [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441],
   [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144],
 ];
-const BASE = [0.72, 0.76, 0.84];
+const BASE_SURFACE = [0.66, 0.71, 0.80]; // lit meshes
+const BASE_LINE = [0.22, 0.27, 0.36]; // curves and points on the light background
+export const BACKGROUND = 0xeceef3;
 
 export function colormap(t) {
   const x = Math.min(1, Math.max(0, Number.isFinite(t) ? t : 0)) * (VIRIDIS.length - 1);
@@ -31,11 +33,11 @@ export function drawColorbar(canvas) {
   }
 }
 
-function colors(n, values, vmax) {
+function colors(n, values, vmax, base) {
   const out = new Float32Array(n * 3);
   const c = new THREE.Color();
   for (let i = 0; i < n; i++) {
-    const rgb = values ? colormap(values[i] / (vmax || 1)) : BASE;
+    const rgb = values ? colormap(values[i] / (vmax || 1)) : base;
     c.setRGB(rgb[0], rgb[1], rgb[2], THREE.SRGBColorSpace); // stored linear
     out[3 * i] = c.r; out[3 * i + 1] = c.g; out[3 * i + 2] = c.b;
   }
@@ -48,7 +50,7 @@ class Pane {
     this.camera = camera;
     this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
-    this.renderer.setClearColor(0x20242c);
+    this.renderer.setClearColor(BACKGROUND);
     container.replaceChildren(this.renderer.domElement);
     this.scene = new THREE.Scene();
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x404655, 1.4));
@@ -122,10 +124,12 @@ export class CompareViewer {
   build(positions, values, vmax) {
     const d = this.data;
     const g = new THREE.BufferGeometry();
+    const surface = d.faces && d.faces.length;
+    const rgb = colors(positions.length / 3, values, vmax, surface ? BASE_SURFACE : BASE_LINE);
     g.setAttribute("position", new THREE.BufferAttribute(positions, 3));
-    g.setAttribute("color", new THREE.BufferAttribute(colors(positions.length / 3, values, vmax), 3));
+    g.setAttribute("color", new THREE.BufferAttribute(rgb, 3));
     const o = this.options;
-    if (d.faces && d.faces.length) {
+    if (surface) {
       g.setIndex(new THREE.BufferAttribute(d.faces, 1));
       g.computeVertexNormals();
       const m = new THREE.MeshStandardMaterial({ vertexColors: true, side: THREE.DoubleSide, roughness: 0.75,
