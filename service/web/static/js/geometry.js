@@ -1,8 +1,15 @@
 // Geometry for display: decoding POST /v1/info?preview=true, the result's JSON, deviations,
 // and decimation for display only (the computation always uses every point).
 
-export const DISPLAY_MAX_POINTS = 300000; // clouds and curves: vertices drawn
-export const DISPLAY_MAX_FACES = 600000; // meshes: triangles drawn
+// What is drawn at most (vertices; triangles): with a GPU, and with a software renderer
+// (SwiftShader, llvmpipe: headless browsers, machines without a GPU), where every pixel costs CPU.
+export const BUDGETS = { gpu: [300000, 600000], software: [60000, 120000] };
+let [DISPLAY_MAX_POINTS, DISPLAY_MAX_FACES] = BUDGETS.gpu;
+
+/** Choose the display budget ("gpu" or "software"). */
+export function setDisplayBudget(kind) {
+  [DISPLAY_MAX_POINTS, DISPLAY_MAX_FACES] = BUDGETS[kind] || BUDGETS.gpu;
+}
 
 function fromBase64(text, Type) {
   if (!text) return null;

@@ -79,6 +79,14 @@ class Pane {
   }
 }
 
+/** Whether WebGL runs on the CPU (SwiftShader, llvmpipe, ...): then the display budget is smaller. */
+export function softwareRendering(renderer) {
+  const gl = renderer.getContext();
+  const ext = gl.getExtension("WEBGL_debug_renderer_info");
+  const name = String(gl.getParameter(ext ? ext.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+  return /swiftshader|llvmpipe|softpipe|software|basic render/i.test(name);
+}
+
 export class CompareViewer {
   constructor(beforeEl, afterEl) {
     this.camera = new THREE.PerspectiveCamera(40, 1, 1e-3, 1e3);
@@ -88,6 +96,7 @@ export class CompareViewer {
     for (const c of this.controls) c.addEventListener("change", () => this.render());
     this.options = { shading: "smooth", wireframe: false, deviation: true, pointSize: 3 };
     this.data = null;
+    this.software = softwareRendering(this.panes[0].renderer);
     new ResizeObserver(() => this.resize()).observe(beforeEl);
     this.resize();
   }
