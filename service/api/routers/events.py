@@ -32,7 +32,6 @@ from starlette.concurrency import run_in_threadpool
 
 from service.api.deps import JobDep, QueueDep, SettingsDep
 from service.api.docs import problem_responses
-from service.api.views import job_view
 from service.jobs.queue import JobQueue, JobRecord
 
 __all__ = ["job_event_stream", "router"]
@@ -50,7 +49,12 @@ _EXAMPLE = (
 
 
 def _job_json(record: JobRecord) -> dict[str, Any]:
-    """The job as ``GET /v1/jobs/{id}`` renders it."""
+    """The job exactly as ``GET /v1/jobs/{id}`` renders it."""
+    public = getattr(record, "public_dict", None)  # the jobs protocol v2 record renders itself
+    if callable(public):
+        return dict(public())
+    from service.api.views import job_view  # the view of the protocol v1 record
+
     return job_view(record).model_dump(mode="json", by_alias=True)
 
 

@@ -83,6 +83,10 @@ export class ProgressView {
       await readEvents(`/v1/jobs/${id}/events`, onEvent, controller.signal);
     } catch (err) {
       if (controller.signal.aborted) return;
+      if ([401, 403, 404].includes(err.status)) { // polling would get the same answer
+        $("#progress-text").textContent = `cannot follow job ${id.slice(0, 8)}: ${err.message}`;
+        return;
+      }
       $("#progress-text").textContent = `event stream lost (${err.message}); polling`;
     }
     while (!controller.signal.aborted && !(last && FINAL.has(last.status))) {
@@ -90,7 +94,7 @@ export class ProgressView {
       try {
         onEvent({ type: "status", data: JSON.stringify(await apiJson(`/v1/jobs/${id}`)) });
       } catch (err) {
-        if (err.status === 404) break; // deleted meanwhile
+        if ([401, 403, 404].includes(err.status)) break; // deleted meanwhile, or not ours
       }
     }
   }
