@@ -209,6 +209,18 @@ def test_curve_from_bundled_sample(browsing: Browsing, web_server: WebServer) ->
     browsing.shot("04-curve-done")
     helix = read_geometry(SAMPLES / "noisy-helix.obj").geometry.points
     check_download(page, "json", helix, report)  # another format than the input's
+    # A fresh page opens the job from the list: report, plot and the result (input unknown).
+    job_id = page.get_attribute("body", "data-job-id")
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+    page.click(f"#jobs-table tr[data-job-id='{job_id}'] td:first-child a")
+    page.wait_for_selector("#phi-plot[data-final=true]")
+    page.wait_for_selector("#pane-after[data-result-loaded=true]")
+    assert "not loaded in this page" in page.text_content("#viewer-note")
+    assert page.get_attribute("#phi-plot", "data-iterations") == str(len(report["history"]))
+    page.wait_for_timeout(200)
+    assert_panes_drawn(page, 0.002)
+    browsing.shot("04b-curve-reopened")
     browsing.assert_offline()
 
 

@@ -9,6 +9,15 @@ function niceLogTicks(lo, hi) {
   return ticks;
 }
 
+function niceLinearTicks(lo, hi, count = 5) {
+  const raw = (hi - lo) / count;
+  const mag = 10 ** Math.floor(Math.log10(raw || 1));
+  const step = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) || raw;
+  const ticks = [];
+  for (let t = Math.ceil(lo / step) * step; t <= hi + step * 1e-9; t += step) ticks.push(Number(t.toPrecision(12)));
+  return ticks;
+}
+
 function fmt(v) {
   if (v === null || v === undefined || !Number.isFinite(v)) return "–";
   const a = Math.abs(v);
@@ -44,8 +53,8 @@ function axes(ctx, box, xr, yr, { xlog, ylog, xlabel, ylabel }) {
   ctx.strokeStyle = COLORS.grid;
   ctx.fillStyle = COLORS.axis;
   ctx.lineWidth = 1;
-  const xt = xlog ? niceLogTicks(...xr) : [xr[0], (xr[0] + xr[1]) / 2, xr[1]];
-  const yt = ylog ? niceLogTicks(...yr) : [yr[0], (yr[0] + yr[1]) / 2, yr[1]];
+  const xt = xlog ? niceLogTicks(...xr) : niceLinearTicks(...xr);
+  const yt = ylog ? niceLogTicks(...yr) : niceLinearTicks(...yr, 4);
   ctx.textAlign = "center";
   for (const t of xt.filter((t) => t >= xr[0] * 0.999 && t <= xr[1] * 1.001)) {
     ctx.beginPath(); ctx.moveTo(X(t), box.t); ctx.lineTo(X(t), box.b); ctx.stroke();
