@@ -55,7 +55,7 @@ def submit_grid(client: httpx.Client, m: int, rms: float) -> dict[str, Any]:
 
 def test_events_follow_a_job_to_its_final_status(web_server: WebServer) -> None:
     with web_server.client() as client:
-        job = submit_grid(client, 180, 0.004)
+        job = submit_grid(client, 150, 0.004)
         with client.stream("GET", f"/v1/jobs/{job['id']}/events") as response:
             assert response.status_code == 200
             assert response.headers["content-type"].startswith("text/event-stream")
@@ -71,7 +71,7 @@ def test_events_follow_a_job_to_its_final_status(web_server: WebServer) -> None:
     statuses = [json.loads(e["data"])["status"] for e in events if e["event"] == "status"]
     assert len(statuses) == len(set(statuses))  # one event per status change
     report = final["report"]
-    tau = 180 * 180 * 0.004**2
+    tau = 150 * 150 * 0.004**2
     progress = [json.loads(e["data"]) for e in events if e["event"] == "progress"]
     assert progress, events  # the search takes ~1 s; the worker writes progress every 0.2 s
     iterations = [p["iteration"] for p in progress]
