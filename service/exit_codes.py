@@ -34,7 +34,7 @@ EXIT_REJECTED = 8
 EXIT_JOB_FAILED = 9
 EXIT_CANCELLED = 10
 
-#: Further statuses of ``geosmooth submit``, set by ``service.client.submit``.
+#: Further statuses of ``geosmooth submit`` (``service.cli.submit``).
 SUBMIT_EXIT_CODES: dict[int, str] = {
     EXIT_UNREACHABLE: "submit: the server cannot be reached",
     EXIT_REJECTED: "submit: the server rejected the input or the parameters",
