@@ -79,14 +79,16 @@ class Digits:
         def between(cs: NDArray[np.int64], a: NDArray[np.int64], b: NDArray[np.int64]) -> Any:
             return cs[b] - np.where(a > 0, cs[np.maximum(a - 1, 0)], 0)
 
-        other = between(cs_plain, s, e) > 0
+        head = raw[np.minimum(s + np.isin(raw[s], (43, 45)), raw.size - 1)]
+        named = ((head | 32) == ord("n")) | ((head | 32) == ord("i"))  # nan, inf: any spec
+        other = (between(cs_plain, s, e) > 0) & ~named
         has_dot = last_dot >= s
         decimals = np.where(has_dot, e - last_dot, 0)
         digits = between(cs_digit, s, e)
         lead = np.where(next_nz <= e, between(cs_digit, s, np.minimum(next_nz, e)) - 1, digits - 1)
         sig = np.maximum(digits - lead, 1)
         for c in range(self.width):
-            m = col == c
+            m = (col == c) & ~named
             if not m.any():
                 continue
             self.other[c] |= bool(other[m].any())
@@ -109,12 +111,13 @@ class Digits:
 
 
 #: The coarsest resolution a text spec may have, relative to the data's extent: an input of
-#: integers (``v 1 2 3``) must not quantize smoothed points to integers.
-RELATIVE_RESOLUTION = 1e-7
+#: integers (``v 1 2 3``) must not quantize smoothed points to integers, while six decimals on
+#: an object of a few units stay six decimals.
+RELATIVE_RESOLUTION = 1e-5
 
 
 def fine_enough(spec: str, values: NDArray[np.float64], extent: float) -> str:
-    """``spec``, refined until its resolution is at most ``1e-7 * extent`` (see above)."""
+    """``spec``, refined until its resolution is at most ``1e-5 * extent`` (see above)."""
     if spec in ("%r", F32, "%d") or values.size == 0:
         return spec
     need = RELATIVE_RESOLUTION * (extent if extent > 0 else max(float(np.max(np.abs(values))), 1.0))
