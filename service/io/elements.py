@@ -44,7 +44,10 @@ def as_indices(values: NDArray[np.generic], *, what: str, fmt: str) -> NDArray[n
         if not np.all(ok):
             bad = float(values.reshape(-1)[~ok.reshape(-1)][0])
             raise FormatError(f"{what} indices must be integers, found {bad!r}", fmt=fmt)
-    return values.astype(np.int64)
+        return values.astype(np.int64)
+    if values.dtype.kind == "u" and values.dtype.itemsize == 8:
+        return values.astype(np.int64)  # beyond int64 wraps negative: caught as out of range
+    return values  # integers stay in their own (compact) dtype; Geometry makes them int64
 
 
 def check_indices(
@@ -97,6 +100,9 @@ def check_indices(
     )
 
 
+_BLOCK = 1 << 16
+
+
 def fan_triangulate(
     flat: NDArray[np.int64], counts: NDArray[np.int64]
 ) -> tuple[NDArray[np.int64], int]:
@@ -108,20 +114,29 @@ def fan_triangulate(
     n_small : int
         Number of polygons with fewer than three vertices (dropped).
     """
-    counts = np.asarray(counts, dtype=np.int64)
-    flat = np.asarray(flat, dtype=np.int64)
+    counts = np.asarray(counts)
+    flat = np.asarray(flat)
     if counts.size == 0:
         return np.zeros((0, 3), dtype=np.int64), 0
-    n_small = int(np.count_nonzero(counts < 3))
-    if counts.min() == counts.max() and counts[0] == 3:
+    if counts.min() == counts.max() == 3:
         return flat.reshape(-1, 3), 0
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    ntri = np.clip(counts - 2, 0, None)
-    poly = np.repeat(np.arange(counts.size), ntri)
-    first_tri = np.concatenate([[0], np.cumsum(ntri)[:-1]])
-    j = np.arange(int(ntri.sum())) - np.repeat(first_tri, ntri)
-    s = starts[poly]
-    tris = np.column_stack([flat[s], flat[s + j + 1], flat[s + j + 2]])
+    n_small = int(np.count_nonzero(counts < 3))
+    parts = []
+    offset = 0
+    for a in range(0, counts.size, _BLOCK):  # blocks: temporaries stay O(block)
+        c = counts[a : a + _BLOCK].astype(np.int64)
+        starts = offset + np.concatenate([[0], np.cumsum(c)[:-1]])
+        offset += int(c.sum())
+        keep = c >= 3
+        if not keep.any():
+            continue
+        c, starts = c[keep], starts[keep]
+        ntri = c - 2
+        first_tri = np.concatenate([[0], np.cumsum(ntri)[:-1]])
+        j = np.arange(int(ntri.sum())) - np.repeat(first_tri, ntri)
+        s = np.repeat(starts, ntri)
+        parts.append(np.column_stack([flat[s], flat[s + j + 1], flat[s + j + 2]]))
+    tris = np.concatenate(parts) if parts else np.zeros((0, 3), dtype=flat.dtype)
     return tris, n_small
 
 
@@ -129,8 +144,15 @@ def drop_repeating(elements: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]
     """Drop rows that repeat a vertex index; return the kept rows and how many were dropped."""
     if elements.size == 0:
         return elements, 0
-    srt = np.sort(elements, axis=1)
-    rep = (srt[:, 1:] == srt[:, :-1]).any(axis=1)
+    k = elements.shape[1]
+    if k <= 4:  # pairwise comparisons: no sorted copy of the elements
+        rep = np.zeros(len(elements), dtype=bool)
+        for i in range(k):
+            for j in range(i + 1, k):
+                rep |= elements[:, i] == elements[:, j]
+    else:
+        srt = np.sort(elements, axis=1)
+        rep = (srt[:, 1:] == srt[:, :-1]).any(axis=1)
     n_rep = int(np.count_nonzero(rep))
     return (elements[~rep] if n_rep else elements), n_rep
 

@@ -119,8 +119,9 @@ def _vertices(acc: _Acc, texts: list[bytes], numbers: list[int]) -> None:
         acc.v_rows.append(values[starts[:, None] + np.arange(3)])
         return
     assert acc.digits is not None
-    acc.digits.update(joined)
-    acc.v_rows.append(values.reshape(len(texts), acc.width))
+    table = values.reshape(len(texts), acc.width)
+    acc.digits.update(joined, table)
+    acc.v_rows.append(table)
 
 
 def _corner_columns(

@@ -153,7 +153,7 @@ def _ascii(data: bytes, pos: int, dt: np.dtype[Any], n: int) -> Any:
         table = table_rows(
             LineBlock(block.data, block.offset, block.rows), data, width, fmt="pcd", what="a point"
         )
-        digits.update(block.data)
+        digits.update(block.data, table)
         col = 0
         for name in dt.names or ():
             k = int(np.prod(dt[name].shape or (1,)))
