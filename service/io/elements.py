@@ -87,7 +87,7 @@ def check_indices(
         return
     pos = int(np.flatnonzero(bad)[0])
     elem = pos if counts is None else int(np.searchsorted(np.cumsum(counts), pos, side="right"))
-    vertex = int(flat[pos]) + base
+    vertex = int(flat.reshape(-1)[pos]) + base
     if lines is not None:
         line = int(lines[elem])
         raise FormatError(

@@ -84,7 +84,8 @@ def _binary_uniform_lists(
     for i, p in enumerate(el.properties):
         if i in lengths:
             k = lengths[i]
-            items = arr[f"p{i}"].reshape(-1) if k else np.zeros(0, dtype=endian + p.type)
+            # (count, k) view of the input: no copy (readers reshape, or use it as faces)
+            items = arr[f"p{i}"] if k else np.zeros((el.count, 0), dtype=endian + p.type)
             out[p.name] = (items, np.full(el.count, k, dtype=np.uint8 if k < 256 else np.int64))
         else:
             out[p.name] = arr[f"p{i}"]
