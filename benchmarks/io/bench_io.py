@@ -36,8 +36,12 @@ def _grid_mesh(n_side: int) -> tuple[np.ndarray, np.ndarray]:
     pts = np.column_stack([u.ravel(), v.ravel(), 0.05 * np.sin(6 * u.ravel()) * v.ravel()])
     i = np.arange(n_side - 1)
     a = (i[:, None] * n_side + i[None, :]).ravel()
-    faces = np.concatenate([np.column_stack([a, a + 1, a + n_side]),
-                            np.column_stack([a + 1, a + n_side + 1, a + n_side])])
+    faces = np.concatenate(
+        [
+            np.column_stack([a, a + 1, a + n_side]),
+            np.column_stack([a + 1, a + n_side + 1, a + n_side]),
+        ]
+    )
     return pts.astype(np.float32), faces.astype(np.int32)
 
 
@@ -76,16 +80,26 @@ def make(fmt: str, n: int) -> Path:
         path = CACHE / f"bench_{n}_cloud.ply"
         cloud = rng.normal(size=(n, 3)).astype(np.float32)
         colours = rng.integers(0, 255, (n, 3), dtype=np.uint8)
-        dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"),
-                       ("blue", "u1")])
+        dt = np.dtype(
+            [
+                ("x", "<f4"),
+                ("y", "<f4"),
+                ("z", "<f4"),
+                ("red", "u1"),
+                ("green", "u1"),
+                ("blue", "u1"),
+            ]
+        )
         rec = np.empty(n, dtype=dt)
         for j, c in enumerate("xyz"):
             rec[c] = cloud[:, j]
         for j, c in enumerate(("red", "green", "blue")):
             rec[c] = colours[:, j]
-        head = ("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\n"
-                "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
-                "property uchar blue\nend_header\n" % n).encode()
+        head = (
+            f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\n"
+            "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+            "property uchar blue\nend_header\n"
+        ).encode()
         with open(path, "wb") as fh:
             fh.write(head)
             fh.write(rec.tobytes())
@@ -95,11 +109,14 @@ def make(fmt: str, n: int) -> Path:
         return path
     if fmt == "pcd":
         sys.path.insert(0, str(ROOT))
-        from service.io import GeometryDocument, save_geometry
         from service.core.geometry import Geometry
+        from service.io import GeometryDocument, save_geometry
 
-        save_geometry(GeometryDocument.from_geometry(Geometry(rng.normal(size=(n, 3)))), path,
-                      precision="float32")
+        save_geometry(
+            GeometryDocument.from_geometry(Geometry(rng.normal(size=(n, 3)))),
+            path,
+            precision="float32",
+        )
         return path
     data = mesh.export(file_type=fmt)
     path.write_bytes(data if isinstance(data, bytes) else data.encode())
@@ -176,7 +193,10 @@ def measure(tool: str, fmt: str, path: Path, repeat: int) -> dict[str, float]:
     for _ in range(repeat):
         res = subprocess.run(
             [sys.executable, __file__, "--one", tool, fmt, str(path)],
-            capture_output=True, text=True, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+            capture_output=True,
+            text=True,
+            check=True,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
         )
         runs.append(json.loads(res.stdout.strip().splitlines()[-1]))
     return {k: statistics.median(r[k] for r in runs) for k in runs[0]}
@@ -193,12 +213,17 @@ def main() -> None:
         return
     sizes = [1_000_000] + ([20_000_000] if args.full else [])
     print(f"load: {os.getloadavg()}")
-    print("| format | n | size MB | tool | read s | read peak / size | write s |"
-          " read+write peak / size |")
+    print(
+        "| format | n | size MB | tool | read s | read peak / size | write s |"
+        " read+write peak / size |"
+    )
     print("|---|---:|---:|---|---:|---:|---:|---:|")
     for n in sizes:
-        fmts = ["ply", "ply-cloud", "obj", "stl", "xyz", "pcd", "las", "laz"] if n < 2e7 else [
-            "las", "laz", "ply-cloud"]
+        fmts = (
+            ["ply", "ply-cloud", "obj", "stl", "xyz", "pcd", "las", "laz"]
+            if n < 2e7
+            else ["las", "laz", "ply-cloud"]
+        )
         for fmt in fmts:
             path = make(fmt, n)
             size = path.stat().st_size
@@ -206,8 +231,11 @@ def main() -> None:
                 r = measure(tool, fmt, path, 1 if n >= 2e7 else args.repeat)
                 read_peak = r.get("read_peak", r["peak"]) / size
                 write = f"{r['write_s']:.2f} | {r['peak'] / size:.2f}" if "write_s" in r else " |"
-                print(f"| {fmt} | {n} | {size / 1e6:.1f} | {tool} | {r['read_s']:.2f} |"
-                      f" {read_peak:.2f} | {write} |", flush=True)
+                print(
+                    f"| {fmt} | {n} | {size / 1e6:.1f} | {tool} | {r['read_s']:.2f} |"
+                    f" {read_peak:.2f} | {write} |",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

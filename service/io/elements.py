@@ -15,6 +15,8 @@ Rules (the same for every format):
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -30,7 +32,7 @@ __all__ = [
 ]
 
 
-def as_indices(values: NDArray[np.generic], *, what: str, fmt: str) -> NDArray[np.int64]:
+def as_indices(values: NDArray[Any], *, what: str, fmt: str) -> NDArray[Any]:
     """Index values (integers, or floats holding integers) as int64.
 
     Raises
@@ -120,9 +122,16 @@ def fan_triangulate(
         return np.zeros((0, 3), dtype=np.int64), 0
     if counts.min() == counts.max() == 3:
         return flat.reshape(-1, 3), 0
-    n_small = int(np.count_nonzero(counts < 3))
-    parts = []
-    offset = 0
+    n_small = sum(
+        int(np.count_nonzero(counts[a : a + _BLOCK] < 3)) for a in range(0, counts.size, _BLOCK)
+    )
+    flat = flat.reshape(-1)
+    total = sum(
+        int(np.clip(counts[a : a + _BLOCK].astype(np.int64) - 2, 0, None).sum())
+        for a in range(0, counts.size, _BLOCK)
+    )
+    tris = np.empty((total, 3), dtype=flat.dtype)
+    offset = at = 0
     for a in range(0, counts.size, _BLOCK):  # blocks: temporaries stay O(block)
         c = counts[a : a + _BLOCK].astype(np.int64)
         starts = offset + np.concatenate([[0], np.cumsum(c)[:-1]])
@@ -135,8 +144,11 @@ def fan_triangulate(
         first_tri = np.concatenate([[0], np.cumsum(ntri)[:-1]])
         j = np.arange(int(ntri.sum())) - np.repeat(first_tri, ntri)
         s = np.repeat(starts, ntri)
-        parts.append(np.column_stack([flat[s], flat[s + j + 1], flat[s + j + 2]]))
-    tris = np.concatenate(parts) if parts else np.zeros((0, 3), dtype=flat.dtype)
+        k = s.size
+        tris[at : at + k, 0] = flat[s]
+        tris[at : at + k, 1] = flat[s + j + 1]
+        tris[at : at + k, 2] = flat[s + j + 2]
+        at += k
     return tris, n_small
 
 

@@ -98,7 +98,12 @@ class Digits:
         self.smax = np.maximum(self.smax, np.where(counted, sig.reshape(shape), 0).max(axis=0))
 
     def _odd(
-        self, token: bytes, col: int, skip: NDArray[np.bool_], i: int, sig: NDArray[np.int64],
+        self,
+        token: bytes,
+        col: int,
+        skip: NDArray[np.bool_],
+        i: int,
+        sig: NDArray[np.int64],
         decimals: NDArray[np.int64],
     ) -> None:
         """A token with an exponent (measured on its mantissa) or a name (nan, inf, other)."""
@@ -138,6 +143,8 @@ RELATIVE_RESOLUTION = 1e-5
 def fine_enough(spec: str, values: NDArray[np.float64], extent: float) -> str:
     """``spec``, refined until its resolution is at most ``1e-5 * extent`` (see above)."""
     if spec in ("%r", F32, "%d") or values.size == 0:
+        return spec
+    if np.all(values == np.round(values)):  # integers lose nothing (a plane's z = 0 stays "0")
         return spec
     need = RELATIVE_RESOLUTION * (extent if extent > 0 else max(float(np.max(np.abs(values))), 1.0))
     want = int(np.ceil(-np.log10(need)))  # decimals giving that resolution

@@ -157,7 +157,11 @@ def _scan_u1(
 
 
 def _entry_sizes(
-    lengths: list[NDArray[Any]], sizes: list[int], csizes: list[int], el: PlyElement, a: int,
+    lengths: list[NDArray[Any]],
+    sizes: list[int],
+    csizes: list[int],
+    el: PlyElement,
+    a: int,
     b: int,
 ) -> NDArray[np.int64]:
     """Byte size of entries ``a:b``."""
