@@ -189,7 +189,9 @@ def read_pcd(source: Source, *, weld: bool = False) -> GeometryDocument:
     if not all(c in names for c in ("x", "y")):
         raise _fail("FIELDS has no x and y")
     coords = [c for c in ("x", "y", "z") if c in names]
-    pts = np.column_stack([rec[c].astype(np.float64) for c in coords])
+    pts = np.empty((n, len(coords)))
+    for j, c in enumerate(coords):
+        pts[:, j] = rec[c]
     finite = np.isfinite(pts).all(axis=1)
     valid = None if finite.all() else finite
     sel = (lambda a: a) if valid is None else (lambda a: a[valid])
