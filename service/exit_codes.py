@@ -20,7 +20,7 @@ EXIT_CODES: dict[int, str] = {
     EXIT_OK: "success",
     EXIT_INTERNAL: "unexpected internal error (GEOSMOOTH_DEBUG=1 shows the traceback)",
     EXIT_USAGE: "invalid command line or parameter value (e.g. --tau -1, --tau with --lam)",
-    EXIT_INPUT: "input file missing, unreadable, malformed or in an unsupported format (GPX, ...)",
+    EXIT_INPUT: "input file missing, unreadable, malformed or in an unsupported format",
     EXIT_GEOMETRY: "invalid geometry, or a parameter this geometry cannot take "
     "(e.g. tau outside (0, phi(0)); the message gives the valid range)",
     EXIT_SOLVER: "the linear solver failed",
@@ -34,10 +34,19 @@ EXIT_REJECTED = 8
 EXIT_JOB_FAILED = 9
 EXIT_CANCELLED = 10
 
-#: Further statuses of ``geosmooth submit``, set by ``service.client.submit``.
+#: Further statuses of ``geosmooth submit`` (``service.cli.submit``).
 SUBMIT_EXIT_CODES: dict[int, str] = {
     EXIT_UNREACHABLE: "submit: the server cannot be reached",
     EXIT_REJECTED: "submit: the server rejected the input or the parameters",
     EXIT_JOB_FAILED: "submit: the job failed on the server",
     EXIT_CANCELLED: "submit: the job was cancelled",
+}
+
+EXIT_ADDRESS = 11
+
+#: Further statuses of ``geosmooth serve`` (``service.api.server``).
+SERVE_EXIT_CODES: dict[int, str] = {
+    EXIT_USAGE: "serve: invalid setting (the message names the GEOSMOOTH_ variable), keys "
+    "file, or a non-loopback address without API keys (see --insecure-no-auth)",
+    EXIT_ADDRESS: "serve: the address cannot be bound (port in use, permission, unknown host)",
 }
