@@ -192,7 +192,7 @@ def read_pcd(source: Source, *, weld: bool = False) -> GeometryDocument:
     pts = np.empty((n, len(coords)))
     for j, c in enumerate(coords):
         pts[:, j] = rec[c]
-    finite = np.isfinite(pts).all(axis=1)
+    finite: NDArray[np.bool_] = np.asarray(np.isfinite(pts).all(axis=1))
     valid = None if finite.all() else finite
     sel = (lambda a: a) if valid is None else (lambda a: a[valid])
     specs: dict[str, str] = {}
