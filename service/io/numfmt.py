@@ -16,6 +16,7 @@ as text: ``float32(0.1)`` is written ``0.1``, not ``0.10000000149011612``).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import Any, BinaryIO
 
@@ -29,19 +30,22 @@ ROWS_PER_CHUNK = 65536
 
 _SPACE = np.zeros(256, dtype=bool)
 _SPACE[[9, 10, 11, 12, 13, 32]] = True
-_DIGIT = np.zeros(256, dtype=bool)
-_DIGIT[48:58] = True
-_NONZERO = np.zeros(256, dtype=bool)
-_NONZERO[49:58] = True
-_PLAIN = np.zeros(256, dtype=bool)  # characters of a decimal number (with an exponent)
-_PLAIN[[43, 45, 46, 69, 101]] = True
+_PLAIN = np.zeros(256, dtype=bool)  # characters of a fixed-point number
+_PLAIN[[43, 45, 46]] = True
 _PLAIN[48:58] = True
-_EXP = np.zeros(256, dtype=bool)
-_EXP[[69, 101]] = True
+_POW10 = 10.0 ** np.arange(309)
+_MANTISSA = re.compile(r"[+-]?(\d*)\.?(\d*)")
 
 
 class Digits:
-    """Per-column digit statistics of whitespace-separated number tables."""
+    """Per-column digit statistics of whitespace-separated number tables.
+
+    For each token: its decimals ``D`` (from the position of its ``.``) and its significant
+    digits ``S``, the digit count of the integer ``round(|value| * 10**D)`` (leading zeros do not
+    count, trailing ones do: ``0.500`` has 3). Tokens with an exponent are measured on their
+    mantissa (rare: a Python loop); ``nan`` / ``inf`` fit every spec and are left out. Only
+    byte-level passes of numpy plus arithmetic on the parsed values: cheap next to parsing.
+    """
 
     def __init__(self, width: int) -> None:
         self.width = width
@@ -51,49 +55,71 @@ class Digits:
         self.other = np.zeros(width, dtype=bool)
         self.exp = np.zeros(width, dtype=bool)
 
-    def update(self, block: bytes | memoryview, first_column: int = 0) -> None:
-        """Add a block of complete rows (blank lines allowed; every row has ``width`` tokens)."""
+    def update(self, block: bytes, values: NDArray[np.float64] | None = None) -> None:
+        """Add a block of complete rows (blank lines allowed; every row has ``width`` tokens).
+
+        ``values``: the block's numbers as parsed, ``(rows, width)`` (parsed here if omitted).
+        """
         raw = np.frombuffer(block, dtype=np.uint8)
-        if raw.size == 0:
-            return
         space = _SPACE[raw]
         start = ~space
         start[1:] &= space[:-1]
         end = ~space
         end[:-1] &= space[1:]
-        s = np.flatnonzero(start)
-        e = np.flatnonzero(end)  # index of each token's last character
+        s, e = np.flatnonzero(start), np.flatnonzero(end)
         if s.size == 0:
             return
-        col = (np.arange(s.size) + first_column) % self.width
-        cs_digit = np.cumsum(_DIGIT[raw], dtype=np.int64)
-        cs_plain = np.cumsum(~_PLAIN[raw], dtype=np.int64)
-        idx = np.arange(raw.size, dtype=np.int64)
-        last_dot = np.maximum.accumulate(np.where(raw == 46, idx, -1))[e]
-        big = raw.size + 1
-        next_nz = np.minimum.accumulate(np.where(_NONZERO[raw], idx, big)[::-1])[::-1][s]
-        next_e = np.minimum.accumulate(np.where(_EXP[raw], idx, big)[::-1])[::-1][s]
-        exp = next_e <= e
-        e = np.where(exp, next_e - 1, e)  # the mantissa's last character
+        if s.size % self.width:
+            raise ValueError("Digits.update needs rows of exactly `width` tokens")
+        if values is None:
+            values = np.array(block.split(), dtype=np.float64)
+        vals = np.asarray(values, dtype=np.float64).reshape(-1)
+        token_of = np.cumsum(start, dtype=np.int32)  # 1 + index of the token at each byte
+        dots = np.flatnonzero(raw == 46)
+        decimals = np.zeros(s.size, dtype=np.int64)
+        tok = token_of[dots] - 1
+        decimals[tok] = e[tok] - dots
+        odd = np.zeros(s.size, dtype=bool)  # exponents, nan, inf, anything not d.ddd
+        bad = np.flatnonzero(~_PLAIN[raw] & ~space)
+        if bad.size:
+            odd[token_of[bad] - 1] = True
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            m = np.rint(np.abs(vals) * _POW10[np.minimum(decimals, 308)])
+            sig = np.where(m >= 1, np.floor(np.log10(np.maximum(m, 1))) + 1, 1).astype(np.int64)
+        skip = odd.copy()
+        for i in np.flatnonzero(odd).tolist():
+            self._odd(block[s[i] : e[i] + 1], i % self.width, skip, i, sig, decimals)
+        shape = (-1, self.width)
+        keep = ~skip.reshape(shape)
+        big = np.int64(10**6)
+        self.dmin = np.minimum(self.dmin, np.where(keep, decimals.reshape(shape), big).min(axis=0))
+        self.dmax = np.maximum(self.dmax, np.where(keep, decimals.reshape(shape), 0).max(axis=0))
+        counted = ~(odd & skip).reshape(shape)
+        self.smax = np.maximum(self.smax, np.where(counted, sig.reshape(shape), 0).max(axis=0))
 
-        def between(cs: NDArray[np.int64], a: NDArray[np.int64], b: NDArray[np.int64]) -> Any:
-            return cs[b] - np.where(a > 0, cs[np.maximum(a - 1, 0)], 0)
-
-        other = between(cs_plain, s, e) > 0
-        has_dot = last_dot >= s
-        decimals = np.where(has_dot, e - last_dot, 0)
-        digits = between(cs_digit, s, e)
-        lead = np.where(next_nz <= e, between(cs_digit, s, np.minimum(next_nz, e)) - 1, digits - 1)
-        sig = np.maximum(digits - lead, 1)
-        for c in range(self.width):
-            m = col == c
-            if not m.any():
-                continue
-            self.other[c] |= bool(other[m].any())
-            self.exp[c] |= bool(exp[m].any())
-            self.dmin[c] = min(self.dmin[c], int(decimals[m].min()))
-            self.dmax[c] = max(self.dmax[c], int(decimals[m].max()))
-            self.smax[c] = max(self.smax[c], int(sig[m].max()))
+    def _odd(
+        self,
+        token: bytes,
+        col: int,
+        skip: NDArray[np.bool_],
+        i: int,
+        sig: NDArray[np.int64],
+        decimals: NDArray[np.int64],
+    ) -> None:
+        """A token with an exponent (measured on its mantissa) or a name (nan, inf, other)."""
+        text = token.decode("ascii", errors="replace").lower()
+        if text.lstrip("+-") in ("nan", "inf", "infinity"):
+            return  # any spec writes these; they say nothing about digits
+        mant, sep, _ = text.partition("e")
+        m = _MANTISSA.fullmatch(mant)
+        if not sep or m is None:
+            self.other[col] = True
+            return
+        self.exp[col] = True
+        digits = (m[1] + m[2]).lstrip("0")
+        sig[i] = max(len(digits), 1)
+        decimals[i] = len(m[2])
+        skip[i] = False  # counted for S (not for fixed decimals: the column is %g now)
 
     def specs(self) -> tuple[str, ...]:
         """One printf spec per column (see the module docstring)."""
@@ -109,13 +135,16 @@ class Digits:
 
 
 #: The coarsest resolution a text spec may have, relative to the data's extent: an input of
-#: integers (``v 1 2 3``) must not quantize smoothed points to integers.
-RELATIVE_RESOLUTION = 1e-7
+#: integers (``v 1 2 3``) must not quantize smoothed points to integers, while six decimals on
+#: an object of a few units stay six decimals.
+RELATIVE_RESOLUTION = 1e-5
 
 
 def fine_enough(spec: str, values: NDArray[np.float64], extent: float) -> str:
-    """``spec``, refined until its resolution is at most ``1e-7 * extent`` (see above)."""
+    """``spec``, refined until its resolution is at most ``1e-5 * extent`` (see above)."""
     if spec in ("%r", F32, "%d") or values.size == 0:
+        return spec
+    if np.all(values == np.round(values)):  # integers lose nothing (a plane's z = 0 stays "0")
         return spec
     need = RELATIVE_RESOLUTION * (extent if extent > 0 else max(float(np.max(np.abs(values))), 1.0))
     want = int(np.ceil(-np.log10(need)))  # decimals giving that resolution

@@ -35,6 +35,7 @@ __all__ = ["ObjLayout", "read_obj"]
 
 _IGNORED = {b"vt", b"vp", b"g", b"o", b"s", b"usemtl", b"mtllib", b"usemap", b"maplib"}
 _KEYS = (b"v", b"vn", b"vt", b"f", b"l")
+_KINDS = frozenset(_KEYS)
 _EXTRA_NAMES = {1: ("w",), 3: ("red", "green", "blue"), 4: ("red", "green", "blue", "alpha")}
 
 
@@ -119,8 +120,9 @@ def _vertices(acc: _Acc, texts: list[bytes], numbers: list[int]) -> None:
         acc.v_rows.append(values[starts[:, None] + np.arange(3)])
         return
     assert acc.digits is not None
-    acc.digits.update(joined)
-    acc.v_rows.append(values.reshape(len(texts), acc.width))
+    table = values.reshape(len(texts), acc.width)
+    acc.digits.update(joined, table)
+    acc.v_rows.append(table)
 
 
 def _corner_columns(
@@ -271,46 +273,65 @@ def _check_upper(
         )
 
 
-def _classify(lines: list[bytes]) -> tuple[dict[bytes, list[int]], dict[int, bytes]]:
-    """Line indices of each statement kind; statement texts where they are not ``line[2:]``."""
-    heads = [line[:3] for line in lines]
-    rows: dict[bytes, list[int]] = {k: [] for k in (*_KEYS, b"#", b"?")}
+def _classify(
+    block: bytes, lines: list[bytes]
+) -> tuple[dict[bytes, list[int]], dict[int, bytes], NDArray[np.int64], NDArray[np.int64]]:
+    """Line indices of each statement kind, texts where they are not ``line[2:]`` / ``[3:]``,
+    and every line's byte span within ``block`` (vectorized; odd lines in Python)."""
+    raw = np.frombuffer(block, dtype=np.uint8)
+    nl = np.flatnonzero(raw == 10)
+    starts = np.concatenate([[0], nl + 1])[: len(lines)].astype(np.int64)
+    ends = starts + np.fromiter(map(len, lines), dtype=np.int64, count=len(lines))
+    pad = np.concatenate([raw, np.zeros(3, np.uint8)])
+    a, b, c = pad[starts], pad[starts + 1], pad[starts + 2]
+    sep_b = (b == 32) | (b == 9)
+    sep_c = (c == 32) | (c == 9)
+    masks = {
+        b"v": (a == 118) & sep_b,
+        b"vt": (a == 118) & (b == 116) & sep_c,
+        b"vn": (a == 118) & (b == 110) & sep_c,
+        b"f": (a == 102) & sep_b,
+        b"l": (a == 108) & sep_b,
+    }
+    rows: dict[bytes, list[int]] = {k: np.flatnonzero(m).tolist() for k, m in masks.items()}
+    rows[b"#"] = np.flatnonzero(a == 35).tolist()
+    rows[b"?"] = []
+    known = np.logical_or.reduce(list(masks.values())) | (a == 35) | (starts == ends)
     texts: dict[int, bytes] = {}
-    fast = {b"v ": b"v", b"f ": b"f", b"l ": b"l"}
-    for i, h in enumerate(heads):
-        key = fast.get(h[:2])
-        if key is not None:
-            rows[key].append(i)
-        elif h == b"vn ":
-            rows[b"vn"].append(i)
-            texts[i] = lines[i][3:]
-        elif h == b"vt ":
-            rows[b"vt"].append(i)
-        else:
-            stripped = lines[i].strip()
-            if not stripped:
-                continue
-            parts = stripped.split(None, 1)
-            kind = parts[0] if parts[0] in _KEYS else (b"#" if stripped[:1] == b"#" else b"?")
-            rows[kind].append(i)
-            texts[i] = parts[1] if len(parts) > 1 else b""
-    for k in rows:
-        rows[k].sort()
-    return rows, texts
+    resorted = False
+    for i in np.flatnonzero(~known).tolist():  # indented, blank-with-spaces or other statements
+        stripped = lines[i].strip()
+        if not stripped:
+            continue
+        parts = stripped.split(None, 1)
+        kind = parts[0] if parts[0] in _KINDS else (b"#" if stripped[:1] == b"#" else b"?")
+        rows[kind].append(i)
+        texts[i] = parts[1] if len(parts) > 1 else b""
+        resorted = resorted or kind in _KINDS
+    if resorted:
+        for k in _KINDS:
+            rows[k].sort()
+    cr = (ends > starts) & (pad[np.maximum(ends - 1, 0)] == 13)
+    return rows, texts, starts, ends - cr
 
 
 def _block(
-    acc: _Acc, faces: _Faces, polys: _Faces, lines: list[bytes], offset: int, first: int
+    acc: _Acc,
+    faces: _Faces,
+    polys: _Faces,
+    block: bytes,
+    lines: list[bytes],
+    offset: int,
+    first: int,
 ) -> None:
-    rows, texts = _classify(lines)
-    starts = offset + np.concatenate([[0], np.cumsum([len(x) + 1 for x in lines])[:-1]])
-    ends = starts + np.fromiter((len(x) for x in lines), dtype=np.int64, count=len(lines))
-    ends -= np.fromiter((x.endswith(b"\r") for x in lines), dtype=np.int64, count=len(lines))
-    statement_rows = [r for k in _KEYS for r in rows[k]] + rows[b"?"]
+    rows, texts, starts, ends = _classify(block, lines)
+    starts, ends = starts + offset, ends + offset
+    statement_rows = [r for k in _KEYS for r in rows[k][:1]] + rows[b"?"][:1]
     head_end = min(statement_rows, default=len(lines)) if not acc.started else -1
     for i in rows[b"#"]:
-        if i < head_end:
-            acc.comments.append(lines[i].strip()[1:].strip().decode("utf-8", errors="replace"))
+        if i >= head_end:
+            break
+        acc.comments.append(lines[i].strip()[1:].strip().decode("utf-8", errors="replace"))
     acc.started = acc.started or bool(statement_rows)
     for i in rows[b"?"]:
         word = lines[i].split(None, 1)[0]
@@ -318,12 +339,14 @@ def _block(
             key = word.decode("utf-8", errors="replace")[:20]
             acc.other[key] = acc.other.get(key, 0) + 1
 
-    def text(i: int) -> bytes:
-        return texts.get(i, lines[i][2:])
+    def text(r: list[int], skip: int) -> list[bytes]:
+        if not texts:
+            return [lines[i][skip:] for i in r]
+        return [texts[i] if i in texts else lines[i][skip:] for i in r]
 
     if rows[b"v"]:
         vr = rows[b"v"]
-        _vertices(acc, [text(i) for i in vr], [first + i for i in vr])
+        _vertices(acc, text(vr, 2), [first + i for i in vr])
         acc.v_spans.append(np.column_stack([starts[vr], ends[vr]]))
     if rows[b"vn"]:
         acc.vn_spans.append(np.column_stack([starts[rows[b"vn"]], ends[rows[b"vn"]]]))
@@ -337,7 +360,7 @@ def _block(
             acc.nvt + np.searchsorted(np.asarray(rows[b"vt"], dtype=np.int64), at),
             acc.nvn + np.searchsorted(np.asarray(rows[b"vn"], dtype=np.int64), at),
         ]
-        sink.add(acc, [text(i) for i in r], [first + i for i in r], before, what)
+        sink.add(acc, text(r, 2), [first + i for i in r], before, what)
     acc.nv += len(rows[b"v"])
     acc.nvt += len(rows[b"vt"])
     acc.nvn += len(rows[b"vn"])
@@ -359,7 +382,7 @@ def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
         lines = block.data.split(b"\n")
         if block.data.endswith(b"\n"):
             lines.pop()
-        _block(acc, faces, polys, lines, block.offset, line)
+        _block(acc, faces, polys, block.data, lines, block.offset, line)
         line += block.data.count(b"\n")
     notes = [f"ignored {k} OBJ {name!r} statements" for name, k in sorted(acc.other.items())]
     if acc.nv == 0:

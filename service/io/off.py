@@ -120,7 +120,7 @@ def _vertices(data: bytes, pos: int, n: int) -> tuple[NDArray[np.float64], Digit
             digits = Digits(width)
         rows.append(table_rows(block, data, width, fmt="off", what="a vertex"))
         assert digits is not None
-        digits.update(block.data)
+        digits.update(block.data, rows[-1])
         got += len(rows[-1])
         pos = raw.offset + len(raw.data)
     if got < n or digits is None:

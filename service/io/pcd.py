@@ -153,7 +153,7 @@ def _ascii(data: bytes, pos: int, dt: np.dtype[Any], n: int) -> Any:
         table = table_rows(
             LineBlock(block.data, block.offset, block.rows), data, width, fmt="pcd", what="a point"
         )
-        digits.update(block.data)
+        digits.update(block.data, table)
         col = 0
         for name in dt.names or ():
             k = int(np.prod(dt[name].shape or (1,)))
@@ -189,8 +189,10 @@ def read_pcd(source: Source, *, weld: bool = False) -> GeometryDocument:
     if not all(c in names for c in ("x", "y")):
         raise _fail("FIELDS has no x and y")
     coords = [c for c in ("x", "y", "z") if c in names]
-    pts = np.column_stack([rec[c].astype(np.float64) for c in coords])
-    finite = np.isfinite(pts).all(axis=1)
+    pts = np.empty((n, len(coords)))
+    for j, c in enumerate(coords):
+        pts[:, j] = rec[c]
+    finite: NDArray[np.bool_] = np.asarray(np.isfinite(pts).all(axis=1))
     valid = None if finite.all() else finite
     sel = (lambda a: a) if valid is None else (lambda a: a[valid])
     specs: dict[str, str] = {}

@@ -170,7 +170,9 @@ def read_ply(source: Source, *, weld: bool = False) -> GeometryDocument:
         elements = read_binary_body(data, header)
     vdata = elements[vi]
     coords = ("x", "y", "z") if vertex.find("z") is not None else ("x", "y")
-    points = np.column_stack([np.asarray(vdata[c], dtype=np.float64) for c in coords])
+    points = np.empty((vertex.count, len(coords)))
+    for j, c in enumerate(coords):  # column by column: no float64 temporaries
+        points[:, j] = vdata[c]
     normal_names = _normal_names(vertex)
     normals = None
     if normal_names is not None:

@@ -145,7 +145,7 @@ def _ascii_element(
         if scalars:
             table = table_rows(block, buf, len(props), fmt="ply", what=f"a {el.name} entry")
             if digits is not None:
-                digits.update(block.data)
+                digits.update(block.data, table)
             for i, p in enumerate(props):
                 cols[p.name].append(_typed(table[:, i], p.type, el, p.name))
             continue

@@ -10,6 +10,8 @@ blocks when the values are gathered: memory stays within the element's size plus
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -82,7 +84,8 @@ def _binary_uniform_lists(
     for i, p in enumerate(el.properties):
         if i in lengths:
             k = lengths[i]
-            items = arr[f"p{i}"].reshape(-1) if k else np.zeros(0, dtype=endian + p.type)
+            # (count, k) view of the input: no copy (readers reshape, or use it as faces)
+            items = arr[f"p{i}"] if k else np.zeros((el.count, 0), dtype=endian + p.type)
             out[p.name] = (items, np.full(el.count, k, dtype=np.uint8 if k < 256 else np.int64))
         else:
             out[p.name] = arr[f"p{i}"]
@@ -153,52 +156,65 @@ def _scan_u1(
     return pos
 
 
-def _blocks(nbytes: NDArray[np.int64]) -> list[tuple[int, int]]:
-    """Entry ranges holding about 4 MiB each (at most 65536 entries)."""
-    cum = np.cumsum(nbytes)
-    out = []
-    s = 0
-    while s < nbytes.size:
-        base = int(cum[s - 1]) if s else 0
-        e = int(np.searchsorted(cum, base + (1 << 22), side="right"))
-        e = min(max(e, s + 1), s + _GATHER)
-        out.append((s, e))
-        s = e
+def _entry_sizes(
+    lengths: list[NDArray[Any]],
+    sizes: list[int],
+    csizes: list[int],
+    el: PlyElement,
+    a: int,
+    b: int,
+) -> NDArray[np.int64]:
+    """Byte size of entries ``a:b``."""
+    out = np.zeros(b - a, dtype=np.int64)
+    for j, p in enumerate(el.properties):
+        if p.is_list:
+            out += csizes[j] + lengths[j][a:b].astype(np.int64) * sizes[j]
+        else:
+            out += sizes[j]
     return out
 
 
 def _binary_scan(buf: bytes, pos: int, el: PlyElement, endian: str) -> tuple[ElementData, int]:
-    """General path: list lengths first, then every property gathered block by block."""
+    """General path: list lengths first, then every property gathered block by block.
+
+    Blocks hold at most 65536 entries and about 4 MiB, so no array of the element's size other
+    than its lengths (in the file's count type) and its values is ever allocated.
+    """
     props = el.properties
     lengths, end = _scan_lengths(buf, pos, el, endian)
     raw = np.frombuffer(buf, dtype=np.uint8)
     sizes = [np.dtype(p.type).itemsize for p in props]
     csizes = [np.dtype(str(p.count_type)).itemsize if p.is_list else 0 for p in props]
-    fixed = sum(sizes[j] if not p.is_list else csizes[j] for j, p in enumerate(props))
-    entry = np.full(el.count, fixed, dtype=np.int64)
-    for j, p in enumerate(props):
-        if p.is_list:
-            entry += lengths[j].astype(np.int64) * sizes[j]
-    parts: list[list[NDArray[np.uint8]]] = [[] for _ in props]
-    at = pos
-    for s, e in _blocks(entry):
-        starts = at + np.concatenate([[0], np.cumsum(entry[s : e - 1])])
-        at += int(entry[s:e].sum())
-        within = np.zeros(e - s, dtype=np.int64)
+    total = [
+        int(lengths[j].sum(dtype=np.int64)) * sizes[j] if p.is_list else el.count * sizes[j]
+        for j, p in enumerate(props)
+    ]
+    parts = [np.empty(t, dtype=np.uint8) for t in total]
+    filled = [0] * len(props)
+    at, s = pos, 0
+    while s < el.count:
+        sz = _entry_sizes(lengths, sizes, csizes, el, s, min(s + _GATHER, el.count))
+        cum = np.cumsum(sz)
+        k = max(int(np.searchsorted(cum, 1 << 22, side="right")), 1)
+        sz = sz[:k]
+        starts = at + np.concatenate([[0], cum[: k - 1]])
+        within = np.zeros(k, dtype=np.int64)
         for j, p in enumerate(props):
             if p.is_list:
-                nb = lengths[j][s:e].astype(np.int64) * sizes[j]
-                parts[j].append(_gather(raw, starts + within + csizes[j], nb))
+                nb = lengths[j][s : s + k].astype(np.int64) * sizes[j]
+                got = _gather(raw, starts + within + csizes[j], nb)
                 within += csizes[j] + nb
             else:
-                parts[j].append(_gather(raw, starts + within, np.full(e - s, sizes[j])))
+                got = _gather(raw, starts + within, np.full(k, sizes[j]))
                 within += sizes[j]
-    del entry
+            parts[j][filled[j] : filled[j] + got.size] = got
+            filled[j] += got.size
+        at += int(cum[k - 1])
+        s += k
     out: ElementData = {}
     for j, p in enumerate(props):
         dt = np.dtype(endian + p.type)
-        values = np.concatenate(parts[j]).view(dt) if parts[j] else np.zeros(0, dt)
-        parts[j] = []
+        values = parts[j].view(dt)
         out[p.name] = (values, lengths[j]) if p.is_list else values
     return out, end
 

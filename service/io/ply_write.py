@@ -122,6 +122,7 @@ def _vertex_props(plain: PlainDocument, layout: PlyLayout | None) -> list[_Prop]
             ordered.append(attrs.pop(p.name))
         elif p.is_list:
             items, counts = vdata[p.name]  # type: ignore[misc]
+            items = np.asarray(items).reshape(-1)
             ordered.append(_Prop(p.name, p.type, items, counts, str(p.count_type), "%d"))
     return ordered + list(attrs.values())
 
@@ -139,6 +140,7 @@ def _elements(plain: PlainDocument, layout: PlyLayout | None) -> list[_Element]:
                 value = layout.elements[i].get(p.name)
                 if p.is_list:
                     items, counts = value if value is not None else (np.zeros(0), np.zeros(0))  # type: ignore[misc]
+                    items = np.asarray(items).reshape(-1)
                     props.append(_Prop(p.name, p.type, items, counts, str(p.count_type)))
                 else:
                     props.append(_Prop(p.name, p.type, np.asarray(value)))

@@ -117,7 +117,7 @@ def _ascii(data: bytes) -> tuple[NDArray[np.float64], StlLayout, Precision]:
     except ValueError:
         raise FormatError("ASCII STL: a vertex or normal is not three numbers", fmt="stl") from None
     digits = Digits(3)
-    digits.update(joined)
+    digits.update(joined, points)
     layout = StlLayout(True, b"", None, normals, solids)
     return points, layout, Precision("float64", digits.specs())
 

@@ -45,7 +45,8 @@ NUMBER = re.compile(
 
 @dataclass(frozen=True)
 class LineBlock:
-    """Complete lines of a buffer: ``data`` starts at byte ``offset``; ``rows`` non-blank lines."""
+    """Complete lines of a buffer: ``data`` starts at byte ``offset``; ``rows`` non-blank lines
+    (``-1``: not counted, when the caller set no row budget)."""
 
     data: bytes
     offset: int
@@ -65,9 +66,11 @@ def tokens_per_line(joined: bytes, n_lines: int) -> NDArray[np.int64]:
     space = _SPACE[raw]
     start = ~space
     start[1:] &= space[:-1]
-    newlines = np.flatnonzero(raw == 10)
-    line_of_token = np.searchsorted(newlines, np.flatnonzero(start), side="right")
-    return np.bincount(line_of_token, minlength=n_lines).astype(np.int64)
+    ends = np.flatnonzero(raw == 10)
+    if ends.size < n_lines:  # the last line has no newline
+        ends = np.append(ends, raw.size - 1)
+    at = np.cumsum(start, dtype=np.int64)[ends]
+    return np.diff(at, prepend=0)
 
 
 def line_blocks(
@@ -90,17 +93,20 @@ def line_blocks(
                 window = buf[pos:hi]
             else:
                 window = window[: cut + 1]
+        if left is None:  # no row budget: the parsers count the rows themselves
+            yield LineBlock(window, pos, -1)
+            pos += len(window)
+            continue
         counts = tokens_per_line(window, window.count(b"\n") + 1)
         nonblank = np.flatnonzero(counts > 0)
-        if left is not None and nonblank.size > left:
+        if nonblank.size > left:
             last_line = int(nonblank[left - 1])
             cut_at = _nth_newline(window, last_line)
             window = window[: cut_at + 1]
             nonblank = nonblank[:left]
         yield LineBlock(window, pos, int(nonblank.size))
         pos += len(window)
-        if left is not None:
-            left -= int(nonblank.size)
+        left -= int(nonblank.size)
 
 
 def _nth_newline(window: bytes, k: int) -> int:

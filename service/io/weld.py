@@ -37,13 +37,22 @@ def weld_index(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[
     first : ndarray of int, shape (n_welded,)
         The first original point of each welded vertex.
     """
-    pts = np.ascontiguousarray(points, dtype=np.float64) + 0.0  # -0.0 -> 0.0
-    keys = pts.view(np.dtype((np.void, pts.dtype.itemsize * pts.shape[1]))).reshape(-1)
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    return rank[inverse.reshape(-1)].astype(np.int64), first[order].astype(np.int64)
+    pts = np.asarray(points)
+    n = pts.shape[0]
+    order = np.lexsort(pts.T[::-1])  # stable; -0.0 and 0.0 compare (and sort) equal
+    srt = pts[order]
+    new = np.empty(n, dtype=bool)
+    new[:1] = True
+    np.any(srt[1:] != srt[:-1], axis=1, out=new[1:])
+    del srt
+    group = np.cumsum(new) - 1  # group of each point, in sorted order
+    first = order[np.flatnonzero(new)]  # stable sort: the first occurrence leads its group
+    by_first = np.argsort(first, kind="stable")
+    rank = np.empty_like(by_first)
+    rank[by_first] = np.arange(by_first.size)
+    index = np.empty(n, dtype=np.int64)
+    index[order] = rank[group]
+    return index, first[by_first].astype(np.int64)
 
 
 def weld_document(doc: GeometryDocument) -> GeometryDocument:

@@ -110,7 +110,7 @@ def _table(data: bytes, pos: int, width: int, digits: Digits) -> NDArray[np.floa
         rows = table_rows(clean, data, width, fmt="xyz", what="a point")
         out[n : n + len(rows)] = rows
         n += len(rows)
-        digits.update(text)
+        digits.update(text, rows)
     return out[:n]
 
 

@@ -292,3 +292,34 @@ def test_deeply_nested_json_is_a_format_error() -> None:
 
     with pytest.raises(FormatError, match="nested too deeply"):
         read_geometry(b"[" * 100_000 + b"]" * 100_000, "json")
+
+
+# issue 15 item 7: rows with the wrong number of columns are never shifted into the next one
+
+
+def test_xyz_rows_that_only_add_up_are_refused() -> None:
+    # 3 + 2 + 4 values = 3 rows of 3: the old reader took them as 3 shifted points
+    with pytest.raises(FormatError, match=r"^line 2: expected 3 values for a point, found 2$"):
+        read_geometry(b"1 2 3\n4 5\n6 7 8 9\n", "xyz")
+
+
+def test_ascii_ply_rows_that_only_add_up_are_refused() -> None:
+    data = ply_bytes("ascii", XYZ3, TRI, FACES)
+    data = data.replace(b"1.0 0.0 0.0\n0.0 1.0 0.0", b"1.0 0.0\n0.0 0.0 1.0 0.0")
+    # header of 9 lines, vertex 0 on line 10: vertex 1 (line 11) has 2 values, vertex 2 has 4
+    with pytest.raises(FormatError, match=r"line 11: expected 3 values for a vertex entry"):
+        read_geometry(data, "ply")
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        b'{"points": [[true, 0, 0], [1, 0, 0]]}',
+        b'{"points": [[0, 0, 0], [1, 0, 0]], "weights": [true, 1]}',
+        b'{"points": [[0, 0, 0], [1, 0, 0]], "edges": [[false, true]]}',
+        b'{"points": [[0, 0], [1, 0]], "attributes": {"a": [true, false]}}',
+    ],
+)
+def test_json_booleans_are_not_numbers(body: bytes) -> None:
+    with pytest.raises(FormatError, match="not booleans"):
+        read_geometry(body, "json")
