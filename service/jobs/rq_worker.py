@@ -23,6 +23,7 @@ Entry point for the CLI: :func:`main` (``argv`` without the ``worker`` word).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
@@ -72,7 +73,7 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
             )  # fmt: skip
             self.notifier = Notifier(settings, self._payload, backend.store.claim_webhook,
                                      backend.store.webhook_state)  # fmt: skip
-            self._requeue_on_stop = False
+            self.stopping = False  # SIGTERM/SIGINT received: exit instead of starting again
 
         @staticmethod
         def _job_id(job: Job) -> str:
@@ -110,7 +111,7 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
             sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
             if sig == signal.SIGALRM:
                 backend.fail(job_id, when, problems.timed_out(settings.job_timeout))
-            elif self._requeue_on_stop:
+            elif self.stopping:
                 backend.requeue(job_id, when, raw["attempts"], count=False)
             elif sig is None or sig in _CRASH_SIGNALS:
                 code = -sig if sig else os.waitstatus_to_exitcode(status)
@@ -124,7 +125,7 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
 
         def request_stop(self, signum: int, frame: Any) -> None:
             """SIGTERM/SIGINT: put the running job back (not a try), then exit."""
-            self._requeue_on_stop = True
+            self.stopping = True
             super().request_stop(signum, frame)
             if self.horse_pid:
                 self.kill_horse()
@@ -177,14 +178,37 @@ def main(argv: list[str] | None = None) -> int:
     limit_threads(_threads(settings))
     logging.basicConfig(level=ns.log_level, format="%(asctime)s %(name)s %(message)s")
     backend = Backend.connect(settings)
-    worker = make_worker(backend, name=ns.name, runner=ns.runner)
-    worker.notifier.start()
-    try:
-        worker.work(burst=ns.burst, max_jobs=ns.max_jobs, logging_level=ns.log_level,
-                    with_scheduler=False)  # fmt: skip
-    finally:
-        worker.notifier.stop()
-    return 0
+    while True:  # RQ quits on a lost Redis connection: wait for Redis, then work again
+        worker = make_worker(backend, name=ns.name, runner=ns.runner)
+        worker.notifier.start()
+        try:
+            worker.work(burst=ns.burst, max_jobs=ns.max_jobs, logging_level=ns.log_level,
+                        with_scheduler=False)  # fmt: skip
+        except Exception:
+            log.exception("worker stopped")
+        finally:
+            worker.notifier.stop()
+        if worker.stopping or ns.burst or ns.max_jobs:
+            return 0
+        time.sleep(1.0)
+        _wait_for_redis(backend)
+        with contextlib.suppress(Exception):  # its registration may have outlived the outage
+            worker.register_death()
+
+
+def _wait_for_redis(backend: Backend, first: float = 0.5, cap: float = 10.0) -> None:
+    """Sleep until Redis answers (exponential backoff between tries)."""
+    from redis.exceptions import RedisError
+
+    delay = first
+    while True:
+        try:
+            backend.redis.ping()
+            log.warning("Redis is back: the worker starts again")
+            return
+        except RedisError:
+            time.sleep(delay)
+            delay = min(cap, delay * 2)
 
 
 if __name__ == "__main__":  # python -m service.jobs.rq_worker
