@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 import signal
 import subprocess
@@ -52,7 +53,7 @@ def _job_dir(cluster: dict[str, Any], job_id: str) -> Path:
 def _no_overlap(cluster: dict[str, Any], job_id: str) -> list[tuple[int, float, float | None]]:
     """The runs of a job, checked to never overlap (a killed run ends when its pid is gone)."""
     found = runs(_job_dir(cluster, job_id))
-    for (_, start1, end1), (_, start2, _) in zip(found, found[1:], strict=False):
+    for (_, start1, end1), (_, start2, _) in itertools.pairwise(found):
         assert start2 > start1 and (end1 is None or start2 >= end1)
     return found
 
