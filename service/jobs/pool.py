@@ -308,6 +308,7 @@ class WorkerPool:
 
     def _watch(self, run: _Run) -> None:
         claim, process = run.claim, run.process
+        run_of = (claim.job_id, self.owner, claim.attempt)
         now = time.monotonic()
         next_check = now + self.poll_interval
         next_renew = now + self.lease / 3
@@ -323,17 +324,27 @@ class WorkerPool:
                 reason = "timeout"
             if reason is None and now >= next_renew:
                 next_renew = now + self.lease / 3
-                if not self.store.renew(claim.job_id, self.owner, claim.attempt, self.lease):
+                if self._lost(lambda: self.store.renew(*run_of, self.lease), claim.job_id):
                     reason = "lost"
             elif reason is None and now >= next_check:
                 next_check = now + self.poll_interval
-                if not self.store.owns(claim.job_id, self.owner, claim.attempt):
+                if self._lost(lambda: self.store.owns(*run_of), claim.job_id):
                     reason = "lost"
             if reason is not None:
                 with self._lock:
                     run.reason = run.reason or reason
                 self._terminate(process)
                 return
+
+    @staticmethod
+    def _lost(holds: Callable[[], bool], job_id: str) -> bool:
+        """Whether the store says the run lost its job (a store that cannot be read or written
+        now, e.g. a full disk, says nothing: the run goes on)."""
+        try:
+            return not holds()
+        except Exception as exc:
+            log.warning("job %s: lease not renewed: %s", job_id, exc)
+            return False
 
     def _terminate(self, process: multiprocessing.process.BaseProcess) -> None:
         pid = process.pid

@@ -71,8 +71,9 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
                 job_monitoring_interval=max(1, int(settings.worker_lease // 3)),
                 work_horse_killed_handler=self._horse_killed,
             )  # fmt: skip
-            self.notifier = Notifier(settings, self._payload, backend.store.claim_webhook,
-                                     backend.store.webhook_state)  # fmt: skip
+            store = backend.store
+            self.notifier = Notifier(settings, backend.webhook_payload, store.claim_webhook,
+                                     store.webhook_state)  # fmt: skip
             self.stopping = False  # SIGTERM/SIGINT received: exit instead of starting again
 
         @staticmethod
@@ -129,12 +130,6 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
             super().request_stop(signum, frame)
             if self.horse_pid:
                 self.kill_horse()
-
-        def _payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:
-            rec = backend.store.get(job_id)
-            if rec is None or not rec.webhook_url:
-                return None
-            return rec.webhook_url, rec.public_dict()
 
     worker = GeosmoothWorker()
     memory = settings.job_memory_limit
