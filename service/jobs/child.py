@@ -176,6 +176,7 @@ def _run(spec: RunSpec, store: JobStore) -> None:
             report_progress=report_progress,
             progress_interval=spec.progress_interval,
             weld=rec.weld,
+            memory_limit=spec.memory_limit,
         )
         report = load_runner(spec.runner)(ctx)
         ctx.flush_progress()

@@ -106,6 +106,7 @@ def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
                 report_progress=lambda p: store.run_update(job_id, owner, attempt, progress=p),
                 progress_interval=0.2,
                 weld=rec.weld,
+                memory_limit=_Config.memory_limit,
             )
             report = load_runner(_Config.runner)(ctx)
             ctx.flush_progress()

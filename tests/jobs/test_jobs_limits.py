@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import pytest
 from jobs_fakes import script
 from jobs_helpers import PARAMS, pid_gone, start_server, wait_finished, wait_for
 
@@ -119,3 +120,20 @@ def test_job_problems_carry_no_server_paths(tmp_path: Path) -> None:
     assert str(tmp_path) not in other["detail"] and "<path>" in other["detail"]
     assert other["detail"].endswith("at line 3")
 
+
+
+def test_a_job_estimated_above_the_limit_is_refused_at_submit(make_queue: MakeQueue) -> None:
+    from service.core.resources import estimate_resources
+    from service.jobs.errors import JobTooLarge
+
+    queue = make_queue(start=False, memory_limit=256 * MIB)
+    big = JobSize(n=5_000_000, dim=3, kind="cloud")
+    with pytest.raises(JobTooLarge) as err:
+        queue.submit(script("ok"), "json", PARAMS, size=big)
+    problem = err.value.to_dict()
+    est = estimate_resources(big.n, big.dim, big.kind, PARAMS, memory_limit=256 * MIB)
+    assert problem["estimate_bytes"] == est.memory_bytes > problem["limit_bytes"] == 256 * MIB
+    assert err.value.status == 422 and "0.25 GiB" in err.value.message
+    assert queue.list()[1] == 0  # nothing stored
+    small = queue.submit(script("ok"), "json", PARAMS, size=JobSize(n=1000, dim=3, kind="cloud"))
+    assert small.status is JobStatus.QUEUED
