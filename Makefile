@@ -20,6 +20,7 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 $(VENV)/.installed-dev: pyproject.toml $(VENV)/.installed
+	scripts/install-system-deps.sh --test
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $@
 
