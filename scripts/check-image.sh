@@ -39,7 +39,7 @@ in_root() {  # in_root ROOT COMMAND...: run in a chroot with /proc, /dev and DNS
   fi
   cp /etc/resolv.conf "$root/etc/resolv.conf"
   chroot "$root" /usr/bin/env -i PATH=/usr/local/bin:/usr/bin:/bin:/usr/sbin:/sbin HOME=/root \
-    LANG=C.UTF-8 DEBIAN_FRONTEND=noninteractive "$@"
+    LANG=C.UTF-8 DEBIAN_FRONTEND=noninteractive PIP_CERT=/etc/ssl/certs/ca-certificates.crt "$@"
 }
 
 fresh_root() {  # fresh_root NAME: a new copy of the base
@@ -57,6 +57,12 @@ make_base() {
   in_root "$root" apt-get update -qq
   in_root "$root" apt-get install -y -qq --no-install-recommends python3.11 python3.11-venv \
     ca-certificates >/dev/null
+  # Trust the CAs the host trusts on top of Debian's (a TLS-intercepting proxy in CI): what a
+  # docker build behind that proxy needs too. pip uses the system bundle (PIP_CERT above).
+  if compgen -G "/usr/local/share/ca-certificates/*.crt" >/dev/null; then
+    cp /usr/local/share/ca-certificates/*.crt "$root/usr/local/share/ca-certificates/"
+    in_root "$root" update-ca-certificates >/dev/null
+  fi
   # Python.h and friends, without libpython3.11-dev's dependencies (zlib1g-dev -> libc6-dev):
   in_root "$root" sh -c 'cd /tmp && apt-get download -qq libpython3.11-dev \
     && dpkg-deb -x libpython3.11-dev_*.deb / && rm -f libpython3.11-dev_*.deb'

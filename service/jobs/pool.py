@@ -39,7 +39,7 @@ __all__ = ["WorkerPool", "default_start_method"]
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.core.pipeline", "service.io")
+_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.jobs.preload")
 #: Signals by which a job process kills itself (its own bug or bad input): the job fails. Any
 #: other signal came from outside (the OOM killer's SIGKILL, a stop of the whole service): the
 #: run was interrupted and is retried like a server death.
@@ -267,7 +267,6 @@ class WorkerPool:
             server_pid=os.getpid(),
             progress_interval=self.progress_interval,
             memory_limit=self.memory_limit,
-            threads=self.threads,
         )
         process = self._ctx.Process(  # type: ignore[attr-defined]
             target=child.main, args=(spec,), name=f"geosmooth-job-{claim.job_id[:8]}", daemon=True

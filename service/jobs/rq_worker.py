@@ -50,7 +50,7 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CRASH_SIGNALS = frozenset({signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal.SIGILL,
                             signal.SIGABRT, signal.SIGSYS, signal.SIGTRAP})  # fmt: skip
-_PRELOAD = ("numpy", "scipy.sparse", "service.core.pipeline", "service.io", "service.jobs.rq_tasks")
+_PRELOAD = ("service.jobs.rq_tasks", "service.jobs.preload")
 
 
 def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFAULT_RUNNER) -> Any:
@@ -168,9 +168,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     os.environ.update(thread_env(_threads(settings)))
     os.environ["GEOSMOOTH_WORKER_PID"] = str(os.getpid())
+    limit_threads(_threads(settings))  # inherited by every horse (a global of the libraries)
     for module in (*_PRELOAD, ns.runner.partition(":")[0]):  # loaded once, shared by every horse
         importlib.import_module(module)
-    limit_threads(_threads(settings))
     logging.basicConfig(level=ns.log_level, format="%(asctime)s %(name)s %(message)s")
     backend = Backend.connect(settings)
     while True:  # RQ quits on a lost Redis connection: wait for Redis, then work again
