@@ -231,3 +231,20 @@ def test_the_worker_that_finished_a_job_posts_its_webhook(cluster: dict[str, Any
     assert verify(WEBHOOK_SECRET, last.body, last.headers["Geosmooth-Signature"])
     assert json.loads(last.body) == done.public_dict()
     assert queue.store.raw(rec.id)["webhook_state"] == "delivered"  # type: ignore[index]
+
+
+def test_ttl_expiry_removes_records_and_blobs(cluster: dict[str, Any]) -> None:
+    queue = _queue(cluster)
+    rec = queue.submit(script("ok"), "json", PARAMS, idempotency_key="ttl-key")
+    assert wait_finished(queue, rec.id, 20).status is JobStatus.SUCCEEDED
+    job_dir = Path(cluster["settings"].data_dir) / "jobs" / rec.id
+    assert job_dir.exists()
+    short = Backend.connect(cluster["settings"].model_copy(update={"result_ttl": 0.3}))
+    time.sleep(0.4)
+    assert rec.id in short.expire()
+    assert queue.get(rec.id) is None and not job_dir.exists()
+    assert queue.store.redis.exists(queue.store.key(rec.id)) == 0
+    assert all(queue.store.redis.zscore(queue.store.index(None, s), rec.id) is None
+               for s in (None, "succeeded"))  # fmt: skip
+    again = queue.submit(script("ok"), "json", PARAMS, idempotency_key="ttl-key")
+    assert again.id != rec.id  # the idempotency key expired with its job
