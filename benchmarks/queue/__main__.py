@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from benchmarks.measure import machine_info
-from benchmarks.queue.run import job_mix, overhead, redis_cost, throughput
+from benchmarks.queue.run import job_mix, overhead, redis_cost, throughput, utilization
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,7 +23,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3, help="runs of the mix per setting")
     ap.add_argument("--repeat", type=int, default=2, help="copies of the 6-job mix per run")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results"))
+    ap.add_argument("--summarize", type=Path, help="print the summary of an earlier result")
     ns = ap.parse_args(argv)
+    if ns.summarize:
+        print(summary(json.loads(ns.summarize.read_text())))
+        return 0
     jobs = job_mix(ns.repeat)
     result: dict[str, object] = {"machine": machine_info(), "jobs_per_run": len(jobs)}
     for backend in ("embedded", "rq"):
@@ -47,14 +51,18 @@ def main(argv: list[str] | None = None) -> int:
 
 def summary(r: dict) -> str:  # type: ignore[type-arg]
     """A markdown table of the results."""
-    lines = ["| backend | workers | jobs/s | p50 latency s | p95 latency s | scaling |",
-             "|---|---|---|---|---|---|"]  # fmt: skip
+    lines = ["| backend | workers | jobs/s | p50 latency s | p95 latency s | scaling | "
+             "worker utilization |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     for backend in ("embedded", "rq"):
         for n in (1, 2):
             x = r[f"{backend}_{n}"]
             scale = f"{r[f'{backend}_scaling']:.2f}" if n == 2 else ""
+            use = sorted(utilization(run, n) for run in x["rounds"])
             lines.append(f"| {backend} | {n} | {x['jobs_per_s']:.2f} | {x['p50_s']:.2f} | "
-                         f"{x['p95_s']:.2f} | {scale} |")  # fmt: skip
+                         f"{x['p95_s']:.2f} | {scale} | {use[len(use) // 2]:.2f} "
+                         f"({use[0]:.2f}-{use[-1]:.2f}) |")  # fmt: skip
+    lines.append(f"load average before/after: {r['machine']['load_average']} / "
+                 f"{r['machine_after']['load_average']} on {r['machine']['cores']} cores")
     o, red = r["overhead"], r["redis"]
     lines.append("")
     lines.append(f"tiny job latency: embedded {o['embedded']['latency_s'] * 1e3:.0f} ms, RQ "

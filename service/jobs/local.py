@@ -200,6 +200,7 @@ class LocalQueue:
         self.notifier = Notifier(settings, self._webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._histogram = DurationHistogram()
+        self._last_strays = 0.0
         self._lock = threading.Lock()
         self._outcomes = {s.value: 0 for s in (JobStatus.SUCCEEDED, JobStatus.FAILED,
                                                 JobStatus.CANCELLED)}  # fmt: skip
@@ -518,6 +519,9 @@ class LocalQueue:
             self.files.remove(job_id)
 
     def _remove_strays(self) -> None:
+        if time.monotonic() - self._last_strays < _ORPHAN_AGE and self._last_strays > 0:
+            return  # a walk of every job directory: at start, then every 10 minutes
+        self._last_strays = time.monotonic()
         for tmp in self.files.stray_temporaries(_ORPHAN_AGE):
             tmp.unlink(missing_ok=True)
 

@@ -39,6 +39,7 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CACHE_AGE = 3600.0
 _CANCEL_WAIT = 15.0
+_PRUNE_INTERVAL = 600.0
 
 
 class RQQueue:
@@ -77,6 +78,7 @@ class RQQueue:
         self._sweeper: threading.Thread | None = None
         self._started = False
         self._last_reconcile = 0.0
+        self._last_prune = 0.0
 
     @classmethod
     def from_settings(cls, settings: Settings) -> RQQueue:
@@ -315,7 +317,9 @@ class RQQueue:
         backend.expire()
         for job_id in self.store.webhooks_due():
             self.notifier.enqueue(job_id)
-        self.blobs.prune_cache(_CACHE_AGE)
+        if time.monotonic() - self._last_prune >= _PRUNE_INTERVAL:  # a walk of the blob tree
+            self._last_prune = time.monotonic()
+            self.blobs.prune_cache(_CACHE_AGE)
 
     def _sweep_loop(self) -> None:
         while not self._stop.wait(self.sweep_interval):

@@ -88,6 +88,26 @@ def test_sigkill_of_a_worker_mid_job_reruns_it_on_the_other(cluster: dict[str, A
     cluster["workers"][0] = replacement  # for the next tests
 
 
+def test_sigterm_of_a_worker_requeues_its_job_without_counting_a_try(
+    cluster: dict[str, Any],
+) -> None:
+    queue: RQQueue = cluster["queue"]
+    rec = queue.submit(script("sleep", seconds=2.0, steps=8), "json", PARAMS)
+    running = wait_for(lambda: (r := queue.get(rec.id)) and r.status is JobStatus.RUNNING
+                       and r.pid and runs(_job_dir(cluster, rec.id)) and r, timeout=20)  # fmt: skip
+    owner = queue.store.raw(rec.id)["owner"]  # type: ignore[index]
+    index = next(i for i, w in enumerate(cluster["workers"]) if w.name == owner)
+    stopped = cluster["workers"][index]
+    stopped.kill(signal.SIGTERM)  # docker stop: the worker exits, its job goes back
+    assert stopped.proc is not None and stopped.proc.returncode == 0
+    assert pid_gone(running.pid)
+    done = wait_finished(queue, rec.id, timeout=30)
+    assert done.status is JobStatus.SUCCEEDED and done.attempts == 1  # not charged a try
+    assert len(_no_overlap(cluster, rec.id)) == 2
+    log = cluster["root"] / f"{owner}r.log"
+    cluster["workers"][index] = WorkerProcess(cluster["settings"], f"{owner}r", log).start()
+
+
 def test_timeout_kills_a_run_stuck_anywhere(cluster: dict[str, Any]) -> None:
     queue: RQQueue = cluster["queue"]
     rec = queue.submit(script("sleep", seconds=60), "json", PARAMS)
