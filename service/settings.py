@@ -125,6 +125,12 @@ class Settings(BaseSettings):
         ge=0,
         description="Submits are refused (507) when the job store has less free space.",
     )
+    reserve_bytes: int = Field(
+        default=8 * 1024 * 1024,
+        ge=0,
+        description="Space the embedded queue reserves (a file next to its database) to record "
+        "job outcomes when the disk fills up.",
+    )
     webhook_secret: SecretStr | None = Field(
         default=None, description="HMAC-SHA256 key of the Geosmooth-Signature webhook header."
     )

@@ -154,8 +154,10 @@ class S3Blobs:
         self.cache.mkdir(parents=True, exist_ok=True)
         if client is None:
             import boto3  # type: ignore[import-untyped]
+            from botocore.config import Config  # type: ignore[import-untyped]
 
-            client = boto3.client("s3")
+            # SigV4 presigned URLs (every region and S3-compatible server accepts them)
+            client = boto3.client("s3", config=Config(signature_version="s3v4"))
         self.client = client
 
     def key(self, job_id: str, name: str) -> str:

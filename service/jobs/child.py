@@ -39,7 +39,7 @@ from typing import Any
 
 from service.jobs import problems
 from service.jobs.files import JobFiles
-from service.jobs.limits import limit_memory, limit_threads
+from service.jobs.limits import limit_memory
 from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
 from service.jobs.store import JobStore
@@ -63,7 +63,6 @@ class RunSpec:
     server_pid: int
     progress_interval: float = 0.2
     memory_limit: int | None = None
-    threads: int = 1
 
 
 def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
@@ -165,8 +164,7 @@ def _run(spec: RunSpec, store: JobStore) -> None:
         rec = store.get(spec.job_id)
         if rec is None:
             return
-        limit_memory(spec.memory_limit)
-        limit_threads(spec.threads)
+        limit_memory(spec.memory_limit)  # threads: set in the forkserver's environment
         ctx = JobContext(
             job_id=spec.job_id,
             job_dir=files.dir(spec.job_id),
@@ -176,6 +174,7 @@ def _run(spec: RunSpec, store: JobStore) -> None:
             report_progress=report_progress,
             progress_interval=spec.progress_interval,
             weld=rec.weld,
+            memory_limit=spec.memory_limit,
         )
         report = load_runner(spec.runner)(ctx)
         ctx.flush_progress()

@@ -117,6 +117,8 @@ class StorageUnavailable(StorageError):
 
 
 _FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+_UNAVAILABLE_ERRNOS = frozenset({errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO, errno.ENODEV,
+                                 errno.ESTALE, errno.ENOTCONN, errno.ETIMEDOUT})  # fmt: skip
 
 
 def storage_error(exc: BaseException) -> StorageError | None:
@@ -129,7 +131,9 @@ def storage_error(exc: BaseException) -> StorageError | None:
     if isinstance(exc, OSError):
         if exc.errno in _FULL_ERRNOS:
             return StorageFull("the job store is out of space")
-        return StorageUnavailable(f"the job store cannot be written ({_errno_name(exc)})")
+        if exc.errno in _UNAVAILABLE_ERRNOS:
+            return StorageUnavailable(f"the job store cannot be written ({_errno_name(exc)})")
+        return None
     if isinstance(exc, sqlite3.OperationalError | sqlite3.DatabaseError) and not isinstance(
         exc, sqlite3.IntegrityError | sqlite3.ProgrammingError | sqlite3.InterfaceError
     ):

@@ -71,13 +71,10 @@ def check_admission(size: JobSize, params: SmoothingParams, limit: int | None) -
     """
     if limit is None:
         return
-    import importlib.util
+    from service.core.resources import estimate_resources
 
-    if importlib.util.find_spec("service.core.resources") is None:  # TRANSITIONAL: removed
-        return  # once core-engine's [seam] (estimate_resources) is merged into jobs
-    from service.core.resources import estimate_resources  # type: ignore[import-not-found]
-
-    est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces)
+    est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces,
+                             memory_limit=limit)  # fmt: skip
     if est.memory_bytes <= limit:
         return
     raise JobTooLarge(

@@ -129,6 +129,9 @@ class LocalQueue:
         BLAS/OpenMP threads per job process (``None``: cores / workers).
     min_free_bytes : int
         Free space a submit must leave in the store (else 507).
+    reserve_bytes : int
+        Size of the reserve file kept next to the database and released when the disk is full,
+        so that running jobs can still be recorded as failed (0: none).
     settings : Settings, optional
         For webhook delivery (secret, SSRF policy, retries); default: from the environment.
     """
@@ -152,6 +155,7 @@ class LocalQueue:
         memory_limit: int | None = None,
         threads_per_job: int | None = None,
         min_free_bytes: int = 0,
+        reserve_bytes: int = 8 * 1024 * 1024,
         settings: Settings | None = None,
     ) -> None:
         if max_attempts < 1:
@@ -166,6 +170,7 @@ class LocalQueue:
         self.retry_backoff = retry_backoff
         self.memory_limit = memory_limit
         self.min_free_bytes = min_free_bytes
+        self.reserve_bytes = reserve_bytes
         self.start_method = start_method or default_start_method()
         if sweep_interval is None:
             sweep_interval = min(60.0, max(1.0, (self.result_ttl or 240.0) / 4))
@@ -195,6 +200,7 @@ class LocalQueue:
         self.notifier = Notifier(settings, self._webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._histogram = DurationHistogram()
+        self._last_strays = 0.0
         self._lock = threading.Lock()
         self._outcomes = {s.value: 0 for s in (JobStatus.SUCCEEDED, JobStatus.FAILED,
                                                 JobStatus.CANCELLED)}  # fmt: skip
@@ -221,6 +227,7 @@ class LocalQueue:
             memory_limit=limit or None,
             threads_per_job=settings.threads_per_job,
             min_free_bytes=settings.min_free_bytes,
+            reserve_bytes=settings.reserve_bytes,
             settings=settings,
         )
 
@@ -486,7 +493,8 @@ class LocalQueue:
 
     def _maintain(self, initial: bool = False) -> None:
         steps: builtins.list[Callable[[], object]] = [
-            self.recover, self.expire, self._remove_strays, self._webhooks_due,
+            self._keep_reserve, self.recover, self.expire, self._remove_strays,
+            self._webhooks_due,
         ]  # fmt: skip
         if initial:
             steps.append(self._remove_orphans)
@@ -503,11 +511,17 @@ class LocalQueue:
         while not self._stop_sweeper.wait(self.sweep_interval):
             self._maintain()
 
+    def _keep_reserve(self) -> None:
+        self.store.keep_reserve(self.reserve_bytes, self.min_free_bytes)
+
     def _remove_orphans(self) -> None:
         for job_id in self.files.orphans(self.store.ids(), _ORPHAN_AGE):
             self.files.remove(job_id)
 
     def _remove_strays(self) -> None:
+        if time.monotonic() - self._last_strays < _ORPHAN_AGE and self._last_strays > 0:
+            return  # a walk of every job directory: at start, then every 10 minutes
+        self._last_strays = time.monotonic()
         for tmp in self.files.stray_temporaries(_ORPHAN_AGE):
             tmp.unlink(missing_ok=True)
 

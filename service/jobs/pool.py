@@ -39,7 +39,7 @@ __all__ = ["WorkerPool", "default_start_method"]
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.core.pipeline", "service.io")
+_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.jobs.preload")
 #: Signals by which a job process kills itself (its own bug or bad input): the job fails. Any
 #: other signal came from outside (the OOM killer's SIGKILL, a stop of the whole service): the
 #: run was interrupted and is retried like a server death.
@@ -267,7 +267,6 @@ class WorkerPool:
             server_pid=os.getpid(),
             progress_interval=self.progress_interval,
             memory_limit=self.memory_limit,
-            threads=self.threads,
         )
         process = self._ctx.Process(  # type: ignore[attr-defined]
             target=child.main, args=(spec,), name=f"geosmooth-job-{claim.job_id[:8]}", daemon=True
@@ -308,6 +307,7 @@ class WorkerPool:
 
     def _watch(self, run: _Run) -> None:
         claim, process = run.claim, run.process
+        run_of = (claim.job_id, self.owner, claim.attempt)
         now = time.monotonic()
         next_check = now + self.poll_interval
         next_renew = now + self.lease / 3
@@ -323,17 +323,27 @@ class WorkerPool:
                 reason = "timeout"
             if reason is None and now >= next_renew:
                 next_renew = now + self.lease / 3
-                if not self.store.renew(claim.job_id, self.owner, claim.attempt, self.lease):
+                if self._lost(lambda: self.store.renew(*run_of, self.lease), claim.job_id):
                     reason = "lost"
             elif reason is None and now >= next_check:
                 next_check = now + self.poll_interval
-                if not self.store.owns(claim.job_id, self.owner, claim.attempt):
+                if self._lost(lambda: self.store.owns(*run_of), claim.job_id):
                     reason = "lost"
             if reason is not None:
                 with self._lock:
                     run.reason = run.reason or reason
                 self._terminate(process)
                 return
+
+    @staticmethod
+    def _lost(holds: Callable[[], bool], job_id: str) -> bool:
+        """Whether the store says the run lost its job (a store that cannot be read or written
+        now, e.g. a full disk, says nothing: the run goes on)."""
+        try:
+            return not holds()
+        except Exception as exc:
+            log.warning("job %s: lease not renewed: %s", job_id, exc)
+            return False
 
     def _terminate(self, process: multiprocessing.process.BaseProcess) -> None:
         pid = process.pid

@@ -54,8 +54,8 @@ def from_exception(exc: BaseException) -> dict[str, Any]:
 
     if isinstance(exc, GeosmoothError | FormatError | JobsError):
         return _from_typed(exc, exc.title)
-    storage = storage_error(exc)
-    if storage is not None and isinstance(exc, OSError):
+    storage = storage_error(exc)  # a full or read-only disk, an unreachable store
+    if storage is not None:
         return _from_typed(storage, storage.title)
     if isinstance(exc, MemoryError):
         return {

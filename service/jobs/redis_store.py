@@ -6,6 +6,8 @@ Keys (``P`` = ``geosmooth:<queue name>``; one Redis, not a cluster: scripts buil
     P:idx:<*|t<tenant>>:<*|status>  zsets by submission order (seq): listing, paging, counts
     P:leases                    zset: running jobs by lease expiry (recovery of lost workers)
     P:finished                  zset: finished jobs by finish time (TTL expiry)
+    P:webhooks                  zset: finished jobs whose webhook is not delivered yet
+    P:pending                   zset: requeued jobs waiting for their backoff (no RQ job yet)
     P:idem:<tenant>:<key>       string: job id of an idempotency key
     P:stats:finished, P:stats:duration   hashes: outcome counters, run-time histogram
     P:seq                       counter
@@ -52,6 +54,9 @@ local function move(p, key, id, old, new, now)
   if new == 'succeeded' or new == 'failed' or new == 'cancelled' then
     redis.call('ZADD', p .. ':finished', now, id)
     redis.call('HINCRBY', p .. ':stats:finished', new, 1)
+    if redis.call('HGET', key, 'webhook_url') then
+      redis.call('ZADD', p .. ':webhooks', now, id)
+    end
   end
 end
 """
@@ -129,6 +134,7 @@ if tenant then
 end
 if idem then redis.call('DEL', idem) end
 redis.call('ZREM', p .. ':finished', id)
+redis.call('ZREM', p .. ':webhooks', id)
 redis.call('DEL', key)
 return 1
 """
@@ -145,6 +151,7 @@ if state then
   if tonumber(string.sub(state, 9)) >= tonumber(ARGV[4]) then return 0 end
 end
 redis.call('HSET', key, 'webhook_state', 'sending:' .. ARGV[3])
+redis.call('ZADD', ARGV[1] .. ':webhooks', ARGV[3], ARGV[2])
 return 1
 """
 
@@ -409,6 +416,7 @@ class RedisJobStore:
     def webhook_state(self, job_id: str, state: str) -> None:
         """``delivered`` or ``failed``."""
         self.update(job_id, webhook_state=state)
+        self.redis.zrem(f"{self.prefix}:webhooks", job_id)
 
     def running(self, before: float | None = None) -> builtins.list[RunInfo]:
         """Running jobs (whose lease ends before ``before``, if given)."""
@@ -434,15 +442,13 @@ class RedisJobStore:
         old = self.redis.zrangebyscore(f"{self.prefix}:finished", "-inf", repr(cutoff))
         return [i.decode() for i in old]
 
-    def webhooks_due(self) -> builtins.list[str]:
-        """Finished jobs with an undelivered webhook (a bounded scan of the newest 1000)."""
-        ids = [i.decode() for i in self.redis.zrevrange(f"{self.prefix}:finished", 0, 999)]
-        with self.redis.pipeline(transaction=False) as pipe:
-            for job_id in ids:
-                pipe.hmget(self.key(job_id), "webhook_url", "webhook_state")
-            rows = pipe.execute()
-        return [j for j, (url, state) in zip(ids, rows, strict=True)
-                if url and (state is None or state.startswith(b"sending:"))]  # fmt: skip
+    def webhooks_due(self, stale_after: float = 60.0) -> builtins.list[str]:
+        """Finished jobs whose webhook is neither delivered nor given up, finished (or claimed)
+        more than ``stale_after`` seconds ago (their deliverer died): ``P:webhooks``, a sorted
+        set kept by the scripts, so the sweep's cost does not grow with the finished jobs."""
+        high = repr(time.time() - stale_after)
+        return [i.decode() for i in self.redis.zrangebyscore(f"{self.prefix}:webhooks", "-inf",
+                                                                 high)]  # fmt: skip
 
     def ids(self) -> set[str]:
         """Every job id."""

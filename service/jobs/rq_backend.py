@@ -18,6 +18,8 @@ and crash recovery do:
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 import socket
 import time
@@ -28,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 from service.jobs import problems
 from service.jobs.blobs import BlobStore, blob_store
 from service.jobs.progress import queued_progress
-from service.jobs.queue import JobStatus
+from service.jobs.queue import JobRecord, JobStatus
 from service.jobs.redis_store import RedisJobStore
 
 if TYPE_CHECKING:
@@ -74,6 +76,24 @@ class Backend:
         store = RedisJobStore(redis, f"geosmooth:{settings.rq_queue_name}", settings.result_ttl)
         blobs = blob_store(settings.storage_url, settings.data_dir, settings.min_free_bytes)
         return cls(settings, redis, store, blobs, Queue(settings.rq_queue_name, connection=redis))
+
+    def get(self, job_id: str) -> JobRecord | None:
+        """A job's record, with its report (from the blob store) once succeeded."""
+        rec = self.store.get(job_id)
+        if rec is None or rec.status is not JobStatus.SUCCEEDED:
+            return rec
+        try:
+            report = json.loads(self.blobs.read(job_id, "report.json"))
+        except FileNotFoundError:  # deleted or expired meanwhile
+            return rec
+        return dataclasses.replace(rec, report=report)
+
+    def webhook_payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:
+        """``(url, JSON of the job)`` of a job with a webhook."""
+        rec = self.get(job_id)
+        if rec is None or not rec.webhook_url:
+            return None
+        return rec.webhook_url, rec.public_dict()
 
     # -- RQ jobs -------------------------------------------------------------------------
     @staticmethod

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import builtins
 import contextlib
-import dataclasses
-import json
 import logging
 import threading
 import time
@@ -41,6 +39,7 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CACHE_AGE = 3600.0
 _CANCEL_WAIT = 15.0
+_PRUNE_INTERVAL = 600.0
 
 
 class RQQueue:
@@ -73,12 +72,13 @@ class RQQueue:
         self.memory_limit = memory_limit
         self.sweep_interval = sweep_interval
         self.reconcile_interval = reconcile_interval
-        self.notifier = Notifier(self.settings, self._webhook_payload, self.store.claim_webhook,
+        self.notifier = Notifier(self.settings, backend.webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._stop = threading.Event()
         self._sweeper: threading.Thread | None = None
         self._started = False
         self._last_reconcile = 0.0
+        self._last_prune = 0.0
 
     @classmethod
     def from_settings(cls, settings: Settings) -> RQQueue:
@@ -161,7 +161,7 @@ class RQQueue:
                 raise
         if not created:
             self.blobs.remove(job.job_id)
-            return self._with_report(rec)
+            return self.get(rec.id) or rec
         return rec
 
     def get(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
@@ -169,20 +169,10 @@ class RQQueue:
         if not is_job_id(job_id):
             return None
         with self._errors():
-            rec = self.store.get(job_id)
+            rec = self.backend.get(job_id)
         if rec is None or (tenant is not None and rec.tenant != tenant):
             return None
-        return self._with_report(rec)
-
-    def _with_report(self, rec: JobRecord) -> JobRecord:
-        if rec.status is not JobStatus.SUCCEEDED:
-            return rec
-        try:
-            with self._errors():
-                report = json.loads(self.blobs.read(rec.id, "report.json"))
-        except FileNotFoundError:
-            return rec
-        return dataclasses.replace(rec, report=report)
+        return rec
 
     def list(
         self,
@@ -327,7 +317,9 @@ class RQQueue:
         backend.expire()
         for job_id in self.store.webhooks_due():
             self.notifier.enqueue(job_id)
-        self.blobs.prune_cache(_CACHE_AGE)
+        if time.monotonic() - self._last_prune >= _PRUNE_INTERVAL:  # a walk of the blob tree
+            self._last_prune = time.monotonic()
+            self.blobs.prune_cache(_CACHE_AGE)
 
     def _sweep_loop(self) -> None:
         while not self._stop.wait(self.sweep_interval):
@@ -349,12 +341,6 @@ class RQQueue:
                 yield
         except RedisError as exc:
             raise StorageUnavailable("the job broker (Redis) cannot be reached") from exc
-
-    def _webhook_payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:
-        rec = self.get(job_id)
-        if rec is None or not rec.webhook_url:
-            return None
-        return rec.webhook_url, rec.public_dict()
 
 
 _: type[JobQueue] = RQQueue

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 from service.jobs import problems
 from service.jobs.child import load_runner, set_parent_death_signal
 from service.jobs.errors import StorageUnavailable
-from service.jobs.limits import limit_memory, limit_threads
+from service.jobs.limits import limit_memory
 from service.jobs.progress import final_progress
 from service.jobs.queue import JobStatus
 from service.jobs.rq_backend import HOST
@@ -94,8 +94,7 @@ def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
         rec = store.get(job_id)
         if rec is None or rec.status is not JobStatus.RUNNING:
             return
-        limit_memory(_Config.memory_limit)
-        limit_threads(_Config.threads)
+        limit_memory(_Config.memory_limit)  # threads: limited in the worker, inherited
         with blobs.workspace(job_id, rec.fmt) as workdir:
             ctx = JobContext(
                 job_id=job_id,
@@ -106,6 +105,7 @@ def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
                 report_progress=lambda p: store.run_update(job_id, owner, attempt, progress=p),
                 progress_interval=0.2,
                 weld=rec.weld,
+                memory_limit=_Config.memory_limit,
             )
             report = load_runner(_Config.runner)(ctx)
             ctx.flush_progress()

@@ -23,6 +23,7 @@ Entry point for the CLI: :func:`main` (``argv`` without the ``worker`` word).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
@@ -49,7 +50,7 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CRASH_SIGNALS = frozenset({signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal.SIGILL,
                             signal.SIGABRT, signal.SIGSYS, signal.SIGTRAP})  # fmt: skip
-_PRELOAD = ("numpy", "scipy.sparse", "service.core.pipeline", "service.io", "service.jobs.rq_tasks")
+_PRELOAD = ("service.jobs.rq_tasks", "service.jobs.preload")
 
 
 def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFAULT_RUNNER) -> Any:
@@ -70,9 +71,10 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
                 job_monitoring_interval=max(1, int(settings.worker_lease // 3)),
                 work_horse_killed_handler=self._horse_killed,
             )  # fmt: skip
-            self.notifier = Notifier(settings, self._payload, backend.store.claim_webhook,
-                                     backend.store.webhook_state)  # fmt: skip
-            self._requeue_on_stop = False
+            store = backend.store
+            self.notifier = Notifier(settings, backend.webhook_payload, store.claim_webhook,
+                                     store.webhook_state)  # fmt: skip
+            self.stopping = False  # SIGTERM/SIGINT received: exit instead of starting again
 
         @staticmethod
         def _job_id(job: Job) -> str:
@@ -110,7 +112,7 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
             sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
             if sig == signal.SIGALRM:
                 backend.fail(job_id, when, problems.timed_out(settings.job_timeout))
-            elif self._requeue_on_stop:
+            elif self.stopping:
                 backend.requeue(job_id, when, raw["attempts"], count=False)
             elif sig is None or sig in _CRASH_SIGNALS:
                 code = -sig if sig else os.waitstatus_to_exitcode(status)
@@ -124,16 +126,10 @@ def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFA
 
         def request_stop(self, signum: int, frame: Any) -> None:
             """SIGTERM/SIGINT: put the running job back (not a try), then exit."""
-            self._requeue_on_stop = True
+            self.stopping = True
             super().request_stop(signum, frame)
             if self.horse_pid:
                 self.kill_horse()
-
-        def _payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:
-            rec = backend.store.get(job_id)
-            if rec is None or not rec.webhook_url:
-                return None
-            return rec.webhook_url, rec.public_dict()
 
     worker = GeosmoothWorker()
     memory = settings.job_memory_limit
@@ -172,19 +168,42 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     os.environ.update(thread_env(_threads(settings)))
     os.environ["GEOSMOOTH_WORKER_PID"] = str(os.getpid())
+    limit_threads(_threads(settings))  # inherited by every horse (a global of the libraries)
     for module in (*_PRELOAD, ns.runner.partition(":")[0]):  # loaded once, shared by every horse
         importlib.import_module(module)
-    limit_threads(_threads(settings))
     logging.basicConfig(level=ns.log_level, format="%(asctime)s %(name)s %(message)s")
     backend = Backend.connect(settings)
-    worker = make_worker(backend, name=ns.name, runner=ns.runner)
-    worker.notifier.start()
-    try:
-        worker.work(burst=ns.burst, max_jobs=ns.max_jobs, logging_level=ns.log_level,
-                    with_scheduler=False)  # fmt: skip
-    finally:
-        worker.notifier.stop()
-    return 0
+    while True:  # RQ quits on a lost Redis connection: wait for Redis, then work again
+        worker = make_worker(backend, name=ns.name, runner=ns.runner)
+        worker.notifier.start()
+        try:
+            worker.work(burst=ns.burst, max_jobs=ns.max_jobs, logging_level=ns.log_level,
+                        with_scheduler=False)  # fmt: skip
+        except Exception:
+            log.exception("worker stopped")
+        finally:
+            worker.notifier.stop()
+        if worker.stopping or ns.burst or ns.max_jobs:
+            return 0
+        time.sleep(1.0)
+        _wait_for_redis(backend)
+        with contextlib.suppress(Exception):  # its registration may have outlived the outage
+            worker.register_death()
+
+
+def _wait_for_redis(backend: Backend, first: float = 0.5, cap: float = 10.0) -> None:
+    """Sleep until Redis answers (exponential backoff between tries)."""
+    from redis.exceptions import RedisError
+
+    delay = first
+    while True:
+        try:
+            backend.redis.ping()
+            log.warning("Redis is back: the worker starts again")
+            return
+        except RedisError:
+            time.sleep(delay)
+            delay = min(cap, delay * 2)
 
 
 if __name__ == "__main__":  # python -m service.jobs.rq_worker

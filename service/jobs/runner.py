@@ -60,6 +60,9 @@ class JobContext:
         written at once, and so is the last event held back, by :meth:`flush_progress`).
     weld : bool
         Merge exactly coincident vertices when reading the input.
+    memory_limit : int or None
+        The per-job memory limit (bytes): the engine takes its matrix-free path when the direct
+        one would not fit (the process runs under a cap of that size).
     """
 
     job_id: str
@@ -70,6 +73,7 @@ class JobContext:
     report_progress: Callable[[dict[str, Any]], bool]
     progress_interval: float = 0.2
     weld: bool = False
+    memory_limit: int | None = None
     _tracker: ProgressTracker = field(default_factory=ProgressTracker, repr=False)
     _started: float = field(default_factory=time.monotonic, repr=False)
     _last_write: float = field(default=float("-inf"), repr=False)
@@ -138,7 +142,8 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
 
     ctx.stage("reading")
     doc = read_geometry(ctx.input_path, ctx.fmt, weld=ctx.weld)
-    result = smooth(doc.geometry, ctx.params, progress=ctx.progress)
+    result = smooth(doc.geometry, ctx.params, progress=ctx.progress,
+                    memory_limit=ctx.memory_limit)  # fmt: skip
     ctx.stage("writing")
     buf = io.BytesIO()
     np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))

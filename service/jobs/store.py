@@ -10,22 +10,26 @@ from __future__ import annotations
 
 import builtins
 import contextlib
+import functools
 import json
+import logging
 import os
 import sqlite3
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.progress import queued_progress
 from service.jobs.queue import FINISHED, JobRecord, JobStatus
 
 __all__ = ["Claim", "JobStore", "NewJob", "RunningRow"]
+
+log = logging.getLogger("geosmooth.jobs")
 
 _SCHEMA_VERSION = 1
 _SCHEMA = """
@@ -105,6 +109,29 @@ class RunningRow:
     max_attempts: int
 
 
+_F = TypeVar("_F", bound=Callable[..., Any])
+RESERVE_NAME = "jobs.reserve"
+
+
+def _with_reserve(method: _F) -> _F:
+    """Retry a state change once after releasing the store's reserve when the disk is full.
+
+    The reserve is a file the server keeps next to the database (:meth:`JobStore.keep_reserve`);
+    without it a full disk would leave runs ``running`` (their outcome cannot be written).
+    """
+
+    @functools.wraps(method)
+    def wrapper(self: JobStore, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.OperationalError as exc:
+            if "full" not in str(exc).lower() or not self.release_reserve():
+                raise
+            return method(self, *args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class NewJob:
     """What ``insert`` stores for a submitted job."""
@@ -146,6 +173,14 @@ class JobStore:
             self._create()
 
     def _create(self) -> None:
+        try:
+            self._create_schema()
+        except sqlite3.OperationalError as exc:  # a read-only file system: reads only
+            if self._conn() is getattr(self._local, "conn", None):
+                raise
+            log.warning("job store opened read-only: %s", exc)
+
+    def _create_schema(self) -> None:
         conn = self._conn()
         if conn.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
             conn.execute("PRAGMA journal_mode=WAL")
@@ -173,9 +208,15 @@ class JobStore:
     def _conn(self) -> sqlite3.Connection:
         conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
         if conn is None or getattr(self._local, "pid", None) != os.getpid():
-            conn = sqlite3.connect(
-                self.path, timeout=30.0, isolation_level=None, check_same_thread=False
-            )
+            try:
+                conn = sqlite3.connect(
+                    self.path, timeout=30.0, isolation_level=None, check_same_thread=False
+                )
+                conn.execute("PRAGMA schema_version").fetchone()
+            except sqlite3.OperationalError:
+                if not self.path.exists():
+                    raise
+                return self._read_only()  # not cached: the next call tries read-write again
             conn.row_factory = sqlite3.Row
             conn.execute("PRAGMA synchronous=FULL")
             conn.execute("PRAGMA busy_timeout=30000")
@@ -183,6 +224,14 @@ class JobStore:
             self._local.pid = os.getpid()
             with self._lock:
                 self._all.append(conn)
+        return conn
+
+    def _read_only(self) -> sqlite3.Connection:
+        """A connection for a store on a read-only file system (reads only; SQLite cannot open
+        a WAL database there otherwise). ``immutable``: nothing can change the file meanwhile."""
+        conn = sqlite3.connect(f"{self.path.as_uri()}?mode=ro&immutable=1", uri=True,
+                               isolation_level=None, check_same_thread=False)  # fmt: skip
+        conn.row_factory = sqlite3.Row
         return conn
 
     @contextmanager
@@ -202,6 +251,43 @@ class JobStore:
             with contextlib.suppress(sqlite3.Error):
                 conn.execute("ROLLBACK")
             raise
+
+    @property
+    def reserve(self) -> Path:
+        """The reserve file (released to record outcomes on a full disk)."""
+        return self.path.with_name(RESERVE_NAME)
+
+    def release_reserve(self) -> bool:
+        """Delete the reserve file; whether there was one."""
+        try:
+            self.reserve.unlink()
+        except FileNotFoundError:
+            return False
+        return True
+
+    def keep_reserve(self, size: int, min_free: int = 0) -> bool:
+        """(Re)create the reserve of ``size`` bytes when the disk has room for it and
+        ``min_free`` more; whether it exists afterwards."""
+        if size <= 0:
+            return False
+        if self.reserve.exists() and self.reserve.stat().st_size >= size:
+            return True
+        st = os.statvfs(self.path.parent)
+        if st.f_bavail * st.f_frsize < size + min_free:
+            return False
+        tmp = self.reserve.with_suffix(".tmp")
+        try:
+            with open(tmp, "wb") as fh:
+                fh.truncate(0)
+                for _ in range(0, size, 1 << 20):
+                    fh.write(b"\0" * min(1 << 20, size - fh.tell()))
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.reserve)
+        except OSError:
+            tmp.unlink(missing_ok=True)
+            return False
+        return True
 
     def close(self) -> None:
         """Close every connection this object opened in this process."""
@@ -400,6 +486,7 @@ class JobStore:
         """Record the progress of a run; ``False`` if the run lost the job."""
         return self._update_run(job_id, owner, attempt, "progress = ?", (json.dumps(progress),))
 
+    @_with_reserve
     def succeed(
         self, job_id: str, owner: str, attempt: int, progress: dict[str, Any], run_seconds: float
     ) -> bool:
@@ -412,6 +499,7 @@ class JobStore:
             (JobStatus.SUCCEEDED.value, time.time(), run_seconds, json.dumps(progress)),
         )
 
+    @_with_reserve
     def fail(self, job_id: str, owner: str, attempt: int, problem: dict[str, Any]) -> bool:
         """Mark a run failed with a problem; ``False`` if the run lost the job."""
         return self._update_run(
@@ -422,6 +510,7 @@ class JobStore:
             (JobStatus.FAILED.value, time.time(), json.dumps(problem)),
         )
 
+    @_with_reserve
     def requeue(
         self,
         job_id: str,
@@ -444,6 +533,7 @@ class JobStore:
              json.dumps(queued_progress())),
         )  # fmt: skip
 
+    @_with_reserve
     def cancel(self, job_id: str) -> tuple[JobRecord | None, JobStatus | None]:
         """Cancel a queued or running job.
 
@@ -493,6 +583,7 @@ class JobStore:
             )
             return cur.rowcount == 1
 
+    @_with_reserve
     def webhook_state(self, job_id: str, state: str) -> None:
         """Record the outcome of a delivery: ``delivered`` or ``failed``."""
         with self._write() as conn:
@@ -510,6 +601,7 @@ class JobStore:
         return [r[0] for r in rows]
 
     # -- deletion ------------------------------------------------------------------------
+    @_with_reserve
     def delete_finished(self, job_id: str) -> bool:
         """Delete a finished job's row; ``False`` if unknown or not finished."""
         with self._write() as conn:

@@ -181,8 +181,9 @@ def deliver(
             if (stop or threading.Event()).wait(delay) or (stop and stop.is_set()):
                 return False, tries - 1
         headers = {"Content-Type": "application/json", "User-Agent": "geosmooth-webhook"}
-        if settings.webhook_secret:
-            headers[SIGNATURE_HEADER] = sign(settings.webhook_secret.get_secret_value(), body)
+        secret = settings.webhook_secret.get_secret_value() if settings.webhook_secret else ""
+        if secret:
+            headers[SIGNATURE_HEADER] = sign(secret, body)
         try:
             target = check_webhook_url(url, settings)
             status = _post(target, body, headers, settings.webhook_timeout)

@@ -12,6 +12,8 @@ The job's input file (format ``json``) is a script, e.g. ``{"action": "sleep", "
 * ``oom_once``: the first run SIGKILLs itself (as the OOM killer would), the next ones succeed
 * ``hog``: allocate ``bytes`` bytes (fails under a smaller memory cap)
 
+``ok``/``sleep`` with ``extra_bytes`` also write an output file of that size.
+
 Every run appends its pid to ``<job_dir>/pids`` and ``start <pid> <t>`` / ``end <pid> <t>``
 lines to ``<job_dir>/runs`` (to check that no two runs of a job overlap).
 """
@@ -103,6 +105,8 @@ def _act(ctx: JobContext, spec: dict[str, Any]) -> dict[str, Any]:
     buf = io.BytesIO()
     np.save(buf, np.arange(6, dtype=np.float64).reshape(3, 2))
     ctx.write("result.npy", buf.getvalue())
+    if spec.get("extra_bytes"):  # a large output (e.g. one that does not fit a full disk)
+        ctx.write("extra.bin", b"\0" * int(spec["extra_bytes"]))
     rel = abs(phi - tau) / tau if tau else None
     return {"phi": phi, "tau": tau, "lambda": 1.0 / steps, "relative_error": rel,
             "iterations": steps}  # fmt: skip

@@ -20,6 +20,7 @@ from jobs_helpers import HERE, REPO, wait_for
 from service.settings import Settings
 
 PYTHON = sys.executable
+WEBHOOK_SECRET = "whsec-rq-7d2e"
 
 
 def free_port() -> int:
@@ -90,6 +91,7 @@ def rq_settings(redis_url: str, data_dir: Path, **overrides: Any) -> Settings:
         "threads_per_job": 1,
         "webhook_allow_private": True,
         "webhook_backoff": 0.1,
+        "webhook_secret": WEBHOOK_SECRET,
     }
     values.update(overrides)
     return Settings(**values)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -12,7 +13,8 @@ import numpy as np
 import pytest
 from jobs_fakes import script
 from jobs_helpers import PARAMS, pid_gone, wait_finished, wait_for
-from rq_harness import RedisServer, WorkerProcess, rq_settings, runs
+from jobs_receiver import Receiver, documented_verifier
+from rq_harness import WEBHOOK_SECRET, RedisServer, WorkerProcess, rq_settings, runs
 
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
@@ -216,3 +218,33 @@ def test_health_and_metrics_from_redis(cluster: dict[str, Any]) -> None:
     stats = queue.stats()
     assert stats["workers"] == 2 and stats["queue_depth"] >= 0
     assert set(stats["finished_total"]) == {"succeeded", "failed", "cancelled"}
+
+
+def test_the_worker_that_finished_a_job_posts_its_webhook(cluster: dict[str, Any]) -> None:
+    queue = _queue(cluster)
+    verify = documented_verifier()
+    with Receiver([502, 200]) as hook:
+        rec = queue.submit(script("ok"), "json", PARAMS, webhook_url=hook.url())
+        done = wait_finished(queue, rec.id, 20)
+        wait_for(lambda: len(hook.deliveries) == 2, timeout=15)
+    last = hook.deliveries[-1]
+    assert verify(WEBHOOK_SECRET, last.body, last.headers["Geosmooth-Signature"])
+    assert json.loads(last.body) == done.public_dict()
+    assert queue.store.raw(rec.id)["webhook_state"] == "delivered"  # type: ignore[index]
+
+
+def test_ttl_expiry_removes_records_and_blobs(cluster: dict[str, Any]) -> None:
+    queue = _queue(cluster)
+    rec = queue.submit(script("ok"), "json", PARAMS, idempotency_key="ttl-key")
+    assert wait_finished(queue, rec.id, 20).status is JobStatus.SUCCEEDED
+    job_dir = Path(cluster["settings"].data_dir) / "jobs" / rec.id
+    assert job_dir.exists()
+    short = Backend.connect(cluster["settings"].model_copy(update={"result_ttl": 0.3}))
+    time.sleep(0.4)
+    assert rec.id in short.expire()
+    assert queue.get(rec.id) is None and not job_dir.exists()
+    assert queue.store.redis.exists(queue.store.key(rec.id)) == 0
+    assert all(queue.store.redis.zscore(queue.store.index(None, s), rec.id) is None
+               for s in (None, "succeeded"))  # fmt: skip
+    again = queue.submit(script("ok"), "json", PARAMS, idempotency_key="ttl-key")
+    assert again.id != rec.id  # the idempotency key expired with its job
