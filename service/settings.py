@@ -245,6 +245,8 @@ class Settings(BaseSettings):
     )
     log_format: Literal["json", "console"] = Field(
         default="json", description="``json``: one JSON object per line; ``console``: text."
+    )
+
     # --- web page and job events (service/api/routers/events.py) ---
     events_poll_seconds: float = Field(
         default=0.2,

@@ -364,7 +364,8 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
 
 def describe_input(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/info``: :func:`service.core.info.describe` of the input, plus what the reader
-    saw (``format``, ``filename``, ``n_polylines``, ``notes``, ``weld``)."""
+    saw (``format``, ``filename``, ``n_polylines``, ``notes``, ``weld``) and, with the option
+    ``preview``, the display arrays of :mod:`service.api.preview`."""
     from service.core.info import describe
 
     parsed = parse_request(req)
@@ -376,4 +377,8 @@ def describe_input(req: IngestRequest) -> dict[str, Any]:
         notes=list(parsed.document.notes),
         weld=parsed.weld,
     )
+    if req.options.get("preview"):
+        from service.api.preview import preview_dict
+
+        info["preview"] = preview_dict(parsed.document)
     return finite(info)  # type: ignore[no-any-return]

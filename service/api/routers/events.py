@@ -50,12 +50,7 @@ _EXAMPLE = (
 
 def _job_json(record: JobRecord) -> dict[str, Any]:
     """The job exactly as ``GET /v1/jobs/{id}`` renders it."""
-    public = getattr(record, "public_dict", None)  # the jobs protocol v2 record renders itself
-    if callable(public):
-        return dict(public())
-    from service.api.views import job_view  # the view of the protocol v1 record
-
-    return job_view(record).model_dump(mode="json", by_alias=True)
+    return record.public_dict()
 
 
 def _event(kind: str, data: dict[str, Any], seq: int) -> ServerSentEvent:

@@ -13,25 +13,18 @@ file's vertex order (the order of a job's result).
 
 from __future__ import annotations
 
-import base64
 import copy
 from typing import Annotated, Any
 
-import anyio
-import numpy as np
-from fastapi import APIRouter, Depends, Query, Request
-from numpy.typing import NDArray
+from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 
-from service.api.deps import SettingsDep
+from service.api.deps import IntakeDep, PrincipalDep
 from service.api.docs import JOB_SUBMIT_OPENAPI, problem_responses
+from service.api.ingest import describe_input
 from service.api.schemas import GEOMETRY_EXAMPLE
-from service.api.uploads import SmoothInput, read_smooth_input
-from service.core.info import describe
-from service.io import GeometryDocument
-from service.io.plain import WriteOptions, plain_document
 
-__all__ = ["Info", "Preview", "preview_arrays", "router"]
+__all__ = ["Info", "Preview", "router"]
 
 router = APIRouter(prefix="/v1", tags=["smooth"])
 
@@ -143,50 +136,6 @@ def _info_openapi() -> dict[str, Any]:
     return spec
 
 
-def _b64(array: NDArray[Any]) -> str:
-    return base64.b64encode(np.ascontiguousarray(array).tobytes()).decode("ascii")
-
-
-def preview_arrays(document: GeometryDocument) -> Preview:
-    """Display arrays of ``document`` in its file's vertex order (see the module docstring)."""
-    plain = plain_document(document, options=WriteOptions(normals="drop"))
-    points = plain.points
-    n, dim = points.shape
-    xyz = np.zeros((n, 3), dtype=np.float64)
-    xyz[:, : min(dim, 3)] = points[:, :3]
-    origin = (xyz.min(axis=0) + xyz.max(axis=0)) / 2 if n else np.zeros(3)
-    faces = plain.faces
-    segments = plain.edges()
-    return Preview(
-        origin=origin.tolist(),
-        n_points=n,
-        dimension=dim,
-        positions=_b64((xyz - origin).astype("<f4")),
-        faces=None if faces is None else _b64(faces.astype("<u4")),
-        segments=None if segments is None else _b64(segments.astype("<u4")),
-    )
-
-
-def _info(smooth_input: SmoothInput, with_preview: bool) -> dict[str, Any]:
-    document = smooth_input.document
-    out = describe(document.geometry, smooth_input.params)
-    out.update(
-        format=smooth_input.fmt,
-        filename=smooth_input.filename,
-        n_polylines=len(document.polylines),
-        notes=list(document.notes),
-        weld=smooth_input.weld,
-    )
-    if with_preview:
-        out["preview"] = preview_arrays(document)
-    return out
-
-
-async def get_info_input(request: Request, settings: SettingsDep) -> SmoothInput:
-    """The request of ``POST /v1/smooth`` with optional ``params``."""
-    return await read_smooth_input(request, settings.max_points, params_required=False)
-
-
 @router.post(
     "/info",
     response_model=Info,
@@ -206,10 +155,23 @@ async def get_info_input(request: Request, settings: SettingsDep) -> SmoothInput
 )
 async def info(
     request: Request,
-    smooth_input: Annotated[SmoothInput, Depends(get_info_input)],
+    principal: PrincipalDep,
+    intake: IntakeDep,
     preview: Annotated[
         bool, Query(description="Include the geometry for display (base64 arrays).")
     ] = False,
 ) -> dict[str, Any]:
-    limiter: anyio.CapacityLimiter | None = request.app.state.sync_limiter
-    return await anyio.to_thread.run_sync(_info, smooth_input, preview, limiter=limiter)
+    # parsed and described in a worker process, like every upload (see service.api.intake)
+    upload = await intake.receive(request)
+    try:
+        answer = await intake.run(
+            request,
+            upload,
+            principal,
+            describe_input,
+            params_required=False,
+            options={"preview": preview},
+        )
+    finally:
+        upload.discard()
+    return answer or {}
