@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 __all__ = [
+    "REPORT_PRESET",
+    "Displacement",
     "LaplacianVariant",
     "NeighborhoodKind",
+    "Preset",
     "SmoothingParams",
     "SolverName",
+    "TauRule",
     "WeightScheme",
 ]
 
@@ -18,23 +24,43 @@ LaplacianVariant = Literal["normalized", "curvature", "feature"]
 WeightScheme = Literal["auto", "uniform", "reciprocal", "mean-value", "cotangent"]
 NeighborhoodKind = Literal["knn", "delaunay"]
 SolverName = Literal["cholmod", "superlu"]
+TauRule = Literal["auto", "gcv"]
+Displacement = Literal["free", "normal"]
+Preset = Literal["report"]
+
+#: ``preset="report"``: the choices of report TW 451, for every field the caller does not give.
+REPORT_PRESET: dict[str, Any] = {
+    "laplacian": "normalized",
+    "weights": "auto",
+    "neighborhood": "delaunay",
+    "k": 12,
+    "displacement": "free",
+}
 
 
 class SmoothingParams(BaseModel):
     """Parameters of one smoothing run (report sections 2, 4, 6 and 8).
 
-    Exactly one of ``lam``, ``tau`` and ``rms`` selects how the regularization parameter
+    At most one of ``lam``, ``tau`` and ``rms`` selects how the regularization parameter
     lambda of eq. (4) is obtained: given directly, or found so that the deviation
     ``phi(lambda) = ||D(X - P)||_F^2`` of eq. (15) equals ``tau`` (section 6.3), where
-    ``rms`` stands for ``tau = sum_i omega_i^2 * rms^2``.
+    ``rms`` stands for ``tau = sum_i omega_i^2 * rms^2``. With none of them (or
+    ``tau="auto"``) tau is chosen from the estimated noise level (discrepancy principle);
+    ``tau="gcv"`` chooses it by generalized cross-validation instead.
+
+    ``preset="report"`` sets every field the caller does not give to the report's choice
+    (:data:`REPORT_PRESET`), reproducing its method exactly.
     """
 
     model_config = ConfigDict(
         extra="forbid",
         json_schema_extra={
             "examples": [
-                {"tau": 0.5},
+                {},
+                {"tau": 2e-4},
+                {"tau": "gcv"},
                 {"rms": 0.001, "laplacian": "feature", "sigma_f": 0.5},
+                {"tau": 2e-4, "preset": "report"},
                 {"lam": 0.05, "weights": "cotangent", "fix_boundary": True},
             ]
         },
@@ -47,15 +73,15 @@ class SmoothingParams(BaseModel):
         description="Regularization parameter lambda of eq. (4), given directly (no search).",
         examples=[0.05],
     )
-    tau: float | None = Field(
+    tau: Annotated[float, Field(gt=0, allow_inf_nan=False)] | TauRule | None = Field(
         default=None,
-        gt=0,
-        allow_inf_nan=False,
         description=(
             "Smoothing factor tau of eq. (3): the budget for the weighted sum of squared "
-            "displacements sum_i omega_i^2 ||x_i - p_i||^2. Must lie in (0, phi(0))."
+            "displacements sum_i omega_i^2 ||x_i - p_i||^2. A number in (0, phi(0)); 'auto' "
+            "(also when none of lam, tau, rms is given): from the estimated noise level; 'gcv': "
+            "by generalized cross-validation."
         ),
-        examples=[0.5],
+        examples=[2e-4, "auto", "gcv"],
     )
     rms: float | None = Field(
         default=None,
@@ -126,12 +152,74 @@ class SmoothingParams(BaseModel):
         "(inputs up to 3000 points).",
     )
 
-    @model_validator(mode="after")
-    def _exactly_one_target(self) -> SmoothingParams:
-        given = [name for name in ("lam", "tau", "rms") if getattr(self, name) is not None]
-        if len(given) != 1:
-            raise ValueError(
-                "give exactly one of lam, tau or rms"
-                + (f" (got {', '.join(given)})" if given else "")
+    # --- core-quality: displacement, max-norm bound, preset --------------------------------------
+    displacement: Displacement = Field(
+        default="free",
+        description=(
+            "'free': every coordinate of every point may move (eq. 4). 'normal': each point "
+            "moves along its normal only, x_i = p_i + t_i n_i, normals from the input's "
+            "neighbourhoods (surfaces and point clouds; the normal plane for curves in 3-D)."
+        ),
+    )
+    max_deviation: float | None = Field(
+        default=None,
+        gt=0,
+        allow_inf_nan=False,
+        description=(
+            "Max-norm bound: no point moves further than this, ||x_i - p_i|| <= max_deviation "
+            "for every i (report section 9), alone or together with tau/rms/lam."
+        ),
+    )
+    preset: Preset | None = Field(
+        default=None,
+        description=(
+            "'report': every field not given takes the choice of report TW 451 (L(n), "
+            "mean-value/reciprocal weights, Delaunay k = 12, free displacement, first order, "
+            "rational lambda search), reproducing its method exactly."
+        ),
+    )
+
+    @field_validator("tau", mode="before")
+    @classmethod
+    def _tau_number_or_rule(cls, value: Any) -> Any:
+        """A positive finite number, or one of the rules (one error located at ``tau``)."""
+        if value is None or value in ("auto", "gcv"):
+            return value
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise PydanticCustomError(
+                "tau_type", "Input should be a number greater than 0, 'auto' or 'gcv'"
+            ) from None
+        if isinstance(value, bool) or not math.isfinite(number):
+            raise PydanticCustomError("finite_number", "Input should be a finite number")
+        if number <= 0:
+            raise PydanticCustomError(
+                "greater_than", "Input should be greater than 0", {"gt": 0}
             )
+        return number
+
+    @model_validator(mode="before")
+    @classmethod
+    def _apply_preset(cls, data: Any) -> Any:
+        if isinstance(data, dict) and data.get("preset") == "report":
+            data = {**REPORT_PRESET, **data}
+        return data
+
+    @model_validator(mode="after")
+    def _at_most_one_target(self) -> SmoothingParams:
+        given = [name for name in ("lam", "tau", "rms") if getattr(self, name) is not None]
+        if len(given) > 1:
+            raise ValueError(f"give at most one of lam, tau or rms (got {', '.join(given)})")
         return self
+
+    @property
+    def tau_rule(self) -> Literal["lam", "tau", "rms", "auto", "gcv"]:
+        """How lambda is chosen: given, from tau or rms, or automatically (auto, gcv)."""
+        if self.lam is not None:
+            return "lam"
+        if self.rms is not None:
+            return "rms"
+        if isinstance(self.tau, float):
+            return "tau"
+        return "gcv" if self.tau == "gcv" else "auto"

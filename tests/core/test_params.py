@@ -1,4 +1,4 @@
-"""SmoothingParams: exactly one target, documented bounds."""
+"""SmoothingParams: at most one target (none: automatic tau), documented bounds, preset."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ def test_defaults() -> None:
 @pytest.mark.parametrize(
     "kw",
     [
-        {},
+        {"tau": "fast"},
+        {"tau": float("inf")},
         {"tau": 1, "lam": 1},
         {"tau": 1, "rms": 1},
         {"tau": -1},
@@ -37,3 +38,27 @@ def test_rejected(kw: dict) -> None:
 def test_json_schema_has_descriptions() -> None:
     schema = SmoothingParams.model_json_schema()
     assert all("description" in v for v in schema["properties"].values())
+
+
+@pytest.mark.parametrize(
+    ("kw", "rule"),
+    [({}, "auto"), ({"tau": "auto"}, "auto"), ({"tau": "gcv"}, "gcv"), ({"tau": "0.5"}, "tau"),
+     ({"rms": 1}, "rms"), ({"lam": 1}, "lam")],
+)
+def test_target_rule(kw: dict, rule: str) -> None:
+    p = SmoothingParams(**kw)
+    assert p.tau_rule == rule
+    assert p.tau is None or p.tau in ("auto", "gcv") or p.tau == 0.5
+
+
+def test_tau_errors_are_located_at_tau() -> None:
+    with pytest.raises(ValidationError) as info:
+        SmoothingParams(tau=-1)
+    (err,) = info.value.errors()
+    assert err["loc"] == ("tau",) and err["type"] == "greater_than"
+
+
+def test_report_preset_fills_only_what_is_not_given() -> None:
+    p = SmoothingParams(tau=1.0, preset="report", weights="uniform")
+    assert (p.weights, p.laplacian, p.displacement, p.k) == ("uniform", "normalized", "free", 12)
+    assert SmoothingParams(tau=1.0, preset="report").weights == "auto"
