@@ -1,0 +1,160 @@
+"""Normal-only displacement: ``x_i = p_i + N_i t_i`` with ``t_i`` in the normal space of ``p_i``.
+
+Laplacian smoothing moves points along the shape as well as across it; against the clean
+positions that tangential drift is error, and it is what the report's mean-value weights
+computed on a noisy input produce (issue 9). Restricting every point to its normal line
+(surfaces, point clouds of surfaces, curves in 2-D: one unknown per point) or normal plane
+(curves in 3-D: two unknowns) removes it. With ``N_i`` an orthonormal basis of the normal space
+(``s x r``), eq. (4) becomes
+
+    min_t  sum_c ||L (P + N t)^(c)||^2  +  lambda sum_i omega_i^2 ||t_i||^2,
+
+a least-squares problem of the same form ``min ||A U - g||^2 + lambda ||D (U - U0)||^2`` with one
+row of ``U`` per unknown: ``A = [L_F diag(N_{.,c,a})]_{c,a}``, ``g = -vec(L P)``, ``U0 = 0`` and
+``D`` repeating ``omega_i`` for the ``r`` unknowns of point ``i``. Because the ``N_i`` are
+orthonormal, ``||D (U - U0)||^2 = sum_i omega_i^2 ||x_i - p_i||^2``: phi and the tau contract are
+exactly those of the free problem. Fixed points keep ``t_i = 0`` (eliminated like in section 8).
+
+Normals come from the input's neighbourhoods: principal directions of the ``k`` nearest
+neighbours of each point after a few explicit averaging steps over the neighbourhood graph
+(``x <- (x + mean of neighbours) / 2``), which take the noise out of the directions without a
+factorization; the number of steps was chosen on the quality benchmark (see
+``service/core/README.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+__all__ = ["NormalSystem", "normal_frames", "normal_system", "presmooth"]
+
+PRESMOOTH_STEPS = 5
+FRAME_NEIGHBOURS = 12
+
+
+def presmooth(
+    points: NDArray[np.float64], adjacency: sp.csr_matrix, steps: int = PRESMOOTH_STEPS
+) -> NDArray[np.float64]:
+    """``steps`` averaging steps ``x <- (x + mean of neighbours) / 2`` (uniform weights)."""
+    deg = np.asarray(adjacency.sum(axis=1)).ravel()
+    inv = np.divide(1.0, deg, out=np.zeros_like(deg), where=deg > 0)
+    W = sp.diags(inv) @ adjacency
+    X = points.copy()
+    has = deg > 0
+    for _ in range(steps):
+        X[has] = 0.5 * (X[has] + np.asarray(W @ X)[has])
+    return X
+
+
+def normal_frames(
+    points: NDArray[np.float64],
+    adjacency: sp.csr_matrix,
+    codim: int,
+    k: int = FRAME_NEIGHBOURS,
+    steps: int = PRESMOOTH_STEPS,
+) -> NDArray[np.float64]:
+    """Orthonormal bases of the normal spaces, shape ``(n, s, codim)``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, s)
+        Input points.
+    adjacency : scipy.sparse.csr_matrix, shape (n, n)
+        The neighbourhood graph (for the averaging steps).
+    codim : int
+        Normal dimensions ``r``: 1 for surfaces in 3-D and curves in 2-D, ``s - 1`` for curves.
+    k : int
+        Neighbours of the principal component analysis.
+    steps : int
+        Averaging steps before the analysis.
+
+    Returns
+    -------
+    ndarray, shape (n, s, codim)
+        The ``codim`` directions of least variance of each neighbourhood.
+    """
+    X = presmooth(points, adjacency, steps)
+    n = X.shape[0]
+    k = min(k, n)
+    _, idx = cKDTree(X).query(X, k=k)
+    idx = np.asarray(idx).reshape(n, k)
+    out = np.empty((n, X.shape[1], codim))
+    for start in range(0, n, 50000):
+        Q = X[idx[start : start + 50000]]
+        Q = Q - Q.mean(axis=1, keepdims=True)
+        _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q))
+        out[start : start + 50000] = vecs[:, :, :codim]  # eigh: ascending variance
+    return out
+
+
+@dataclass(frozen=True)
+class NormalSystem:
+    """The normal equations of normal-only displacement (see the module docstring).
+
+    Attributes
+    ----------
+    M : scipy.sparse.csc_matrix, shape (m r, m r)
+        ``A^T A``.
+    d2 : ndarray, shape (m r,)
+        ``omega_i^2`` repeated for the ``r`` unknowns of each free point.
+    b : ndarray, shape (m r, 1)
+        ``A^T g``.
+    U0 : ndarray, shape (m r, 1)
+        Zeros: no displacement.
+    frames : ndarray, shape (m, s, r)
+        Normal bases of the free points.
+    """
+
+    M: sp.csc_matrix
+    d2: NDArray[np.float64]
+    b: NDArray[np.float64]
+    U0: NDArray[np.float64]
+    frames: NDArray[np.float64]
+
+    def points(self, P_free: NDArray[np.float64], U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Free points ``p_i + N_i t_i`` for the solution ``U`` (shape (m r, 1))."""
+        m, _, r = self.frames.shape
+        return P_free + np.einsum("nsr,nr->ns", self.frames, U.reshape(m, r))
+
+
+def normal_system(
+    L_F: sp.spmatrix,
+    LP: NDArray[np.float64],
+    frames: NDArray[np.float64],
+    w2: NDArray[np.float64],
+) -> NormalSystem:
+    """Assemble ``M = A^T A``, ``b = A^T g`` of normal-only displacement.
+
+    Parameters
+    ----------
+    L_F : scipy.sparse matrix, shape (q, m)
+        Rows of ``L`` that take part (those of the free points), free columns.
+    LP : ndarray, shape (q, s)
+        ``L P`` on the same rows (fixed points' contributions included).
+    frames : ndarray, shape (m, s, r)
+        Orthonormal normal bases of the free points.
+    w2 : ndarray, shape (m,)
+        ``omega_i^2`` of the free points.
+
+    Returns
+    -------
+    NormalSystem
+    """
+    m, _, r = frames.shape
+    K = sp.csr_matrix(L_F.T @ L_F).tocoo()
+    # block (i, j) of M is K_ij N_i^T N_j (r x r)
+    G = np.einsum("ksa,ksb->kab", frames[K.row], frames[K.col])
+    a, bb = np.meshgrid(np.arange(r), np.arange(r), indexing="ij")
+    rows = (K.row[:, None, None] * r + a[None]).ravel()
+    cols = (K.col[:, None, None] * r + bb[None]).ravel()
+    M = sp.csc_matrix((np.repeat(K.data, r * r) * G.reshape(-1), (rows, cols)), shape=(m * r,) * 2)
+    M.sum_duplicates()
+    M.eliminate_zeros()
+    LtLP = np.asarray(L_F.T @ LP)  # (m, s)
+    b = -np.einsum("nsa,ns->na", frames, LtLP).reshape(m * r, 1)
+    return NormalSystem(M, np.repeat(w2, r), b, np.zeros((m * r, 1)), frames)
