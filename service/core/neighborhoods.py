@@ -373,7 +373,7 @@ def cloud_delaunay_neighborhoods(
     # wedges between consecutive fan neighbours; closed fans wrap around
     w_i, w_j, w_k = [], [], []
     for t in range(fans.shape[1]):
-        closing = t + 1 == count  # last slot: wraps to slot 0 for closed fans
+        closing = np.asarray(t + 1 == count)  # last slot: wraps to slot 0 for closed fans
         ok = (t < count) & (~closing | (~open_fan & (count >= 3)))
         sel = rows[ok]
         w_i.append(sel)

@@ -12,8 +12,10 @@ __all__ = [
     "REPORT_PRESET",
     "Displacement",
     "LaplacianVariant",
+    "MethodName",
     "NeighborhoodKind",
     "Preset",
+    "SearchName",
     "SmoothingParams",
     "SolverName",
     "TauRule",
@@ -23,7 +25,11 @@ __all__ = [
 LaplacianVariant = Literal["normalized", "curvature", "feature"]
 WeightScheme = Literal["auto", "uniform", "reciprocal", "mean-value", "cotangent"]
 NeighborhoodKind = Literal["knn", "delaunay"]
-SolverName = Literal["cholmod", "superlu"]
+# --- core-engine block (search, solver path, method, order) --------------------------------
+SolverName = Literal["auto", "cholmod", "superlu", "cg"]
+SearchName = Literal["auto", "newton", "rational"]
+MethodName = Literal["tikhonov", "windowed-sinc"]
+# --- end core-engine block --------------------------------------------------------------------
 TauRule = Literal["auto", "gcv"]
 Displacement = Literal["free", "normal"]
 Preset = Literal["report"]
@@ -35,6 +41,10 @@ REPORT_PRESET: dict[str, Any] = {
     "neighborhood": "delaunay",
     "k": 12,
     "displacement": "free",
+    "order": 1,
+    "method": "tikhonov",
+    "search": "rational",
+    "solver": "cholmod",
 }
 
 
@@ -141,11 +151,34 @@ class SmoothingParams(BaseModel):
             "the deviation before rescaling."
         ),
     )
+    # --- core-engine block (search, solver path, method, order) ----------------------------
     solver: SolverName = Field(
-        default="cholmod",
-        description="CHOLMOD (scikit-sparse) or SciPy's SuperLU; CHOLMOD falls back to SuperLU "
-        "with a warning when scikit-sparse is unavailable.",
+        default="auto",
+        description="Linear solver: 'auto' (CHOLMOD when the factor fits the memory budget, "
+        "else the matrix-free conjugate gradients), 'cholmod' (scikit-sparse; falls back to "
+        "SciPy's SuperLU with a warning when unavailable), 'superlu', or 'cg' (matrix-free, "
+        "O(n) memory).",
     )
+    search: SearchName = Field(
+        default="auto",
+        description="lambda search for tau/rms: 'newton' (Lanczos estimate, then safeguarded "
+        "Newton on phi^(-1/2k) reusing one factorization), 'rational' (the report's rational "
+        "interpolation, section 6.3), 'auto' (newton).",
+    )
+    method: MethodName = Field(
+        default="tikhonov",
+        description="'tikhonov': eq. (4) (with `order`); 'windowed-sinc': a polynomial low-pass "
+        "filter of the same Laplacian whose pass band is chosen so that phi = tau (no "
+        "factorization).",
+    )
+    order: int = Field(
+        default=1,
+        ge=1,
+        le=8,
+        description="Iterated Tikhonov order k: filter 1 - (mu/(mu+lambda))^k, k solves per "
+        "lambda with one factorization (1 = the report's eq. 4).",
+    )
+    # --- end core-engine block ------------------------------------------------------------
     spectrum: bool = Field(
         default=False,
         description="Also return the singular values of L and the filter factors of eq. (12) "

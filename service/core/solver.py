@@ -1,19 +1,22 @@
-"""Our thin wrapper over the sparse solvers for the normal equations of report eq. (17).
+"""Linear solvers for ``K(lambda) X = R`` with ``K(lambda) = M + lambda diag(d2)`` (report eq. 17).
 
-For the free points ``F`` (fixed points ``C`` have infinite weight and are eliminated, report
-section 8) the system is::
+Two paths, one interface (:class:`LinearSolver`):
 
-    (L_F^T L_F + lambda D_F^2) X_F = lambda D_F^2 P_F - L_F^T L_C P_C
+* :class:`Direct`: sparse Cholesky (CHOLMOD via scikit-sparse; the symbolic analysis done once
+  per sparsity pattern and cached, see :mod:`service.core.cache`) or SciPy's SuperLU (the
+  fallback, selectable by name and used with a warning when scikit-sparse cannot be imported).
+  A factorization of ``K(lambda_0)`` is reused at a nearby ``lambda`` as the preconditioner of
+  CG (:func:`service.core.krylov.pcg`) when the predicted CG work is cheaper than a new
+  numeric factorization; the answer is exact to the same bound either way.
+* :class:`MatrixFree`: Jacobi-preconditioned CG with products by ``M`` only, O(n) memory,
+  warm-started across lambda.
 
-where ``L_F`` / ``L_C`` are the free / fixed columns of the rows of ``L`` belonging to free
-points. With CHOLMOD (scikit-sparse) the symbolic analysis is done once; every lambda is one
-numeric refactorization plus one solve of all ``s`` columns together. SciPy's SuperLU is the
-fallback, selectable by name and used automatically (with a warning) when scikit-sparse cannot
-be imported. Nothing outside this module touches the scikit-sparse API (it changed in 0.5).
+Nothing outside this module touches the scikit-sparse API (it changed in 0.5).
 """
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -25,8 +28,20 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from service.core.errors import SolverError
+from service.core.krylov import pcg
 
-__all__ = ["NormalEquations", "SolverStats", "cholmod_available", "split_fixed"]
+__all__ = [
+    "Direct",
+    "LinearSolver",
+    "MatrixFree",
+    "SolverStats",
+    "cholmod_available",
+    "split_fixed",
+]
+
+Array = NDArray[np.float64]
+#: Relative accuracy of every solve, in the ``D``-norm of the solution (bound of krylov.pcg).
+SOLVE_RTOL = 1e-10
 
 try:  # pragma: no cover - depends on the machine
     from sksparse import cholmod as _cholmod
@@ -49,8 +64,10 @@ class SolverStats:
     analysis: float = 0.0
     factorization: float = 0.0
     solve: float = 0.0
+    matvec: float = 0.0
     factorizations: int = 0
     solves: int = 0
+    matvecs: int = 0
     warnings: list[str] = field(default_factory=list)
 
 
@@ -58,11 +75,6 @@ def split_fixed(
     L: sp.csr_matrix, fixed: NDArray[np.bool_]
 ) -> tuple[sp.csc_matrix, sp.csc_matrix, NDArray[np.int64], NDArray[np.int64]]:
     """Rows of free points of ``L``, split into free and fixed columns.
-
-    Parameters
-    ----------
-    L : scipy.sparse.csr_matrix, shape (n, n)
-    fixed : ndarray of bool, shape (n,)
 
     Returns
     -------
@@ -76,85 +88,177 @@ def split_fixed(
     return rows[:, free].tocsc(), rows[:, fixed_idx].tocsc(), free, fixed_idx
 
 
-class NormalEquations:
-    """``(M + lambda diag(d2)) X = lambda diag(d2) P + b`` for many lambdas (report eq. 17).
+class LinearSolver:
+    """Common part: ``M`` (CSR for products), ``d2``, work counters.
 
     Parameters
     ----------
-    M : scipy.sparse matrix, shape (m, m)
-        ``L_F^T L_F`` (symmetric positive semi-definite).
+    M : sparse matrix, shape (m, m)
+        Symmetric positive semi-definite.
     d2 : ndarray, shape (m,)
-        Squared weights ``omega_i^2`` of the free points (positive).
-    method : {"cholmod", "superlu"}
-        Requested solver; ``"cholmod"`` falls back to SuperLU with a warning when scikit-sparse
-        is missing.
+        Positive diagonal of ``D^2``.
     """
 
+    name: str = ""
+    path: Literal["direct", "matrix-free"] = "direct"
+
+    def __init__(self, M: sp.spmatrix, d2: Array, stats: SolverStats | None = None) -> None:
+        self.M = sp.csr_matrix(M)
+        self.d2 = np.asarray(d2, dtype=np.float64)
+        self.stats = stats if stats is not None else SolverStats()
+
+    @property
+    def size(self) -> int:
+        return int(self.M.shape[0])
+
+    def matvec(self, X: Array) -> Array:
+        """``M X`` (counted)."""
+        t0 = time.perf_counter()
+        out = np.asarray(self.M @ X)
+        self.stats.matvec += time.perf_counter() - t0
+        self.stats.matvecs += 1
+        return out
+
+    def operator(self, lam: float) -> Any:
+        d2 = self.d2[:, None]
+        return lambda X: self.matvec(X) + lam * d2 * X
+
+    def solve(
+        self, lam: float, R: Array, x0: Array | None = None, offset: Array | None = None
+    ) -> Array:
+        """``X = K(lam)^-1 R`` with ``||D (X - X*)|| <= SOLVE_RTOL ||D (X* - offset)||``.
+
+        Iterative methods solve for ``X - offset`` (so the accuracy is relative to the
+        deviation from ``offset``, e.g. ``E = U - U0``); ``x0`` is a starting guess for ``X``.
+        """
+        raise NotImplementedError
+
+    def _iterate(
+        self,
+        lam: float,
+        R: Array,
+        x0: Array | None,
+        offset: Array | None,
+        precond: Any,
+        maxiter: int,
+    ) -> tuple[Array, bool]:
+        K = self.operator(lam)
+        if offset is None:
+            X, _, ok = pcg(K, R, precond, lam, self.d2, x0, SOLVE_RTOL, maxiter)
+            return X, ok
+        y0 = None if x0 is None else x0 - offset
+        Y, _, ok = pcg(K, R - K(offset), precond, lam, self.d2, y0, SOLVE_RTOL, maxiter)
+        return offset + Y, ok
+
+    @staticmethod
+    def _check(X: Array, lam: float) -> Array:
+        if not np.all(np.isfinite(X)):
+            raise SolverError(
+                f"the solver returned non-finite values at lambda={lam:.6g}", field="params"
+            )
+        return X
+
+
+class MatrixFree(LinearSolver):
+    """Jacobi-preconditioned CG on ``K(lambda)``; O(n) memory, no factorization."""
+
+    name = "cg"
+    path = "matrix-free"
+
+    def __init__(self, M: sp.spmatrix, d2: Array, maxiter: int = 20000) -> None:
+        super().__init__(M, d2)
+        self.diag = self.M.diagonal()
+        self.maxiter = maxiter
+
+    def solve(
+        self, lam: float, R: Array, x0: Array | None = None, offset: Array | None = None
+    ) -> Array:
+        inv = 1.0 / (self.diag + lam * self.d2)[:, None]
+        X, ok = self._iterate(lam, R, x0, offset, lambda Q: inv * Q, self.maxiter)
+        if not ok:
+            self.stats.warnings.append(
+                f"conjugate gradients did not reach the accuracy bound at lambda={lam:.6g} "
+                f"in {self.maxiter} products"
+            )
+        return self._check(X, lam)
+
+
+class Direct(LinearSolver):
+    """Sparse Cholesky (CHOLMOD) or SuperLU of ``K(lambda)``, reused at nearby lambdas.
+
+    Parameters
+    ----------
+    M, d2
+        See :class:`LinearSolver`.
+    method : {"cholmod", "superlu"}
+        ``"cholmod"`` falls back to SuperLU with a warning when scikit-sparse is missing.
+    reuse : bool
+        Reuse a factorization at a nearby lambda through preconditioned CG when cheaper
+        (``False``: one numeric factorization per distinct lambda, as in the report).
+    symbolic : callable, optional
+        ``pattern -> analyzed CHOLMOD factor`` (the analysis cache); default: analyze here.
+    """
+
+    path = "direct"
+
     def __init__(
-        self, M: sp.spmatrix, d2: NDArray[np.float64], method: Literal["cholmod", "superlu"]
+        self,
+        M: sp.spmatrix,
+        d2: Array,
+        method: Literal["cholmod", "superlu"] = "cholmod",
+        *,
+        reuse: bool = True,
+        symbolic: Any = None,
     ) -> None:
-        self.stats = SolverStats()
+        super().__init__(M, d2)
         if method == "cholmod" and _cholmod is None:
             self.stats.warnings.append(
                 f"scikit-sparse (CHOLMOD) is not available ({_CHOLMOD_IMPORT_ERROR}); "
                 "used SciPy's SuperLU instead"
             )
             method = "superlu"
-        self.method: Literal["cholmod", "superlu"] = method
-        m = M.shape[0]
-        self.d2 = np.asarray(d2, dtype=np.float64)
+        self.name = method
+        self.reuse = reuse
+        m = self.size
         pattern = (sp.csc_matrix(M) + sp.diags(self.d2)).tocsc()
         pattern.sum_duplicates()
         pattern.sort_indices()
-        self._A = pattern
-        # positions of the diagonal entries inside the CSC data array
+        self.pattern = pattern
         cols = np.repeat(np.arange(m), np.diff(pattern.indptr))
         diag_pos = np.flatnonzero(pattern.indices == cols)
         self._diag_pos = diag_pos[np.argsort(cols[diag_pos])]
         self._M_data = pattern.data.copy()
         self._M_data[self._diag_pos] = sp.csc_matrix(M).diagonal()
         self._factor: Any = None
-        self.M_fro = float(np.sqrt(np.sum(self._M_data**2)))
-        if self.method == "cholmod":
+        self.lam_factored: float | None = None
+        if self.name == "cholmod":
             t0 = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                self._factor = _cholmod.analyze(pattern, mode="auto")
+            self._factor = symbolic(pattern) if symbolic is not None else analyze(pattern)
             self.stats.analysis += time.perf_counter() - t0
 
-    @property
-    def size(self) -> int:
-        """Number of unknown points."""
-        return int(self._A.shape[0])
+    def with_weights(self, d2: Array) -> Direct:
+        """The same solver for ``M + lambda diag(d2)``: same pattern, no new analysis."""
+        new = Direct.__new__(Direct)
+        new.__dict__.update(self.__dict__)
+        new.d2 = np.asarray(d2, dtype=np.float64)
+        new.stats = SolverStats()
+        new.lam_factored = None
+        new._factor = self._factor.copy() if self.name == "cholmod" else None
+        return new
 
-    def _matrix(self, lam: float) -> sp.csc_matrix:
-        A = self._A
+    def matrix(self, lam: float) -> sp.csc_matrix:
+        """``K(lam)`` in CSC with the analysed pattern."""
+        A = self.pattern
         data = self._M_data.copy()
         data[self._diag_pos] += lam * self.d2
         return sp.csc_matrix((data, A.indices, A.indptr), shape=A.shape)
 
-    def solve(self, lam: float, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Factor ``M + lam diag(d2)`` (numerically) and solve for all columns of ``rhs``.
-
-        Parameters
-        ----------
-        lam : float
-            Regularization parameter, ``> 0`` (or ``0`` when ``M`` is definite).
-        rhs : ndarray, shape (m, s)
-
-        Returns
-        -------
-        ndarray, shape (m, s)
-
-        Raises
-        ------
-        SolverError
-            When the matrix is not positive definite or the solve gives non-finite values.
-        """
-        A = self._matrix(lam)
+    def factor(self, lam: float) -> None:
+        """Numeric factorization of ``K(lam)``."""
+        A = self.matrix(lam)
         t0 = time.perf_counter()
         try:
-            if self.method == "cholmod":
+            if self.name == "cholmod":
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     self._factor.cholesky_inplace(A)
@@ -166,19 +270,71 @@ class NormalEquations:
                     options={"SymmetricMode": True},
                 )
         except Exception as exc:  # CholmodNotPositiveDefiniteError, RuntimeError (singular)
+            self.lam_factored = None
             raise SolverError(
                 f"the normal equations could not be factored at lambda={lam:.6g}: {exc}",
                 field="params",
             ) from exc
-        t1 = time.perf_counter()
-        self.stats.factorization += t1 - t0
+        self.stats.factorization += time.perf_counter() - t0
         self.stats.factorizations += 1
-        x = self._factor(rhs) if self.method == "cholmod" else self._factor.solve(rhs)
-        x = np.asarray(x, dtype=np.float64).reshape(rhs.shape)
-        self.stats.solve += time.perf_counter() - t1
+        self.lam_factored = lam
+
+    def apply_factor(self, R: Array) -> Array:
+        """``K(lambda_factored)^-1 R`` (counted as one solve)."""
+        t0 = time.perf_counter()
+        f = self._factor
+        X = f(R) if self.name == "cholmod" else f.solve(np.asfortranarray(R))
+        self.stats.solve += time.perf_counter() - t0
         self.stats.solves += 1
-        if not np.all(np.isfinite(x)):
-            raise SolverError(
-                f"the solver returned non-finite values at lambda={lam:.6g}", field="params"
-            )
-        return x
+        return np.asarray(X, dtype=np.float64).reshape(R.shape)
+
+    def _cg_cheaper(self, lam: float, reduction: float) -> bool:
+        """Predicted CG work with the current factor vs a new factorization (measured times).
+
+        ``reduction`` is the factor by which the error bound must shrink; preconditioned by
+        ``K(lambda_0)``, CG contracts it by ``q = (sqrt(rho) - 1) / (sqrt(rho) + 1)`` per step
+        with ``rho = max(lambda / lambda_0, lambda_0 / lambda)``.
+        """
+        st = self.stats
+        if not self.reuse or self.lam_factored is None or st.factorizations == 0:
+            return False
+        rho = max(lam / self.lam_factored, self.lam_factored / lam)
+        q = (math.sqrt(rho) - 1.0) / (math.sqrt(rho) + 1.0)
+        steps = 2 + (math.ceil(math.log(reduction) / math.log(q)) if q > 0 and reduction < 1 else 0)
+        t_solve = st.solve / max(st.solves, 1)
+        t_mv = st.matvec / max(st.matvecs, 1) if st.matvecs else 0.2 * t_solve
+        t_fact = st.factorization / st.factorizations
+        return steps * (t_solve + t_mv) < t_fact + t_solve
+
+    def _reduction(self, lam: float, R: Array, x0: Array | None, offset: Array | None) -> float:
+        """How much the error bound of ``x0`` must shrink to reach :data:`SOLVE_RTOL`."""
+        if x0 is None:
+            return SOLVE_RTOL
+        ref = x0 if offset is None else x0 - offset
+        res = R - self.operator(lam)(x0)
+        bound = float(np.linalg.norm(res / np.sqrt(self.d2)[:, None])) / lam
+        size = float(np.linalg.norm(np.sqrt(self.d2)[:, None] * ref))
+        return min(1.0, SOLVE_RTOL * size / bound) if bound > 0 else 1.0
+
+    def solve(
+        self, lam: float, R: Array, x0: Array | None = None, offset: Array | None = None
+    ) -> Array:
+        if self.lam_factored != lam and not self._cg_cheaper(
+            lam, self._reduction(lam, R, x0, offset) if self.reuse else 1.0
+        ):
+            self.factor(lam)
+        if self.lam_factored == lam:
+            return self._check(self.apply_factor(R), lam)
+        X, ok = self._iterate(lam, R, x0, offset, self.apply_factor, 60)
+        if not ok:  # the prediction was wrong: factor here after all
+            self.factor(lam)
+            X = self.apply_factor(R)
+        return self._check(X, lam)
+
+
+def analyze(pattern: sp.csc_matrix, ordering: str = "amd") -> Any:
+    """CHOLMOD symbolic analysis (fill-reducing ordering, supernodal structure)."""
+    assert _cholmod is not None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return _cholmod.analyze(pattern, mode="supernodal", ordering_method=ordering)
