@@ -24,6 +24,7 @@ factorization; the number of steps was chosen on the quality benchmark (see
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +32,13 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-__all__ = ["NormalSystem", "normal_frames", "normal_system", "presmooth"]
+from service.core.errors import ParameterError
+from service.core.geometry import Geometry
+from service.core.neighborhoods import Neighborhoods
+from service.core.noise import codimension
+from service.core.system import SmoothingSystem
+
+__all__ = ["NormalSystem", "normal_frames", "normal_mode", "normal_system", "presmooth"]
 
 PRESMOOTH_STEPS = 5
 FRAME_NEIGHBOURS = 12
@@ -158,3 +165,34 @@ def normal_system(
     LtLP = np.asarray(L_F.T @ LP)  # (m, s)
     b = -np.einsum("nsa,ns->na", frames, LtLP).reshape(m * r, 1)
     return NormalSystem(M, np.repeat(w2, r), b, np.zeros((m * r, 1)), frames)
+
+
+def normal_mode(
+    geometry: Geometry,
+    L: sp.csr_matrix,
+    nb: Neighborhoods,
+    P: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    fixed: NDArray[np.bool_],
+) -> tuple[SmoothingSystem, Callable[[NDArray[np.float64]], NDArray[np.float64]]]:
+    """The :class:`SmoothingSystem` of normal-only displacement for the free points, and the
+    map from its solution to the free points (internal frame ``P``, weights ``omega``).
+
+    Raises
+    ------
+    ParameterError
+        When the points have no normal direction (a surface in 2-D, 1-D data).
+    """
+    codim = codimension(geometry)
+    if codim < 1:
+        raise ParameterError(
+            f"displacement 'normal' needs a normal direction: a {geometry.kind} in "
+            f"{geometry.dim}-D has none; use displacement 'free'",
+            field="params.displacement",
+        )
+    free = np.flatnonzero(~fixed)
+    frames = normal_frames(P, nb.adjacency, codim)[free]
+    L_R = sp.csr_matrix(L)[free]
+    ns = normal_system(L_R[:, free], np.asarray(L_R @ P), frames, omega[free] ** 2)
+    P_F = P[free]
+    return SmoothingSystem(ns.M, ns.d2, ns.b, ns.U0), lambda U: ns.points(P_F, U)
