@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
 
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
@@ -29,6 +30,7 @@ from service.core.system import Deviation
 __all__ = ["GCV_PROBES", "AutoTau", "auto_tau", "gcv_lambda"]
 
 GCV_PROBES = 8
+EXACT_TRACE = 400
 
 
 @dataclass(frozen=True)
@@ -70,8 +72,11 @@ def auto_tau(geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool
 
 
 def _residual_trace(dev: Deviation, lam: float, probes: int) -> float:
-    """``tr((K^-1 M)^k)`` by Hutchinson probes (k solves of ``probes`` columns)."""
+    """``tr((K^-1 M)^k)``: exact for up to :data:`EXACT_TRACE` unknowns (the identity's
+    columns as probes), else by Hutchinson probes (``k`` solves of ``probes`` columns, more
+    probes on smaller systems so that the relative error stays near 1 %)."""
     solver = dev.solver
+    m = dev.system.size
 
     def apply(Z: NDArray[np.float64]) -> NDArray[np.float64]:
         Y = Z
@@ -79,7 +84,9 @@ def _residual_trace(dev: Deviation, lam: float, probes: int) -> float:
             Y = solver.solve(lam, solver.matvec(Y))
         return Y
 
-    return hutchinson_trace(apply, dev.system.size, probes)
+    if m <= EXACT_TRACE:
+        return float(np.trace(apply(np.eye(m))))
+    return hutchinson_trace(apply, m, max(probes, min(64, 20000 // m)))
 
 
 def gcv_lambda(
@@ -87,8 +94,9 @@ def gcv_lambda(
 ) -> float:
     """Minimizer of the GCV score over ``[lo, hi]`` (internal frame), from ``start``.
 
-    A scan of ``start * 10^j``, ``j = -3 .. 3``, then golden-section refinement in log lambda
-    (12 evaluations in all, each one factorization and ``k (probes + 1)`` solves).
+    A scan of ``start * 10^(j/2)``, ``j = -4 .. 4``, then Brent's method in log lambda on the
+    bracket around the best scanned value (to 0.02 decades): about 15 evaluations, each one
+    factorization and ``k (probes + 1)`` solves.
     """
     m, c = dev.system.U0.shape
     scores: dict[float, float] = {}
@@ -98,25 +106,18 @@ def gcv_lambda(
         if lam not in scores:
             phi = dev(lam)
             tr = _residual_trace(dev, lam, probes)
-            scores[lam] = (phi / (m * c)) / (tr / m) ** 2 if tr > 0 else math.inf
+            scores[lam] = math.log((phi / (m * c)) / (tr / m) ** 2) if tr > 0 else math.inf
         return scores[lam]
 
-    grid = [math.log(start) + j * math.log(10.0) for j in range(-3, 4)]
+    step = 0.5 * math.log(10.0)
+    grid = [math.log(start) + j * step for j in range(-4, 5)]
     vals = [score(x) for x in grid]
     i = int(np.argmin(vals))
-    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    g = (math.sqrt(5) - 1) / 2
-    x1, x2 = b - g * (b - a), a + g * (b - a)
-    f1, f2 = score(x1), score(x2)
-    for _ in range(3):
-        if f1 < f2:
-            b, x2, f2 = x2, x1, f1
-            x1 = b - g * (b - a)
-            f1 = score(x1)
-        else:
-            a, x1, f1 = x1, x2, f2
-            x2 = a + g * (b - a)
-            f2 = score(x2)
+    if 0 < i < len(grid) - 1:
+        minimize_scalar(
+            score, bracket=(grid[i - 1], grid[i], grid[i + 1]), method="brent",
+            options={"xtol": 1e-2},
+        )
     best = min(scores, key=lambda k: scores[k])
     if not math.isfinite(scores[best]):
         raise ParameterError(

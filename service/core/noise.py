@@ -188,6 +188,9 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
     ok = np.isfinite(v)
     if ok.sum() < max(10, P.shape[0] // 10):
         return None
+    extent = float(np.ptp(P, axis=0).max())
+    if np.mean(v[ok] <= (1e-12 * extent) ** 2) > 0.5:  # exactly smooth (e.g. a CAD mesh)
+        return NoiseEstimate(0.0, d, k, int(ok.sum()), v)
     sigma2 = log_mode(v[ok])
     return NoiseEstimate(float(np.sqrt(sigma2)), d, k, int(ok.sum()), v)
 

@@ -147,7 +147,10 @@ def smooth(
         symbolic=cache.analysis_of,
     )
     dev.listener = run.evaluated
-    search = find_lambda(dev, op, fixed, params, run)
+    if params.tau_rule == "gcv":
+        search = _gcv(dev, geometry, params, fixed, run)
+    else:
+        search = find_lambda(dev, op, fixed, params, run)
     run.emit("postprocess", iteration=len(dev.history))
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
@@ -264,8 +267,6 @@ def find_lambda(
     if params.lam is not None:
         lam = frame.lam_in(params.lam)
         return LambdaSearch(lam, dev(lam), True, list(dev.history))
-    if params.tau_rule == "gcv":
-        return _gcv(dev, run)
     if run.tau is not None and run.tau <= 0:  # automatic tau on noise-free input
         lam = dev.system.lambda_ceiling(1e-300)
         return LambdaSearch(lam, dev(lam), True, list(dev.history))
@@ -316,17 +317,31 @@ def _phi0(
     return phi_at_zero(dev, op.L, fixed) if params.displacement == "free" else dev.phi0()
 
 
-def _gcv(dev: Deviation, run: Run) -> LambdaSearch:
-    """``tau="gcv"``: lambda by generalized cross-validation; tau is phi there."""
+def _gcv(
+    dev: Deviation, geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_], run: Run
+) -> LambdaSearch:
+    """``tau="gcv"``: lambda by generalized cross-validation (started at the Lanczos estimate
+    of the automatic tau's lambda, no factorization); tau is phi there."""
     assert run.frame is not None
     system = dev.system
     lo = dev.floor
+    start = None
+    try:
+        tau0 = auto_tau(geometry, params, fixed).tau / run.frame.phi_factor
+        if tau0 > 0:
+            hi = max(system.lambda_ceiling(tau0), lo)
+            inv_d = 1.0 / np.sqrt(system.d2)[:, None]
+            start, _, _, _ = estimate_lambda(
+                lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * system.r, tau0, lo, hi,
+                order=dev.order,
+            )
+    except ParameterError:  # no noise estimate: start from the middle of the range
+        pass
     hi = max(system.lambda_ceiling(1e-12 * float(np.sum(system.d2[:, None] * system.U0**2))), lo)
-    start = math.sqrt(lo * hi) if lo > 0 else hi
-    lam = gcv_lambda(dev, lo, hi, min(max(start, lo), hi))
+    lam = gcv_lambda(dev, lo, hi, start if start else math.sqrt(lo * hi))
     phi = dev(lam)
     run.tau = phi * run.frame.phi_factor
-    run.tau_how = f"generalized cross-validation (Hutchinson trace, {dev.order} solve(s) per probe)"
+    run.tau_how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
     return LambdaSearch(lam, phi, True, list(dev.history))
 
 

@@ -127,7 +127,11 @@ class SmoothResult:
     tau_rule: str = "tau"
     sigma_estimate: float | None = None
     tau_how: str | None = None
-    checks: dict[str, Any] = field(default_factory=dict)
+    checks: dict[str, Any] = field(
+        default_factory=lambda: dict.fromkeys(
+            ("flipped_faces", "volume_change", "area_change", "moved_far")
+        )
+    )
     bound: dict[str, Any] | None = None
 
     @property

@@ -53,3 +53,14 @@ def test_cloud_spacing_is_nearest_neighbour_distance() -> None:
     P = np.column_stack([g, np.zeros(len(g))])
     d = describe(Geometry(P), SmoothingParams(tau=1.0, neighborhood="knn", k=4))
     assert d["kind"] == "cloud" and np.isclose(d["mean_spacing"], 0.5)
+
+
+def test_noise_estimate_and_suggestion() -> None:
+    P, F = noisy_icosphere(4, 0.01, seed=3)
+    g = Geometry(P, faces=F)
+    d = describe(g)
+    assert abs(d["sigma_estimate"] / 0.01 - 1) < 0.15
+    assert 0 < d["suggested_tau"] < d["phi0"]
+    assert np.isclose(d["suggested_rms"] ** 2 * len(P), d["suggested_tau"])
+    res = smooth(g, SmoothingParams())  # the automatic tau is the suggestion
+    assert np.isclose(res.tau, d["suggested_tau"]) and res.sigma_estimate == d["sigma_estimate"]
