@@ -36,7 +36,8 @@ def test_bound_holds_for_every_point(make, target: dict, displacement: str) -> N
     kw = dict(target)
     if "tau" in kw:
         kw["tau"] = base.tau
-    res = smooth(g, SmoothingParams(max_deviation=delta, displacement=displacement, **weights, **kw))
+    params = SmoothingParams(max_deviation=delta, displacement=displacement, **weights, **kw)
+    res = smooth(g, params)
     dist = np.linalg.norm(res.points - g.points, axis=1)
     assert dist.max() <= delta
     assert res.bound is not None and res.bound["rounds"] >= 1
