@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 __all__ = ["BoundResult", "bound_deviation", "clip_points", "point_deviations"]
 
 Array = NDArray[np.float64]
-MARGIN = 0.05
+MARGIN = 0.5
 
 
 class _Deviation(Protocol):

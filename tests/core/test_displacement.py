@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from core_fixtures import noisy_icosphere, polyline_edges
 
 from service.core import Geometry, SmoothingParams
-from service.core.displacement import normal_frames, normal_system
+from service.core.displacement import normal_frames, normal_system, projected_normal_system
 from service.core.pipeline import build_laplacian
 
 
@@ -85,3 +85,25 @@ def test_fixed_points_use_reduced_columns() -> None:
                             np.concatenate([gvec, np.zeros(free.size)]), rcond=None)
     np.testing.assert_allclose(X[free], g.points[free] + N[free, :, 0] * t[:, None], atol=1e-11)
     assert np.array_equal(X[:5], g.points[:5])
+
+
+def test_projected_system_matches_dense_oracle_in_a_normal_plane() -> None:
+    """Curve in 3-D (two unknowns per point): min sum_i ||N_i^T (L(P + N t))_i||^2 + lam ..."""
+    rng = np.random.default_rng(4)
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    P = np.column_stack([np.cos(t), np.sin(t), 0.3 * np.sin(3 * t)]) + rng.normal(0, 0.02, (50, 3))
+    g = Geometry(P, edges=polyline_edges(50, closed=True))
+    L, nb, _, _ = build_laplacian(g, SmoothingParams(lam=1.0))
+    N = normal_frames(P, nb.adjacency, 2)
+    w2 = rng.uniform(0.5, 2.0, 50)
+    sysn = projected_normal_system(L, np.asarray(L @ P), N, w2)
+    lam = 0.2
+    U = np.linalg.solve(sysn.M.toarray() + lam * np.diag(sysn.d2), sysn.b)
+    Ld = L.toarray()
+    A = np.zeros((100, 100))
+    for i in range(50):
+        for j in np.flatnonzero(Ld[i]):
+            A[2 * i : 2 * i + 2, 2 * j : 2 * j + 2] = Ld[i, j] * N[i].T @ N[j]
+    gvec = -np.einsum("nsa,ns->na", N, Ld @ P).reshape(-1)
+    ref = np.linalg.solve(A.T @ A + lam * np.diag(np.repeat(w2, 2)), A.T @ gvec)
+    np.testing.assert_allclose(U[:, 0], ref, rtol=1e-9, atol=1e-12)
