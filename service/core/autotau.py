@@ -18,9 +18,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
+from service.core.displacement import tangential_ratio
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.noise import codimension, discrepancy_tau, estimate_noise, hutchinson_trace
@@ -42,7 +44,12 @@ class AutoTau:
     rule: str
 
 
-def auto_tau(geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_]) -> AutoTau:
+def auto_tau(
+    geometry: Geometry,
+    params: SmoothingParams,
+    fixed: NDArray[np.bool_],
+    adjacency: sp.csr_matrix | None = None,
+) -> AutoTau:
     """``tau`` from the estimated noise (discrepancy principle, calibrated factor).
 
     Raises
@@ -60,11 +67,16 @@ def auto_tau(geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool
         )
     r = codimension(geometry)
     w2 = float(np.sum(geometry.omega()[~fixed] ** 2))
-    tau = discrepancy_tau(est.sigma, w2, r, params.displacement)
+    rho = 0.0
+    if params.displacement == "free" and adjacency is not None and r > 0:
+        rho = tangential_ratio(geometry.points, adjacency, r)
+    tau = discrepancy_tau(est.sigma, w2, r, params.displacement, rho)
     rule = (
         f"automatic: tau = {tau:.6g} from the estimated noise sigma = {est.sigma:.6g} "
-        f"(discrepancy principle, tau = {tau / (r * est.sigma**2 * w2):g} x {r} x sigma^2 x "
-        f"sum omega^2 over {int((~fixed).sum())} free points)"
+        f"(discrepancy principle: {tau / (r * est.sigma**2 * w2):.3g} x {r} x sigma^2 x "
+        f"sum omega^2 over {int((~fixed).sum())} free points"
+        + (f"; roughness along/across the shape {rho:.3g}" if rho else "")
+        + ")"
         if est.sigma > 0
         else "automatic: the input has no measurable noise (sigma = 0)"
     )

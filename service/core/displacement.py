@@ -50,6 +50,7 @@ __all__ = [
     "normal_system",
     "presmooth",
     "projected_normal_system",
+    "tangential_ratio",
 ]
 
 PRESMOOTH_STEPS = 5
@@ -240,3 +241,23 @@ def normal_mode(
     ns = projected_normal_system(L_R[:, free], np.asarray(L_R @ P), frames, omega[free] ** 2)
     P_F = P[free]
     return SmoothingSystem(ns.M, ns.d2, ns.b, ns.U0), lambda U: ns.points(P_F, U)
+
+
+def tangential_ratio(
+    points: NDArray[np.float64], adjacency: sp.csr_matrix, codim: int
+) -> float:
+    """``rho = sum ||T_i (L_u P)_i||^2 / sum ||N_i^T (L_u P)_i||^2`` of the uniform Laplacian.
+
+    How much of the roughness of the input lies along the shape rather than across it: near 0
+    for noise along the normals on a regular sampling, about 2 for isotropic noise on a
+    surface (two tangent directions against one normal direction). The automatic tau of free
+    displacement spends budget on it (:func:`service.core.noise.discrepancy_tau`).
+    """
+    deg = np.asarray(adjacency.sum(axis=1)).ravel()
+    inv = np.divide(1.0, deg, out=np.zeros_like(deg), where=deg > 0)
+    LP = points - np.asarray((sp.diags(inv) @ adjacency) @ points)
+    LP[deg == 0] = 0.0
+    N = normal_frames(points, adjacency, codim)
+    across = float(np.sum(np.einsum("nsa,ns->na", N, LP) ** 2))
+    total = float(np.sum(LP**2))
+    return (total - across) / across if across > 0 else 0.0

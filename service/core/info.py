@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from service.core.errors import ParameterError
 from service.core.geometry import Geometry
-from service.core.noise import codimension, discrepancy_tau, estimate_noise
 from service.core.params import SmoothingParams
 
 __all__ = ["describe", "mean_spacing"]
@@ -41,9 +41,12 @@ def _bbox(P: NDArray[np.float64]) -> dict[str, list[float]]:
     return {"min": P.min(axis=0).tolist(), "max": P.max(axis=0).tolist()}
 
 
-def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, int]:
+def _phi0(
+    geometry: Geometry, params: SmoothingParams
+) -> tuple[float, float, int, NDArray[np.bool_], Any]:
     """``phi(0)`` (eq. 14, per component, fixed points as boundary values), the weight sum
-    ``sum omega_i^2`` over the points that can move, and the number of neighbour pairs."""
+    ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the fixed
+    points and the neighbourhood graph."""
     import scipy.sparse as sp
 
     from service.core.elimination import laplacian_system, phi_at_zero
@@ -57,7 +60,7 @@ def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, in
     fixed, _ = free_set(geometry, op, params, [])
     omega = geometry.omega()
     if fixed.all():
-        return 0.0, 0.0, n_edges
+        return 0.0, 0.0, n_edges, fixed, adj
     frame = op.frame.weighted(omega[~fixed])
     system = laplacian_system(
         op.L, frame.points(geometry.points), omega / frame.weight_scale, fixed
@@ -66,7 +69,8 @@ def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, in
     if phi0 is None:
         solver = "superlu" if params.solver == "superlu" else "cholmod"
         phi0 = phi_at_zero(Deviation(system, solver=solver), op.L, fixed)
-    return float(phi0) * frame.phi_factor, float(np.sum(omega[~fixed] ** 2)), n_edges
+    w2 = float(np.sum(omega[~fixed] ** 2))
+    return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
 
 
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
@@ -88,24 +92,29 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs).
         ``sigma_estimate`` is the noise level across the shape
         (:func:`~service.core.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
-        rule would choose with ``params`` (:func:`~service.core.noise.discrepancy_tau`) and
+        rule would choose with ``params`` (:func:`~service.core.autotau.auto_tau`) and
         ``suggested_rms`` the same budget as an RMS displacement; ``None`` when no estimate
         can be made (too few or degenerate points) or when it falls outside ``(0, phi0)``.
     """
+    from service.core.autotau import auto_tau
+
     if params is None:
         params = SmoothingParams.model_construct()
-    phi0, weight_sum, n_edges = _phi0(geometry, params)
+    phi0, weight_sum, n_edges, fixed, adjacency = _phi0(geometry, params)
     r = float(np.sqrt(phi0 / weight_sum)) if weight_sum > 0 else 0.0
     sigma: float | None = None
     suggested_tau: float | None = None
     suggested_rms: float | None = None
-    est = estimate_noise(geometry)
-    if est is not None:
-        sigma = est.sigma
-        tau = discrepancy_tau(sigma, weight_sum, codimension(geometry), params.displacement)
-        if 0 < tau < phi0:
-            suggested_tau = tau
-            suggested_rms = float(np.sqrt(tau / weight_sum))
+    if weight_sum > 0:
+        try:
+            auto = auto_tau(geometry, params, fixed, adjacency)
+        except ParameterError:  # no noise estimate
+            auto = None
+        if auto is not None:
+            sigma = auto.sigma
+            if 0 < auto.tau < phi0:
+                suggested_tau = auto.tau
+                suggested_rms = float(np.sqrt(auto.tau / weight_sum))
     return {
         "n_points": geometry.n,
         "dimension": geometry.dim,

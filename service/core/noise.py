@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from service.core.geometry import Geometry
 
 __all__ = [
+    "TANGENTIAL_SHARE",
     "TAU_FACTOR",
     "NoiseEstimate",
     "codimension",
@@ -197,10 +198,11 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
 
 # --- tau from the noise: discrepancy principle, generalized cross-validation --------------------
 
-#: ``c`` of the discrepancy rule ``tau = c * r * sigma^2 * sum omega_i^2`` (``r`` normal
-#: directions per point), per displacement mode; calibrated on the quality benchmark
-#: (``service/core/README.md``).
-TAU_FACTOR: dict[str, float] = {"free": 1.0, "normal": 0.8}
+#: ``c`` of the discrepancy rule ``tau = c * r * sigma^2 * sum omega_i^2 * (1 + alpha rho)``
+#: (``r`` normal directions per point), per displacement mode, and ``alpha`` (free
+#: displacement only); calibrated on the quality benchmark (``service/core/README.md``).
+TAU_FACTOR: dict[str, float] = {"free": 1.0, "normal": 0.9}
+TANGENTIAL_SHARE = 0.8
 
 
 def codimension(geometry: Geometry) -> int:
@@ -208,16 +210,21 @@ def codimension(geometry: Geometry) -> int:
     return max(geometry.dim - _manifold_dim(geometry), 0)
 
 
-def discrepancy_tau(sigma: float, weight_sum: float, codim: int, displacement: str) -> float:
-    """``tau = c r sigma^2 sum omega_i^2``: the share of the noise energy smoothing removes.
+def discrepancy_tau(
+    sigma: float, weight_sum: float, codim: int, displacement: str, rho: float = 0.0
+) -> float:
+    """``tau = c r sigma^2 sum omega_i^2 (1 + alpha rho)``: the noise energy smoothing removes.
 
     With noise of standard deviation ``sigma`` across the shape, a smoothing that removes the
     noise and nothing else moves each point by about ``sigma`` per normal direction; part of
-    the noise stays in the smooth result (the degrees of freedom the filter keeps) and free
-    displacement also spends budget along the shape, which the calibrated factor ``c``
-    (:data:`TAU_FACTOR`) accounts for.
+    the noise stays in the smooth result (the degrees of freedom the filter keeps), which the
+    calibrated factor ``c`` (:data:`TAU_FACTOR`) accounts for. Free displacement also moves
+    points along the shape, in proportion to the roughness along it: ``rho`` is its ratio to
+    the roughness across (:func:`service.core.displacement.tangential_ratio`) and ``alpha``
+    (:data:`TANGENTIAL_SHARE`) the calibrated share of it worth spending.
     """
-    return TAU_FACTOR[displacement] * codim * sigma**2 * weight_sum
+    extra = 1.0 + TANGENTIAL_SHARE * rho if displacement == "free" else 1.0
+    return TAU_FACTOR[displacement] * codim * sigma**2 * weight_sum * extra
 
 
 def hutchinson_trace(apply: Callable[[Array], Array], m: int, probes: int, seed: int = 0) -> float:

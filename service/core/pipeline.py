@@ -135,7 +135,7 @@ def smooth(
     fixed, n_fixed = free_set(geometry, op, params, run.notes)
     run.frame = frame = op.frame.weighted(geometry.omega()[~fixed])
     system, to_points = smoothing_system(geometry, op, fixed, frame, params)
-    run.tau = resolve_tau(params, geometry, fixed, run)
+    run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
     if system.size == 0 or system.M.nnz == 0:
         return _unchanged(geometry, params, op, run, n_fixed)
@@ -225,7 +225,11 @@ def smoothing_system(
 
 
 def resolve_tau(
-    params: SmoothingParams, geometry: Geometry, fixed: NDArray[np.bool_], run: Run
+    params: SmoothingParams,
+    geometry: Geometry,
+    fixed: NDArray[np.bool_],
+    run: Run,
+    op: SmoothingOperator | None = None,
 ) -> float | None:
     """The target ``tau`` in the input's frame: given, ``rms^2 sum omega_i^2`` (free points),
     or from the estimated noise (:func:`~service.core.autotau.auto_tau`); ``None`` for a given
@@ -235,7 +239,8 @@ def resolve_tau(
     if rule in ("lam", "gcv"):
         return None
     if rule == "auto":
-        auto = auto_tau(geometry, params, fixed)
+        adjacency = op.neighborhoods.adjacency if op is not None else None
+        auto = auto_tau(geometry, params, fixed, adjacency)
         run.sigma, run.tau_how = auto.sigma, auto.rule
         return auto.tau
     if rule == "tau":
