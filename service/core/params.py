@@ -41,6 +41,7 @@ REPORT_PRESET: dict[str, Any] = {
     "neighborhood": "delaunay",
     "k": 12,
     "displacement": "free",
+    "presmooth": 0,
     "order": 1,
     "method": "tikhonov",
     "search": "rational",
@@ -192,6 +193,17 @@ class SmoothingParams(BaseModel):
             "'free': every coordinate of every point may move (eq. 4). 'normal': each point "
             "moves along its normal only, x_i = p_i + t_i n_i, normals from the input's "
             "neighbourhoods (surfaces and point clouds; the normal plane for curves in 3-D)."
+        ),
+    )
+    presmooth: int = Field(
+        default=2,
+        ge=0,
+        le=100,
+        description=(
+            "Averaging steps x <- (x + mean of neighbours) / 2 applied to a copy of the input "
+            "before the curvature and the row scales of L(kappa) / L(f) (eqs. 7-10) are "
+            "computed, so that they follow the shape rather than the noise; 0 computes them "
+            "from the input itself (the report)."
         ),
     )
     max_deviation: float | None = Field(
