@@ -112,9 +112,11 @@ def run_auto(case: Case, scorer: Scorer, kw: dict[str, Any] | None = None,
     auto = _run(case, scorer, p)
     if auto is None:
         return None
-    given = _params(tau=auto["tau"], **kw)
-    assert given is not None
     t_auto = [auto["seconds"]]
+    if repeats == 0:
+        return auto
+    given = _params(**{**kw, "tau": auto["tau"]})
+    assert given is not None
     t_given = []
     for _ in range(repeats):
         r = _run(case, scorer, given)
