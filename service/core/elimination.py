@@ -44,11 +44,14 @@ def laplacian_system(
     M = (L_F.T @ L_F).tocsr()
     M.eliminate_zeros()
     labels, has_fixed = _components(L, fixed, free)
-    phi0 = None
+    d2 = omega[free] ** 2
+    phi0 = bound = None
     if not has_fixed[labels[free]].any():
-        E0 = _centroid_offsets(labels[free], omega[free] ** 2, P[free])
-        phi0 = float(np.sum(omega[free, None] ** 2 * E0**2))
-    return SmoothingSystem(M, omega[free] ** 2, b, P[free], phi0=phi0)
+        E0 = _centroid_offsets(labels[free], d2, P[free])
+        phi0 = float(np.sum(d2[:, None] * E0**2))
+    elif free.size:
+        bound = _phi0_bound(P[free], d2, P[fixed_idx])
+    return SmoothingSystem(M, d2, b, P[free], phi0=phi0, phi0_bound=bound)
 
 
 def _components(
@@ -98,3 +101,28 @@ def phi_at_zero(dev: Deviation, L: sp.csr_matrix, fixed: NDArray[np.bool_]) -> f
     for key in ("factorizations", "solves", "matvecs", "factorization", "solve", "analysis"):
         setattr(dev.stats, key, getattr(dev.stats, key) + getattr(sub_dev.stats, key))
     return float(np.sum(s.d2[:, None] * E0**2))
+
+
+def _phi0_bound(U: Array, d2: Array, fixed_points: Array) -> float:
+    """An upper bound of ``phi(0)`` without a solve.
+
+    As lambda -> 0 the free points of a component with fixed points tend to the solution of
+    ``L X = 0`` on the free rows: a discrete harmonic function of the fixed values, which the
+    normalized Laplacian's convex combinations (and any positive row scaling of them, eqs. 9-10)
+    keep inside the bounding box of the fixed points (maximum principle). So each coordinate
+    moves at most to the farther side of that box. Components without fixed points contribute
+    at most the same (their centroid lies in the box of all points, which this also bounds
+    from above when the box is taken over fixed and free points).
+
+    Parameters
+    ----------
+    U : ndarray, shape (m, s)
+        Free points (internal frame).
+    d2 : ndarray, shape (m,)
+    fixed_points : ndarray, shape (c, s)
+        Internal-frame coordinates of the fixed points.
+    """
+    lo = np.minimum(fixed_points.min(axis=0), U.min(axis=0))
+    hi = np.maximum(fixed_points.max(axis=0), U.max(axis=0))
+    far = np.maximum(np.abs(U - lo), np.abs(U - hi))
+    return float(np.sum(d2[:, None] * far**2))

@@ -27,7 +27,6 @@ from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.guards import guard_warnings, noise_ratio, shape_checks
 from service.core.maxnorm import bound_deviation, clip_points
-from service.core.neighborhoods import unique_faces
 from service.core.operator import (
     SmoothingOperator,
     build_laplacian,
@@ -38,12 +37,7 @@ from service.core.params import SmoothingParams
 from service.core.progress import ProgressCallback, ProgressEvent
 from service.core.resources import choose_solver
 from service.core.result import SmoothResult, Spectrum
-from service.core.shrinkage import (
-    enclosed_measure,
-    is_closed_curve_set,
-    is_closed_mesh,
-    rescale_to_measure,
-)
+from service.core.shrinkage import check_preservable, preserve_measure
 from service.core.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
 from service.core.system import Deviation, SmoothingSystem
 from service.core.tau import (
@@ -157,7 +151,7 @@ def smooth(
     X[~fixed] = frame.back(to_points(U))
     volume_scale = None
     if params.preserve_volume:
-        X, volume_scale = _preserve(geometry, X)
+        X, volume_scale = preserve_measure(geometry, X)
     if params.max_deviation is not None:
         X, _ = clip_points(geometry.points, X, params.max_deviation)
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
@@ -197,7 +191,7 @@ def free_set(
             notes.append("fix_boundary has no effect on k-NN neighbourhoods (no boundary defined)")
         fixed = fixed | nb.boundary
     if params.preserve_volume:
-        _check_preservable(geometry, fixed)
+        check_preservable(geometry, fixed)
     L = op.L
     coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
     return fixed | ~coupled, int(fixed.sum())
@@ -278,7 +272,8 @@ def find_lambda(
     assert run.tau is not None
     tau, system = run.tau / frame.phi_factor, dev.system
     phi0 = system.phi0
-    if params.search == "rational":
+    bound = system.phi0_bound if system.phi0_bound is not None else np.inf
+    if params.search == "rational" or (phi0 is None and tau >= bound):
         phi0 = _phi0(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
@@ -307,12 +302,25 @@ def find_lambda(
         tolerance=params.tolerance,
         max_iterations=params.max_iterations,
         propose=dev.local_root if params.search == "auto" else None,
+        below=lambda: _check_range(dev, op, fixed, params, run),
     )
     if not search.converged and search.phi < tau:
-        phi0 = _phi0(dev, op, fixed, params)
-        if tau >= phi0:
-            raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
+        _check_range(dev, op, fixed, params, run)
     return search
+
+
+def _check_range(
+    dev: Deviation,
+    op: SmoothingOperator,
+    fixed: NDArray[np.bool_],
+    params: SmoothingParams,
+    run: Run,
+) -> None:
+    """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``)."""
+    assert run.frame is not None and run.tau is not None
+    phi0 = _phi0(dev, op, fixed, params)
+    if run.tau / run.frame.phi_factor >= phi0:
+        raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
 
 
 def _phi0(
@@ -460,34 +468,6 @@ def diagnostics(
         checks=checks.to_dict(),
         bound=run.bound,
     )
-
-
-def _check_preservable(geometry: Geometry, fixed: NDArray[np.bool_]) -> None:
-    ok = False
-    if geometry.faces is not None:
-        ok = geometry.dim == 3 and is_closed_mesh(unique_faces(geometry.faces))
-    elif geometry.edges is not None:
-        ok = geometry.dim == 2 and is_closed_curve_set(geometry.edges, geometry.n)
-    if not ok:
-        raise ParameterError(
-            "preserve_volume needs a closed triangle mesh in 3D or closed polygons in 2D",
-            field="params.preserve_volume",
-        )
-    if fixed.any():
-        raise ParameterError(
-            "preserve_volume cannot be combined with fixed points (rescaling would move them)",
-            field="params.preserve_volume",
-        )
-
-
-def _preserve(geometry: Geometry, X: Array) -> tuple[Array, float]:
-    faces = unique_faces(geometry.faces) if geometry.faces is not None else None
-    edges = geometry.edges if faces is None else None
-    before = enclosed_measure(geometry.points, faces, edges)
-    after = enclosed_measure(X, faces, edges)
-    referenced = np.zeros(geometry.n, dtype=bool)
-    referenced[(faces if faces is not None else edges).ravel()] = True  # type: ignore[union-attr]
-    return rescale_to_measure(X, referenced, before, after, geometry.dim)
 
 
 def _spectrum(

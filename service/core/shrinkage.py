@@ -12,7 +12,18 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["enclosed_measure", "is_closed_curve_set", "is_closed_mesh", "rescale_to_measure"]
+from service.core.errors import ParameterError
+from service.core.geometry import Geometry
+from service.core.neighborhoods import unique_faces
+
+__all__ = [
+    "check_preservable",
+    "enclosed_measure",
+    "is_closed_curve_set",
+    "is_closed_mesh",
+    "preserve_measure",
+    "rescale_to_measure",
+]
 
 
 def is_closed_mesh(faces: NDArray[np.int64]) -> bool:
@@ -99,3 +110,35 @@ def rescale_to_measure(
     c = X[referenced].mean(axis=0)
     out[referenced] = c + (X[referenced] - c) * scale
     return out, scale
+
+
+def check_preservable(geometry: Geometry, fixed: NDArray[np.bool_]) -> None:
+    """Preservation needs a closed mesh in 3D or closed polygons in 2D, and no fixed points."""
+    ok = False
+    if geometry.faces is not None:
+        ok = geometry.dim == 3 and is_closed_mesh(unique_faces(geometry.faces))
+    elif geometry.edges is not None:
+        ok = geometry.dim == 2 and is_closed_curve_set(geometry.edges, geometry.n)
+    if not ok:
+        raise ParameterError(
+            "preserve_volume needs a closed triangle mesh in 3D or closed polygons in 2D",
+            field="params.preserve_volume",
+        )
+    if fixed.any():
+        raise ParameterError(
+            "preserve_volume cannot be combined with fixed points (rescaling would move them)",
+            field="params.preserve_volume",
+        )
+
+
+def preserve_measure(
+    geometry: Geometry, X: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float]:
+    """Rescale ``X`` so that it encloses the input's volume (3D mesh) or area (2D polygons)."""
+    faces = unique_faces(geometry.faces) if geometry.faces is not None else None
+    edges = geometry.edges if faces is None else None
+    before = enclosed_measure(geometry.points, faces, edges)
+    after = enclosed_measure(X, faces, edges)
+    referenced = np.zeros(geometry.n, dtype=bool)
+    referenced[(faces if faces is not None else edges).ravel()] = True  # type: ignore[union-attr]
+    return rescale_to_measure(X, referenced, before, after, geometry.dim)

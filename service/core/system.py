@@ -64,6 +64,8 @@ class SmoothingSystem:
         The data the deviation is measured from.
     phi0 : float, optional
         ``phi(0)`` when known in closed form (eq. 14); see :meth:`Deviation.phi0`.
+    phi0_bound : float, optional
+        An upper bound of ``phi(0)`` when known (a ``tau`` above it is out of range).
     """
 
     M: sp.spmatrix
@@ -71,6 +73,7 @@ class SmoothingSystem:
     b: Array
     U0: Array
     phi0: float | None = None
+    phi0_bound: float | None = None
     r: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:

@@ -235,12 +235,14 @@ def newton_search(
     tolerance: float = 1e-3,
     max_iterations: int = 50,
     propose: Callable[[float, float, float, float], float | None] | None = None,
+    below: Callable[[], None] | None = None,
 ) -> LambdaSearch:
     """Safeguarded Newton on ``h = phi^(-1/(2k)) - tau^(-1/(2k))`` inside ``[lo, hi]``.
 
     ``propose(lam, tau, lo, hi)``, when given and not ``None``, replaces Newton's step (e.g.
     the root of a shift-invert model built with the factorization just made); the same
-    safeguard applies to it.
+    safeguard applies to it. ``below()`` is called once when Newton's tangent from a point with
+    ``phi < tau`` falls below ``lo`` (``tau`` may exceed ``phi(0)``; it raises if so).
 
     Parameters
     ----------
@@ -285,8 +287,13 @@ def newton_search(
         if new is None or new in (lo, hi):
             slope = e * phi ** (e - 1.0) * derivative(lam) if phi > 0 else 0.0
             new = lam - (phi**e - target) / slope if slope > 0 else math.nan
+            if below is not None and phi < tau and not new > lo:
+                below()
+                below = None
         if not (math.isfinite(new) and lo < new < hi):
             new = math.sqrt(lo * hi) if lo > 0 else hi * 1e-3
+        if new == lam:
+            break
         lam = new
     assert best is not None
     return LambdaSearch(best[0], best[1], False, history)
