@@ -55,7 +55,7 @@ __all__ = [
 FRAME_NEIGHBOURS = 12
 #: Averaging steps before the normals are estimated (sphere with noise 0.5 h: 0 steps give
 #: normals 19 degrees off, 3 steps 6.5, 10 steps 2.3; 10 steps round the creases of
-#: fandisk.obj, 3-5 do not; see service/core/README.md).
+#: fandisk.obj, 3-5 do not; see benchmarks/quality/README.md).
 FRAME_STEPS = 5
 
 
@@ -65,6 +65,7 @@ def normal_frames(
     codim: int,
     k: int = FRAME_NEIGHBOURS,
     steps: int = FRAME_STEPS,
+    at: NDArray[np.int64] | None = None,
 ) -> NDArray[np.float64]:
     """Orthonormal bases of the normal spaces, shape ``(n, s, codim)``.
 
@@ -80,19 +81,22 @@ def normal_frames(
         Neighbours of the principal component analysis.
     steps : int
         Averaging steps before the analysis.
+    at : ndarray of int, optional
+        Only these points' frames (default: all).
 
     Returns
     -------
-    ndarray, shape (n, s, codim)
+    ndarray, shape (n or len(at), s, codim)
         The ``codim`` directions of least variance of each neighbourhood.
     """
     X = presmooth(points, adjacency, steps)
     n = X.shape[0]
     k = min(k, n)
-    _, idx = cKDTree(X).query(X, k=k)
-    idx = np.asarray(idx).reshape(n, k)
-    out = np.empty((n, X.shape[1], codim))
-    for start in range(0, n, 50000):
+    query = X if at is None else X[at]
+    _, idx = cKDTree(X).query(query, k=k)
+    idx = np.asarray(idx).reshape(query.shape[0], k)
+    out = np.empty((query.shape[0], X.shape[1], codim))
+    for start in range(0, query.shape[0], 50000):
         Q = X[idx[start : start + 50000]]
         Q = Q - Q.mean(axis=1, keepdims=True)
         _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q))
@@ -243,9 +247,11 @@ def tangential_ratio(
     """
     deg = np.asarray(adjacency.sum(axis=1)).ravel()
     inv = np.divide(1.0, deg, out=np.zeros_like(deg), where=deg > 0)
-    LP = points - np.asarray((sp.diags(inv) @ adjacency) @ points)
-    LP[deg == 0] = 0.0
-    N = normal_frames(points, adjacency, codim)
+    n = points.shape[0]
+    at = np.arange(n) if n <= 20000 else np.random.default_rng(0).choice(n, 20000, replace=False)
+    LP = (points - np.asarray((sp.diags(inv) @ adjacency) @ points))[at]
+    LP[deg[at] == 0] = 0.0
+    N = normal_frames(points, adjacency, codim, at=at)
     across = float(np.sum(np.einsum("nsa,ns->na", N, LP) ** 2))
     total = float(np.sum(LP**2))
     return (total - across) / across if across > 0 else 0.0

@@ -16,7 +16,7 @@ steps, default 2; 0 reproduces the report): on ``fandisk.obj`` with noise 0.25 h
 normals, at equal tau = 0.6 n sigma^2, the RMS vertex error of the points within two edge lengths
 of a crease is 0.628 of the input's with L(f) against 0.673 with L(n) (0.754 with the report's
 L(f)); with noise 0.1 h (normal + tangential) 0.724 against 0.965. It does not help with
-isotropic noise of 0.5 h (0.700 against 0.634); see ``service/core/README.md``.
+isotropic noise of 0.5 h (0.700 against 0.634); see ``benchmarks/quality/README.md``.
 """
 
 from __future__ import annotations

@@ -16,9 +16,9 @@ pulls that point towards its input position, so
 
 The weights only grow, a point's weight grows geometrically while it violates the bound, and a
 point whose weight grew without bound would not move at all, so the rounds shrink the violations;
-step 4 makes the guarantee exact whatever happens. The rounds used are reported (on the quality
-benchmark they end without step 4, see ``service/core/README.md``). With a tau, phi is searched
-again with the original weights after each reweighting, so ``phi = tau`` still holds within the
+step 4 makes the guarantee exact whatever happens. The rounds used are reported (see
+``benchmarks/quality/README.md`` for the benchmark's). With a tau, phi is searched again with
+the original weights after each reweighting, so ``phi = tau`` still holds within the
 tolerance unless the bound makes it impossible (``tau`` above ``sum omega_i^2 delta^2``), in
 which case the result keeps every point within delta and phi stays below tau (a warning says so).
 """

@@ -4,7 +4,7 @@ Measured on this implementation (6 seeds each) before writing the assertions:
 - noisy square (40 samples per side, sigma = spacing / 12, tau = n s sigma^2): mean corner error
   L(n) 0.012-0.015, L(f) 0.003-0.0045 (ratio 0.23-0.33);
 - both are the report's L(f) and L(kappa), from the noisy input (``preset="report"``); with the
-  default ``presmooth=2`` the corner ratio is 0.42-0.54 (service/core/README.md);
+  default ``presmooth=2`` the corner ratio is 0.42-0.54 (benchmarks/quality/README.md);
 - non-uniform circle (150 noisy samples on the left half, 40 exact on the right):
   radial RMS on the noisy half L(kappa) 0.005-0.009 vs L(n) 0.0055-0.0094 (never worse), on the
   sparse half L(kappa) 0.002-0.005 vs L(n) 0.012-0.021 (L(n) drags the sparse half).
