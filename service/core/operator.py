@@ -18,7 +18,7 @@ from service.core.curvature import curvature
 from service.core.errors import ParameterError
 from service.core.frame import Frame
 from service.core.geometry import Geometry
-from service.core.laplacian import laplacian, presmooth
+from service.core.laplacian import laplacian, presmooth, without_junction_rows
 from service.core.neighborhoods import (
     Neighborhoods,
     cloud_delaunay_neighborhoods,
@@ -39,7 +39,9 @@ __all__ = [
 ]
 
 #: The parameters an operator depends on.
-BUILD_FIELDS = ("laplacian", "weights", "neighborhood", "k", "sigma_h", "sigma_f", "presmooth")
+BUILD_FIELDS = (
+    "laplacian", "weights", "neighborhood", "k", "sigma_h", "sigma_f", "presmooth", "junctions"
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,6 +156,8 @@ def _build(
         ref = presmooth(P, nb.adjacency, params.presmooth)
     kappa = curvature(ref, curv_nb) if params.laplacian != "normalized" else None
     L = laplacian(W, ref, params.laplacian, kappa, params.sigma_h / frame.scale, params.sigma_f)
+    if nb.source == "curve" and params.junctions == "corner":
+        L = without_junction_rows(L, nb.adjacency)
     t2 = time.perf_counter()
     timings = {"neighborhoods": t1 - t0, "laplacian": t2 - t1}
     return SmoothingOperator(L, nb, scheme, frame, key, timings)

@@ -11,6 +11,7 @@ from pydantic_core import PydanticCustomError
 __all__ = [
     "REPORT_PRESET",
     "Displacement",
+    "Junctions",
     "LaplacianVariant",
     "MethodName",
     "NeighborhoodKind",
@@ -33,6 +34,7 @@ MethodName = Literal["tikhonov", "windowed-sinc"]
 TauRule = Literal["auto", "gcv"]
 Displacement = Literal["free", "normal"]
 Preset = Literal["report"]
+Junctions = Literal["corner", "smooth"]
 
 #: ``preset="report"``: the choices of report TW 451, for every field the caller does not give.
 REPORT_PRESET: dict[str, Any] = {
@@ -42,6 +44,7 @@ REPORT_PRESET: dict[str, Any] = {
     "k": 12,
     "displacement": "free",
     "presmooth": 0,
+    "junctions": "smooth",
     "order": 1,
     "method": "tikhonov",
     "search": "rational",
@@ -204,6 +207,14 @@ class SmoothingParams(BaseModel):
             "before the curvature and the row scales of L(kappa) / L(f) (eqs. 7-10) are "
             "computed, so that they follow the shape rather than the noise; 0 computes them "
             "from the input itself (the report)."
+        ),
+    )
+    junctions: Junctions = Field(
+        default="corner",
+        description=(
+            "Curve networks: a vertex where three or more curves meet is a 'corner' (no "
+            "smoothness term of its own: each curve is smoothed up to it) or is smoothed like "
+            "any other vertex, towards the centroid of its neighbours ('smooth', the report)."
         ),
     )
     max_deviation: float | None = Field(
