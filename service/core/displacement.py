@@ -41,17 +41,22 @@ from service.core.geometry import Geometry
 from service.core.laplacian import presmooth
 from service.core.neighborhoods import Neighborhoods
 from service.core.noise import codimension
+from service.core.params import SmoothingParams
 from service.core.system import SmoothingSystem
 
 __all__ = [
+    "DEFAULT_DISPLACEMENT",
     "NormalSystem",
     "normal_frames",
     "normal_mode",
     "normal_system",
     "projected_normal_system",
+    "resolve_displacement",
     "tangential_ratio",
 ]
 
+#: ``displacement="auto"`` per kind of input (chosen on the quality benchmark).
+DEFAULT_DISPLACEMENT = {"mesh": "free", "curve": "free", "cloud": "normal"}
 FRAME_NEIGHBOURS = 12
 #: Averaging steps before the normals are estimated (sphere with noise 0.5 h: 0 steps give
 #: normals 19 degrees off, 3 steps 6.5, 10 steps 2.3; 10 steps round the creases of
@@ -255,3 +260,10 @@ def tangential_ratio(
     across = float(np.sum(np.einsum("nsa,ns->na", N, LP) ** 2))
     total = float(np.sum(LP**2))
     return (total - across) / across if across > 0 else 0.0
+
+
+def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> SmoothingParams:
+    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input."""
+    if params.displacement != "auto":
+        return params
+    return params.model_copy(update={"displacement": DEFAULT_DISPLACEMENT[geometry.kind]})

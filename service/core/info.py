@@ -97,9 +97,11 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         can be made (too few or degenerate points) or when it falls outside ``(0, phi0)``.
     """
     from service.core.autotau import auto_tau
+    from service.core.displacement import resolve_displacement
 
     if params is None:
         params = SmoothingParams.model_construct()
+    params = resolve_displacement(params, geometry)
     phi0, weight_sum, n_edges, fixed, adjacency = _phi0(geometry, params)
     r = float(np.sqrt(phi0 / weight_sum)) if weight_sum > 0 else 0.0
     sigma: float | None = None

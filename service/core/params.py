@@ -32,7 +32,7 @@ SearchName = Literal["auto", "newton", "rational"]
 MethodName = Literal["tikhonov", "windowed-sinc"]
 # --- end core-engine block --------------------------------------------------------------------
 TauRule = Literal["auto", "gcv"]
-Displacement = Literal["free", "normal"]
+Displacement = Literal["auto", "free", "normal"]
 Preset = Literal["report"]
 Junctions = Literal["corner", "smooth"]
 
@@ -112,18 +112,25 @@ class SmoothingParams(BaseModel):
         ),
     )
     weights: WeightScheme = Field(
-        default="auto",
+        default="uniform",
         description=(
-            "Neighbour weights w_ij of eq. (1). 'auto': reciprocal distance for curves "
-            "(section 4.2), mean value for meshes and Delaunay neighbourhoods (4.3-4.4), "
-            "reciprocal distance for k-NN neighbourhoods."
+            "Neighbour weights w_ij of eq. (1). 'auto': the report's choice, reciprocal "
+            "distance for curves (section 4.2), mean value for meshes and Delaunay "
+            "neighbourhoods (4.3-4.4), reciprocal distance for k-NN neighbourhoods. Default "
+            "'uniform': weights computed from a noisy input move points along the shape "
+            "(benchmarks/quality/README.md)."
         ),
     )
     neighborhood: NeighborhoodKind = Field(
         default="delaunay",
         description="Point clouds only: Delaunay neighbourhoods (section 4.4) or plain k-NN.",
     )
-    k: int = Field(default=12, ge=3, le=64, description="Point clouds only: neighbours per point.")
+    k: int = Field(
+        default=20,
+        ge=3,
+        le=64,
+        description="Point clouds only: neighbours per point (the report: 12).",
+    )
     sigma_h: float = Field(
         default=1e-7, gt=0, allow_inf_nan=False, description="Huber threshold of eq. (8)."
     )
@@ -176,11 +183,12 @@ class SmoothingParams(BaseModel):
         "factorization).",
     )
     order: int = Field(
-        default=1,
+        default=2,
         ge=1,
         le=8,
         description="Iterated Tikhonov order k: filter 1 - (mu/(mu+lambda))^k, k solves per "
-        "lambda with one factorization (1 = the report's eq. 4).",
+        "lambda with one factorization (1 = the report's eq. 4; default 2, chosen by the "
+        "quality benchmark).",
     )
     # --- end core-engine block ------------------------------------------------------------
     spectrum: bool = Field(
@@ -191,11 +199,13 @@ class SmoothingParams(BaseModel):
 
     # --- core-quality: displacement, max-norm bound, preset --------------------------------------
     displacement: Displacement = Field(
-        default="free",
+        default="auto",
         description=(
             "'free': every coordinate of every point may move (eq. 4). 'normal': each point "
             "moves along its normal only, x_i = p_i + t_i n_i, normals from the input's "
-            "neighbourhoods (surfaces and point clouds; the normal plane for curves in 3-D)."
+            "neighbourhoods (surfaces and point clouds; the normal plane for curves in 3-D), "
+            "the smoothness measured across the shape. 'auto': the one the quality benchmark "
+            "found best for the kind of input (normal for point clouds, free otherwise)."
         ),
     )
     presmooth: int = Field(

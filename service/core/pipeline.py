@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from service.core import cache
 from service.core.autotau import auto_tau, gcv_lambda
-from service.core.displacement import normal_mode
+from service.core.displacement import normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
 from service.core.errors import ParameterError, TauOutOfRange
 from service.core.frame import Frame
@@ -124,6 +124,7 @@ def smooth(
         The factorization failed.
     """
     run = Run(progress)
+    params = resolve_displacement(params, geometry)
     run.emit("neighborhoods")
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, run.notes)

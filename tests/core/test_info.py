@@ -41,9 +41,10 @@ def test_phi0_with_fixed_points_is_the_limit_of_smooth() -> None:
     t = np.linspace(0, np.pi, 30)
     P = np.column_stack([t, np.sin(t)])
     g = Geometry(P, edges=polyline_edges(30))
-    d = describe(g, SmoothingParams(tau=1.0, fix_boundary=True))
-    # lambda -> 0 with both ends fixed: the chord between the ends (reciprocal weights)
-    X = smooth(g, SmoothingParams(lam=1e-9, fix_boundary=True)).points
+    params = {"fix_boundary": True, "order": 1}
+    d = describe(g, SmoothingParams(tau=1.0, **params))
+    # lambda -> 0 with both ends fixed: the chord between the ends
+    X = smooth(g, SmoothingParams(lam=1e-9, **params)).points
     assert np.isclose(d["phi0"], float(np.sum((X - P) ** 2)), rtol=1e-4)
     assert d["rms_range"][1] == np.sqrt(d["phi0"] / 28)
 

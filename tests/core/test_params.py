@@ -10,8 +10,13 @@ from service.core import SmoothingParams
 
 def test_defaults() -> None:
     p = SmoothingParams(tau=1.0)
-    assert (p.laplacian, p.weights, p.neighborhood) == ("normalized", "auto", "delaunay")
+    assert (p.laplacian, p.weights, p.neighborhood) == ("normalized", "uniform", "delaunay")
+    assert p.k == 20
+    assert (p.order, p.displacement, p.presmooth, p.junctions) == (2, "auto", 2, "corner")
     assert (p.sigma_h, p.sigma_f, p.tolerance) == (1e-7, 0.5, 1e-3)
+    r = SmoothingParams(tau=1.0, preset="report")  # the report's choices
+    assert (r.weights, r.k, r.order, r.displacement, r.presmooth, r.search) == (
+        "auto", 12, 1, "free", 0, "rational")
 
 
 @pytest.mark.parametrize(

@@ -37,7 +37,7 @@ def test_normal_mode_matches_dense_oracle() -> None:
     """x_i = p_i + t_i n_i, t = argmin sum_i (n_i . (L(P + N t))_i)^2 + lam ||t||^2, dense."""
     g = _mesh()
     lam = 0.05
-    params = SmoothingParams(lam=lam, displacement="normal", weights="uniform")
+    params = SmoothingParams(lam=lam, displacement="normal", weights="uniform", order=1)
     X = smooth(g, params).points
     L, nb, _, _ = build_laplacian(g, params)
     N = normal_frames(g.points, nb.adjacency, 1)[:, :, 0]
@@ -88,7 +88,7 @@ def test_automatic_tau_follows_the_noise() -> None:
 def test_gcv_minimizes_the_dense_gcv_score() -> None:
     """tau='gcv': the chosen lambda's exact GCV score is within 5 % of the dense minimum."""
     g = _helix(120)
-    res = smooth(g, SmoothingParams(tau="gcv", weights="uniform"))
+    res = smooth(g, SmoothingParams(tau="gcv", weights="uniform", order=1))
     L, _, _, _ = build_laplacian(g, SmoothingParams(weights="uniform"))
     mu, V = np.linalg.eigh((L.T @ L).toarray())
     n, s = g.points.shape
