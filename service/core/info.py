@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 
@@ -40,32 +41,36 @@ def _bbox(P: NDArray[np.float64]) -> dict[str, list[float]]:
     return {"min": P.min(axis=0).tolist(), "max": P.max(axis=0).tolist()}
 
 
-def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, int]:
+def _phi0(
+    geometry: Geometry, params: SmoothingParams
+) -> tuple[float, float, int, NDArray[np.bool_], Any]:
     """``phi(0)`` (eq. 14, per component, fixed points as boundary values), the weight sum
-    ``sum omega_i^2`` over the points that can move, and the number of neighbour pairs."""
+    ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the fixed
+    points and the neighbourhood graph."""
     import scipy.sparse as sp
 
-    from service.core.pipeline import _phi_at_zero, build_laplacian
-    from service.core.solver import split_fixed
+    from service.core.elimination import laplacian_system, phi_at_zero
+    from service.core.operator import build_operator
+    from service.core.pipeline import free_set
+    from service.core.system import Deviation
 
-    L, nb, _, _ = build_laplacian(geometry, params)
-    adj = nb.adjacency
+    op = build_operator(geometry, params)
+    adj = op.neighborhoods.adjacency
     n_edges = int(sp.triu(adj + adj.T, k=1).nnz)
-    fixed = geometry.fixed_mask()
-    if params.fix_boundary:
-        fixed = fixed | nb.boundary
-    coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
-    fixed = fixed | ~coupled
+    fixed, _ = free_set(geometry, op, params, [])
     omega = geometry.omega()
-    L_F, L_C, free, fixed_idx = split_fixed(L, fixed)
-    if free.size == 0:
-        return 0.0, 0.0, n_edges
-    b = np.zeros((free.size, geometry.dim))
-    if fixed_idx.size:
-        b = -np.asarray(L_F.T @ (L_C @ geometry.points[fixed_idx]))
-    M = (L_F.T @ L_F).tocsc()
-    phi0, _ = _phi_at_zero(L, geometry.points, omega, fixed, free, M, b, params.solver)
-    return float(phi0), float(np.sum(omega[free] ** 2)), n_edges
+    if fixed.all():
+        return 0.0, 0.0, n_edges, fixed, adj
+    frame = op.frame.weighted(omega[~fixed])
+    system = laplacian_system(
+        op.L, frame.points(geometry.points), omega / frame.weight_scale, fixed
+    )
+    phi0 = system.phi0
+    if phi0 is None:
+        solver = "superlu" if params.solver == "superlu" else "cholmod"
+        phi0 = phi_at_zero(Deviation(system, solver=solver), op.L, fixed)
+    w2 = float(np.sum(omega[~fixed] ** 2))
+    return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
 
 
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
@@ -84,16 +89,34 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         ``n_points, dimension, kind, n_faces, n_edges, bbox {min, max}, mean_spacing, phi0,
         tau_range [0, phi0], rms_range [0, r], sigma_estimate, suggested_tau, suggested_rms``
         where ``r = sqrt(phi0 / sum omega_i^2)`` over the points that can move and ``n_edges``
-        counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs). The last
-        three are ``None`` when no estimate can be made.
+        counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs).
+        ``sigma_estimate`` is the noise level across the shape
+        (:func:`~service.core.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
+        rule would choose with ``params`` (:func:`~service.core.autotau.auto_tau`) and
+        ``suggested_rms`` the same budget as an RMS displacement; ``None`` when no estimate
+        can be made (too few or degenerate points) or when it falls outside ``(0, phi0)``.
     """
+    from service.core.autotau import auto_tau
+    from service.core.displacement import resolve_displacement
+
     if params is None:
         params = SmoothingParams.model_construct()
-    phi0, weight_sum, n_edges = _phi0(geometry, params)
+    params = resolve_displacement(params, geometry)
+    phi0, weight_sum, n_edges, fixed, adjacency = _phi0(geometry, params)
     r = float(np.sqrt(phi0 / weight_sum)) if weight_sum > 0 else 0.0
     sigma: float | None = None
     suggested_tau: float | None = None
     suggested_rms: float | None = None
+    if weight_sum > 0:
+        try:
+            auto = auto_tau(geometry, params, fixed, adjacency)
+        except ParameterError:  # no noise estimate
+            auto = None
+        if auto is not None:
+            sigma = auto.sigma
+            if 0 < auto.tau < phi0:
+                suggested_tau = auto.tau
+                suggested_rms = float(np.sqrt(auto.tau / weight_sum))
     return {
         "n_points": geometry.n,
         "dimension": geometry.dim,

@@ -9,7 +9,9 @@ internal frame of :mod:`.frame`.
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -17,10 +19,14 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core import cache
+from service.core.autotau import auto_tau, gcv_lambda
+from service.core.displacement import normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
 from service.core.errors import ParameterError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
+from service.core.guards import guard_warnings, noise_ratio, shape_checks
+from service.core.maxnorm import bound_deviation, clip_points
 from service.core.operator import (
     SmoothingOperator,
     build_laplacian,
@@ -56,6 +62,9 @@ class Run:
         self.tau: float | None = None
         self.frame = frame
         self.notes: list[str] = []
+        self.sigma: float | None = None  # core-quality: automatic tau, max-norm bound
+        self.tau_how: str | None = None
+        self.bound: dict[str, Any] | None = None
 
     def emit(self, stage: str, **kw: Any) -> None:
         if self.progress is not None:
@@ -115,12 +124,13 @@ def smooth(
         The factorization failed.
     """
     run = Run(progress)
+    params = resolve_displacement(params, geometry)
     run.emit("neighborhoods")
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, run.notes)
     run.frame = frame = op.frame.weighted(geometry.omega()[~fixed])
-    system = smoothing_system(geometry, op, fixed, frame, params)
-    run.tau = resolve_tau(params, geometry, fixed)
+    system, to_points = smoothing_system(geometry, op, fixed, frame, params)
+    run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
     if system.size == 0 or system.M.nnz == 0:
         return _unchanged(geometry, params, op, run, n_fixed)
@@ -132,13 +142,19 @@ def smooth(
         symbolic=cache.analysis_of,
     )
     dev.listener = run.evaluated
-    search = find_lambda(dev, op, fixed, params, run)
+    if params.tau_rule == "gcv":
+        search = _gcv(dev, geometry, params, fixed, run)
+    else:
+        search = find_lambda(dev, op, fixed, params, run)
     run.emit("postprocess", iteration=len(dev.history))
+    U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
-    X[~fixed] = frame.back(dev.solution(search.lam))
+    X[~fixed] = frame.back(to_points(U))
     volume_scale = None
     if params.preserve_volume:
         X, volume_scale = preserve_measure(geometry, X)
+    if params.max_deviation is not None:
+        X, _ = clip_points(geometry.points, X, params.max_deviation)
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
 
 
@@ -188,25 +204,42 @@ def smoothing_system(
     fixed: NDArray[np.bool_],
     frame: Frame,
     params: SmoothingParams,
-) -> SmoothingSystem:
-    """The system of the selected mode, in the internal frame (the mode dispatch point).
+) -> tuple[SmoothingSystem, Callable[[Array], Array]]:
+    """The system of the selected mode, in the internal frame (the mode dispatch point), and
+    the map from its solution ``U`` to the free points.
 
     ``free`` displacement: eq. (4) with the fixed points eliminated
-    (:func:`~service.core.elimination.laplacian_system`).
+    (:func:`~service.core.elimination.laplacian_system`); ``normal``: one unknown per normal
+    direction of each point (:func:`~service.core.displacement.normal_mode`).
     """
     P = frame.points(geometry.points)
     omega = geometry.omega() / frame.weight_scale
-    return laplacian_system(op.L, P, omega, fixed)
+    if params.displacement == "normal":
+        return normal_mode(geometry, op.L, op.neighborhoods, P, omega, fixed)
+    return laplacian_system(op.L, P, omega, fixed), lambda U: U
 
 
 def resolve_tau(
-    params: SmoothingParams, geometry: Geometry, fixed: NDArray[np.bool_]
+    params: SmoothingParams,
+    geometry: Geometry,
+    fixed: NDArray[np.bool_],
+    run: Run,
+    op: SmoothingOperator | None = None,
 ) -> float | None:
-    """The target ``tau`` in the input's frame: given, or ``rms^2 sum omega_i^2`` (free points)."""
-    if params.lam is not None:
+    """The target ``tau`` in the input's frame: given, ``rms^2 sum omega_i^2`` (free points),
+    or from the estimated noise (:func:`~service.core.autotau.auto_tau`); ``None`` for a given
+    lambda and for ``tau="gcv"`` (known once lambda is).
+    """
+    rule = params.tau_rule
+    if rule in ("lam", "gcv"):
         return None
-    if params.tau is not None:
-        return float(params.tau)
+    if rule == "auto":
+        adjacency = op.neighborhoods.adjacency if op is not None else None
+        auto = auto_tau(geometry, params, fixed, adjacency)
+        run.sigma, run.tau_how = auto.sigma, auto.rule
+        return auto.tau
+    if rule == "tau":
+        return float(params.tau)  # type: ignore[arg-type]
     assert params.rms is not None
     return float(params.rms**2 * np.sum(geometry.omega()[~fixed] ** 2))
 
@@ -234,12 +267,15 @@ def find_lambda(
     if params.lam is not None:
         lam = frame.lam_in(params.lam)
         return LambdaSearch(lam, dev(lam), True, list(dev.history))
+    if run.tau is not None and run.tau <= 0:  # automatic tau on noise-free input
+        lam = dev.system.lambda_ceiling(1e-300)
+        return LambdaSearch(lam, dev(lam), True, list(dev.history))
     assert run.tau is not None
     tau, system = run.tau / frame.phi_factor, dev.system
     phi0 = system.phi0
     bound = system.phi0_bound if system.phi0_bound is not None else np.inf
     if params.search == "rational" or (phi0 is None and tau >= bound):
-        phi0 = phi_at_zero(dev, op.L, fixed)
+        phi0 = _phi0(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
     if params.search == "rational":
@@ -283,9 +319,66 @@ def _check_range(
 ) -> None:
     """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``)."""
     assert run.frame is not None and run.tau is not None
-    phi0 = phi_at_zero(dev, op.L, fixed)
+    phi0 = _phi0(dev, op, fixed, params)
     if run.tau / run.frame.phi_factor >= phi0:
         raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
+
+
+def _phi0(
+    dev: Deviation, op: SmoothingOperator, fixed: NDArray[np.bool_], params: SmoothingParams
+) -> float:
+    """``phi(0)``: eqs. (13-14) for free displacement, the system's limit otherwise."""
+    return phi_at_zero(dev, op.L, fixed) if params.displacement == "free" else dev.phi0()
+
+
+def _gcv(
+    dev: Deviation, geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_], run: Run
+) -> LambdaSearch:
+    """``tau="gcv"``: lambda by generalized cross-validation (started at the Lanczos estimate
+    of the automatic tau's lambda, no factorization); tau is phi there."""
+    assert run.frame is not None
+    system = dev.system
+    lo = dev.floor
+    start = None
+    try:
+        tau0 = auto_tau(geometry, params, fixed).tau / run.frame.phi_factor
+        if tau0 > 0:
+            hi = max(system.lambda_ceiling(tau0), lo)
+            inv_d = 1.0 / np.sqrt(system.d2)[:, None]
+            start, _, _, _ = estimate_lambda(
+                lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * system.r, tau0, lo, hi,
+                order=dev.order,
+            )
+    except ParameterError:  # no noise estimate: start from the middle of the range
+        pass
+    hi = max(system.lambda_ceiling(1e-12 * float(np.sum(system.d2[:, None] * system.U0**2))), lo)
+    lam = gcv_lambda(dev, lo, hi, start if start else math.sqrt(lo * hi))
+    phi = dev(lam)
+    run.tau = phi * run.frame.phi_factor
+    run.tau_how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
+    return LambdaSearch(lam, phi, True, list(dev.history))
+
+
+def _bounded(
+    dev: Deviation, search: LambdaSearch, params: SmoothingParams, run: Run, group: int
+) -> tuple[Array, LambdaSearch]:
+    """The solution ``U``; with ``max_deviation``, reweighted until every point is within it."""
+    if params.max_deviation is None:
+        return dev.solution(search.lam), search
+    assert run.frame is not None
+    frame = run.frame
+    tau = None if run.tau is None or params.tau_rule == "gcv" else run.tau / frame.phi_factor
+    hi = dev.system.lambda_ceiling(tau) if tau else search.lam
+    res = bound_deviation(
+        dev, params.max_deviation / frame.scale, search.lam, group=group, tau=tau,
+        bracket=(dev.floor, max(hi, search.lam)), tolerance=params.tolerance,
+    )
+    run.notes.extend(res.warnings)
+    run.bound = {"max_deviation": params.max_deviation, "rounds": res.rounds,
+                 "clipped": res.clipped}
+    history = [*search.history, *res.history]
+    converged = tau is None or abs(res.phi - tau) <= params.tolerance * tau
+    return dev.system.U0 + res.E, LambdaSearch(res.lam, res.phi, converged, history)
 
 
 def _fro(M: sp.spmatrix) -> float:
@@ -335,6 +428,9 @@ def diagnostics(
             solve=stats.solve,
             matvec=stats.matvec,
         )
+    checks = shape_checks(geometry, X)
+    ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
+    run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
     spectrum = None
@@ -366,6 +462,12 @@ def diagnostics(
         volume_scale=volume_scale,
         warnings=[*run.notes, *(stats.warnings if stats else [])],
         spectrum=spectrum,
+        displacement=params.displacement,
+        tau_rule=params.tau_rule,
+        sigma_estimate=run.sigma,
+        tau_how=run.tau_how,
+        checks=checks.to_dict(),
+        bound=run.bound,
     )
 
 

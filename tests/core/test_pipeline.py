@@ -66,7 +66,7 @@ def _cases() -> list[tuple[str, Geometry, dict]]:
 def test_matches_dense_least_squares(name: str, geometry: Geometry, kw: dict) -> None:
     """X(lambda) equals the dense least-squares solution of the stacked system (eq. 16)."""
     lam = 0.37
-    params = SmoothingParams(lam=lam, **kw)
+    params = SmoothingParams(lam=lam, preset="report", **kw)  # eq. (4) itself
     res = smooth(geometry, params)
     L = build_laplacian(geometry, params)[0].toarray()
     P, omega = geometry.points, geometry.omega()
@@ -149,7 +149,7 @@ def test_tau_is_met_within_tolerance(name: str, geometry: Geometry) -> None:
         seen: list[tuple[int, float, float]] = []
         res = smooth(
             geometry,
-            SmoothingParams(tau=tau, tolerance=tol, neighborhood=nbk),
+            SmoothingParams(tau=tau, tolerance=tol, neighborhood=nbk, preset="report"),
             progress=lambda e, seen=seen: seen.append((e.iteration, e.lam, e.phi))
             if e.stage == "search"
             else None,
@@ -256,7 +256,7 @@ def test_reproduction_on_planar_point_cloud() -> None:
     Q = np.c_[x.ravel(), y.ravel()] + rng.uniform(-0.3, 0.3, (400, 2))
     P = np.c_[Q, np.zeros(400)] @ random_rotation(3, seed=9)
     border = np.flatnonzero((Q.min(1) < 2) | (Q.max(1) > 17))
-    res = smooth(Geometry(P, fixed=border), SmoothingParams(lam=1e-3, k=12))
+    res = smooth(Geometry(P, fixed=border), SmoothingParams(lam=1e-3, k=12, preset="report"))
     assert np.abs(res.points - P).max() < 1e-9
     assert res.weights == "mean-value"
 
