@@ -251,6 +251,10 @@ def _from_json(req: IngestRequest) -> ParsedRequest:
             f"unknown member(s): {', '.join(unknown)}; expected "
             "geometry, params, weld, webhook_url",
         )
+    if "params" in obj and not isinstance(obj["params"], dict):
+        raise _invalid(
+            "params", "params must be a JSON object", "invalid-parameters", "Invalid parameters"
+        )
     params = _params(obj.get("params"), req.params_required)
     _check_param_bounds(params, req.limits)
     weld, url = obj.get("weld", False), obj.get("webhook_url")

@@ -265,6 +265,15 @@ class SmoothingParams(BaseModel):
             )
         return number
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _booleans_are_not_numbers(cls, value: Any, info: Any) -> Any:
+        """``true`` is not ``1`` (pydantic's lax mode would take it for an int or a float)."""
+        field = cls.model_fields.get(info.field_name)
+        if isinstance(value, bool) and field is not None and field.annotation is not bool:
+            raise PydanticCustomError("bool_not_number", "Input should be a number, not a boolean")
+        return value
+
     @model_validator(mode="before")
     @classmethod
     def _apply_preset(cls, data: Any) -> Any:

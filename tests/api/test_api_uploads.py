@@ -71,6 +71,7 @@ def test_format_from_part_type_or_content(
         ('{"tau": ' + "[" * 5000 + "]" * 5000 + "}", "params"),
         ('{"tau": 1e400}', "params.tau"),
         ('{"tau": NaN}', "params.tau"),
+        ('{"lam": 1, "max_iterations": true}', "params.max_iterations"),  # true is not 1
     ],
 )
 def test_hostile_params_are_422(client: httpx.Client, params: str, field: str) -> None:

@@ -48,6 +48,18 @@ _EXAMPLE = (
 )
 
 
+#: One event of the stream (the schema each event follows; ``data`` is JSON text).
+_EVENT_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "properties": {
+        "event": {"type": "string", "enum": ["progress", "status"]},
+        "data": {"type": "string", "description": "JSON: a progress object or the job."},
+        "id": {"type": "string"},
+        "retry": {"type": "integer"},
+    },
+}
+
+
 def _job_json(record: JobRecord) -> dict[str, Any]:
     """The job exactly as ``GET /v1/jobs/{id}`` renders it."""
     return record.public_dict()
@@ -128,7 +140,7 @@ def _last_id(value: str | None) -> int:
     responses={
         200: {
             "description": "The event stream (ends after the final status).",
-            "content": {"text/event-stream": {"schema": {"type": "string"}, "example": _EXAMPLE}},
+            "content": {"text/event-stream": {"schema": _EVENT_SCHEMA, "example": _EXAMPLE}},
         },
         **problem_responses(404, 503),
     },
