@@ -5,10 +5,10 @@ Smoothing parameters are :class:`service.core.params.SmoothingParams`, reused un
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
-from pydantic.json_schema import JsonDict
+from pydantic.json_schema import WithJsonSchema
 
 from service.core.params import SmoothingParams
 from service.io.registry import FORMATS
@@ -271,12 +271,12 @@ class JobProgress(BaseModel):
                     "stage": "search",
                     "iteration": 3,
                     "lambda": 0.011,
-                    "phi": 0.00019,
-                    "tau": 0.0002,
-                    "relative_error": 0.05,
-                    "percent": 80.0,
-                    "eta_seconds": 0.4,
-                    "elapsed_seconds": 1.6,
+                    "phi": 0.47,
+                    "tau": 0.5,
+                    "relative_error": 0.06,
+                    "percent": 71.5,
+                    "eta_seconds": 2.4,
+                    "elapsed_seconds": 6.1,
                 }
             ]
         },
@@ -316,7 +316,8 @@ class JobLinks(BaseModel):
     )
 
 
-_TIME: JsonDict = {"format": "date-time"}
+#: An ISO 8601 UTC time as the queue writes it (``2026-01-01T12:00:00Z``), passed through as is.
+IsoTime = Annotated[str, WithJsonSchema({"type": "string", "format": "date-time"})]
 _JOB_EXAMPLE: dict[str, Any] = {
     "id": "3f2a9c0d4b5e6f708192a3b4c5d6e7f8",
     "status": "running",
@@ -332,9 +333,17 @@ _JOB_EXAMPLE: dict[str, Any] = {
     "attempts": 1,
     "max_attempts": 3,
     "run_seconds": None,
-    "progress": {"stage": "search", "iteration": 3, "lambda": 0.011, "phi": 0.00019,
-                 "tau": 0.0002, "relative_error": 0.05, "percent": 80.0, "eta_seconds": 0.4,
-                 "elapsed_seconds": 1.6},
+    "progress": {
+        "stage": "search",
+        "iteration": 3,
+        "lambda": 0.011,
+        "phi": 0.00019,
+        "tau": 0.0002,
+        "relative_error": 0.05,
+        "percent": 80.0,
+        "eta_seconds": 0.4,
+        "elapsed_seconds": 1.6,
+    },
     "report": None,
     "error": None,
     "links": {
@@ -343,7 +352,7 @@ _JOB_EXAMPLE: dict[str, Any] = {
         "report": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/report",
         "events": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/events",
     },
-}  # fmt: skip
+}
 
 
 class Job(BaseModel):
@@ -358,14 +367,12 @@ class Job(BaseModel):
     params: dict[str, Any] = Field(description="Smoothing parameters.")
     weld: bool = Field(default=False, description="Coincident vertices are welded on reading.")
     webhook_url: str | None = Field(default=None, description="Where the final job is POSTed.")
-    created_at: str = Field(description="When the job was submitted (ISO 8601 UTC).",
-                            json_schema_extra=_TIME)  # fmt: skip
-    started_at: str | None = Field(default=None, description="When its latest run started.",
-                                   json_schema_extra=_TIME)  # fmt: skip
-    finished_at: str | None = Field(default=None, description="When it ended.",
-                                    json_schema_extra=_TIME)  # fmt: skip
-    expires_at: str | None = Field(default=None, description="When a finished job and its "
-                                   "files are purged.", json_schema_extra=_TIME)  # fmt: skip
+    created_at: IsoTime = Field(description="When the job was submitted (ISO 8601 UTC).")
+    started_at: IsoTime | None = Field(default=None, description="When its latest run started.")
+    finished_at: IsoTime | None = Field(default=None, description="When it ended.")
+    expires_at: IsoTime | None = Field(
+        default=None, description="When a finished job and its files are purged."
+    )
     attempts: int = Field(default=0, description="Runs started (interrupted runs are retried).")
     max_attempts: int = Field(default=3, description="Runs allowed before it is given up.")
     run_seconds: float | None = Field(default=None, description="Wall time of the successful run.")
