@@ -311,6 +311,7 @@ class JobLinks(BaseModel):
     )
     events: str | None = Field(
         default=None,
+        exclude_if=lambda value: value is None,  # absent where the server has no stream
         description="GET: server-sent events (progress, status), where the server streams them.",
         examples=["/v1/jobs/3f2a9c/events"],
     )
