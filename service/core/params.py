@@ -268,9 +268,13 @@ class SmoothingParams(BaseModel):
     @field_validator("*", mode="before")
     @classmethod
     def _booleans_are_not_numbers(cls, value: Any, info: Any) -> Any:
-        """``true`` is not ``1`` (pydantic's lax mode would take it for an int or a float)."""
+        """``true`` is not ``1`` and ``0`` is not ``false`` (pydantic's lax mode takes both)."""
         field = cls.model_fields.get(info.field_name)
-        if isinstance(value, bool) and field is not None and field.annotation is not bool:
+        if field is None:
+            return value
+        if field.annotation is bool and not isinstance(value, bool):
+            raise PydanticCustomError("bool_type", "Input should be a valid boolean")
+        if isinstance(value, bool) and field.annotation is not bool:
             raise PydanticCustomError("bool_not_number", "Input should be a number, not a boolean")
         return value
 

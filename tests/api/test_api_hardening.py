@@ -20,15 +20,24 @@ PTS, FACES = noisy_sphere(1)
 
 
 def _raw(port: int, payload: bytes, timeout: float = 10.0) -> bytes:
+    """Send ``payload``; read one response (head and ``Content-Length`` bytes of body)."""
     with socket.create_connection(("127.0.0.1", port), timeout=timeout) as sock:
         sock.sendall(payload)
-        chunks = []
-        try:
-            while chunk := sock.recv(65536):
-                chunks.append(chunk)
-        except TimeoutError:
-            pass
-    return b"".join(chunks)
+        data = b""
+        while b"\r\n\r\n" not in data and (chunk := sock.recv(65536)):
+            data += chunk
+        head, _, body = data.partition(b"\r\n\r\n")
+        length = next(
+            (
+                int(line.split(b":")[1])
+                for line in head.lower().split(b"\r\n")
+                if line.startswith(b"content-length:")
+            ),
+            0,
+        )
+        while len(body) < length and (chunk := sock.recv(65536)):
+            body += chunk
+    return head + b"\r\n\r\n" + body
 
 
 # --------------------------------------------------------------------------- Host, Origin, CORS
