@@ -269,7 +269,7 @@ def test_query_validation_is_422_problem(client: httpx.Client) -> None:
     job = client.post(
         "/v1/jobs", json={"geometry": json_geometry(PTS, FACES), "params": {"tau": 0.05}}
     ).json()
-    _problem(client.get(f"/v1/jobs/{job['id']}/result", params={"format": "dxf"}), 422, "format")
+    _problem(client.get(f"/v1/jobs/{job['id']}/result", params={"format": "svg"}), 422, "format")
 
 
 def test_server_survives_all_of_the_above(client: httpx.Client) -> None:
