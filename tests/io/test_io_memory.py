@@ -50,7 +50,7 @@ def test_crafted_binary_ply_of_empty_lists() -> None:
 
 
 def test_crafted_ascii_ply_of_empty_lists() -> None:
-    k = 10_000_000
+    k = 16_000_000
     data = _ply_head("ascii", k) + b"0 0 0\n" * 3 + b"0\n" * k
     assert 1 + _added_peak(data, "ply") <= 3.0
 
