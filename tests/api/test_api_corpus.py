@@ -11,7 +11,7 @@ from typing import Any
 import httpx
 import pytest
 from api_corpus import corpus
-from api_helpers import wait_done
+from api_helpers import ROOT, wait_done
 
 PROBLEM = "application/problem+json"
 CORPUS = corpus()
@@ -61,3 +61,23 @@ def test_corpus_through_upload_and_sync(
             assert job["status"] == "succeeded", job
             result = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "json"})
             assert result.status_code == 200 and _finite(result.json())
+
+
+# --------------------------------------------------------------------------- the io corpus
+
+IO_CORPUS = ROOT / "tests" / "corpus"
+IO_FILES = json.loads((IO_CORPUS / "manifest.json").read_text()) if IO_CORPUS.is_dir() else []
+
+
+@pytest.mark.parametrize("entry", IO_FILES, ids=[e["file"] for e in IO_FILES])
+def test_io_corpus_through_upload_and_sync(client: httpx.Client, entry: dict[str, Any]) -> None:
+    """Every malformed file of the io helper's corpus: a 4xx with the reader's problem code."""
+    data = (IO_CORPUS / "files" / entry["file"]).read_bytes()
+    files = {"file": (entry["file"], data)}
+    for path in ("/v1/smooth", "/v1/jobs"):
+        r = client.post(path, files=files, data={"params": PARAMS})
+        assert 400 <= r.status_code < 500, (path, r.status_code, r.text[:300])
+        assert r.headers["content-type"] == PROBLEM
+        body = r.json()
+        assert body["code"] == entry["code"] and body.get("field"), (path, body)
+        assert "NaN" not in r.text and "Infinity" not in r.text
