@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.json_schema import WithJsonSchema
 
+from service.api.examples import GEOMETRY_EXAMPLE, JOB_EXAMPLE, REPORT_EXAMPLE
 from service.core.params import SmoothingParams
 from service.io.registry import FORMATS
 
@@ -39,33 +40,6 @@ if TYPE_CHECKING:
     OutputFormat = str
 else:
     OutputFormat = Literal[tuple(FORMATS)]
-
-_GEOMETRY_EXAMPLE: dict[str, Any] = {
-    "points": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [1.0, 1.0, -0.1], [0.0, 1.0, 0.05]],
-    "faces": [[0, 1, 2], [0, 2, 3]],
-}
-_REPORT_EXAMPLE: dict[str, Any] = {
-    "lambda": 0.0123,
-    "phi": 0.4998,
-    "tau": 0.5,
-    "relative_error": 0.0004,
-    "converged": True,
-    "iterations": 6,
-    "factorizations": 6,
-    "history": [{"lambda": 0.01, "phi": 0.41}, {"lambda": 0.0123, "phi": 0.4998}],
-    "n_points": 2930,
-    "dimension": 3,
-    "kind": "mesh",
-    "laplacian": "normalized",
-    "weights": "mean-value",
-    "n_fixed": 0,
-    "rms_deviation": 0.013,
-    "max_deviation": 0.041,
-    "volume_scale": None,
-    "timings": {"laplacian": 0.004, "analysis": 0.002, "solve": 0.011, "total": 0.03},
-    "solver": "cholmod",
-    "warnings": [],
-}
 
 
 class FieldError(BaseModel):
@@ -149,7 +123,6 @@ class JobProblem(BaseModel):
 # fields listed in COMPONENT_REFS point at the component ``GeometryJson`` (io's
 # ``GEOMETRY_JSON_SCHEMA``) and ``Report`` (added by the app's openapi()).
 GeometryJsonDict = dict[str, Any]
-GEOMETRY_EXAMPLE = _GEOMETRY_EXAMPLE
 
 
 class SmoothJsonRequest(BaseModel):
@@ -157,7 +130,7 @@ class SmoothJsonRequest(BaseModel):
 
     model_config = ConfigDict(
         extra="forbid",
-        json_schema_extra={"examples": [{"geometry": _GEOMETRY_EXAMPLE, "params": {"tau": 0.01}}]},
+        json_schema_extra={"examples": [{"geometry": GEOMETRY_EXAMPLE, "params": {"tau": 0.01}}]},
     )
 
     geometry: GeometryJsonDict = Field(
@@ -185,7 +158,7 @@ class Report(BaseModel):
     """Diagnostics of a smoothing run: exactly ``SmoothResult.report()`` of ``service.core``."""
 
     model_config = ConfigDict(
-        extra="allow", populate_by_name=True, json_schema_extra={"examples": [_REPORT_EXAMPLE]}
+        extra="allow", populate_by_name=True, json_schema_extra={"examples": [REPORT_EXAMPLE]}
     )
 
     lam: float = Field(alias="lambda", description="The lambda used.")
@@ -319,47 +292,12 @@ class JobLinks(BaseModel):
 
 #: An ISO 8601 UTC time as the queue writes it (``2026-01-01T12:00:00Z``), passed through as is.
 IsoTime = Annotated[str, WithJsonSchema({"type": "string", "format": "date-time"})]
-_JOB_EXAMPLE: dict[str, Any] = {
-    "id": "3f2a9c0d4b5e6f708192a3b4c5d6e7f8",
-    "status": "running",
-    "format": "ply",
-    "filename": "bunny.ply",
-    "params": {"tau": 0.0002},
-    "weld": False,
-    "webhook_url": None,
-    "created_at": "2026-01-01T12:00:00Z",
-    "started_at": "2026-01-01T12:00:01Z",
-    "finished_at": None,
-    "expires_at": None,
-    "attempts": 1,
-    "max_attempts": 3,
-    "run_seconds": None,
-    "progress": {
-        "stage": "search",
-        "iteration": 3,
-        "lambda": 0.011,
-        "phi": 0.00019,
-        "tau": 0.0002,
-        "relative_error": 0.05,
-        "percent": 80.0,
-        "eta_seconds": 0.4,
-        "elapsed_seconds": 1.6,
-    },
-    "report": None,
-    "error": None,
-    "links": {
-        "status": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8",
-        "result": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/result",
-        "report": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/report",
-        "events": "/v1/jobs/3f2a9c0d4b5e6f708192a3b4c5d6e7f8/events",
-    },
-}
 
 
 class Job(BaseModel):
     """A smoothing job: exactly ``JobRecord.public_dict()`` of the queue."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [_JOB_EXAMPLE]})
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [JOB_EXAMPLE]})
 
     id: str = Field(description="Job id.")
     status: JobStatusName = Field(description="queued, running, succeeded, failed or cancelled.")
@@ -409,7 +347,7 @@ class JobList(BaseModel):
                 {
                     "items": [
                         {
-                            **_JOB_EXAMPLE,
+                            **JOB_EXAMPLE,
                             "status": "succeeded",
                             "progress": None,
                             "finished_at": "2026-01-01T12:00:03Z",
@@ -436,7 +374,7 @@ class SmoothJsonResponse(BaseModel):
     """Result of ``POST /v1/smooth?format=json``: the smoothed geometry and its diagnostics."""
 
     model_config = ConfigDict(
-        json_schema_extra={"examples": [{"geometry": _GEOMETRY_EXAMPLE, "report": _REPORT_EXAMPLE}]}
+        json_schema_extra={"examples": [{"geometry": GEOMETRY_EXAMPLE, "report": REPORT_EXAMPLE}]}
     )
 
     geometry: GeometryJsonDict = Field(
