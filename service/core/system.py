@@ -220,9 +220,12 @@ class Deviation:
         """Root of ``phi = tau`` in ``[lo, hi]`` from the factorization made at ``lam``.
 
         Shift-invert Lanczos with the factor of ``K(lam)`` (one solve per step,
-        :func:`~service.core.krylov.shift_invert`) until the model's root is stable to 1e-7;
-        the Galerkin solution at that root seeds the next solve. ``None`` when the solver holds
-        no factorization at ``lam`` (matrix-free path).
+        :func:`~service.core.krylov.shift_invert`) until the model's root lies inside the
+        bracket and is stable to 1e-7. Below ``lam`` the model's Gauss rule underestimates
+        ``phi`` (every derivative of ``theta^2 / (1 + delta theta)^2`` is positive for
+        ``delta < 0``), so an unconverged root is still a lower bound of ``lambda*``. The
+        Galerkin vectors at the root seed the next solves. ``None`` without a factorization
+        at ``lam`` (matrix-free path).
         """
         solver = self.solver
         if not isinstance(solver, Direct) or solver.lam_factored != lam:
@@ -235,15 +238,34 @@ class Deviation:
             if len(model.basis) < 2:
                 return False
             roots.append(log_bisect(model.phi, tau, lo, hi))
-            return len(roots) >= 2 and abs(roots[-1] - roots[-2]) <= 1e-7 * roots[-1]
+            inside = lo < roots[-1] < hi
+            return inside and len(roots) >= 2 and abs(roots[-1] - roots[-2]) <= 1e-7 * roots[-1]
 
         model, _ = shift_invert(
-            lambda V: d * solver.apply_factor(d * V), s.r / d, lam, self.order, 16, stop
+            lambda V: d * solver.apply_factor(d * V), s.r / d, lam, self.order, 20, stop
         )
         if not roots:
             return None
-        self._warm["U1"] = s.U0 + model.first_solution(roots[-1]) / d
+        self._seed(model, roots[-1], d)
         return roots[-1]
+
+    def _seed(self, model: ShiftInvert, lam: float, d: Array) -> None:
+        """Warm starts at ``lam`` for every solve of :meth:`deviation` and :meth:`derivative`.
+
+        In the basis of ``S`` (``theta = 1 / (mu + lambda_0)``): ``D E_1`` is
+        ``theta / (1 + delta theta)`` and ``D Z_{j+1} = (M_t + lambda)^-1 D E_j`` is
+        ``(1 - lambda_0 theta)^(j-1) theta^2 / (1 + delta theta)^(j+1)`` applied to ``c``.
+        """
+        lam0 = model.lam0
+        U0 = self.system.U0
+        self._warm["U1"] = U0 + model.vector(lam, lambda t, dl: t / (1 + dl * t)) / d
+        for j in range(1, self.order + 1):
+            role = f"Z{j + 1}" if j < self.order else "dphi"
+
+            def h(t: Array, dl: float, j: int = j) -> Array:
+                return (1 - lam0 * t) ** (j - 1) * t**2 / (1 + dl * t) ** (j + 1)
+
+            self._warm[role] = model.vector(lam, h) / d
 
     def reweighted(self, d2: Array) -> Deviation:
         """The same system with ``D^2 = diag(d2)``: same pattern, so no new analysis."""
