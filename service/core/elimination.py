@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
-from service.core.solver import split_fixed
+from service.core.solver import Gram, split_fixed
 from service.core.system import Deviation, SmoothingSystem
 
 __all__ = ["laplacian_system", "phi_at_zero"]
@@ -41,8 +41,7 @@ def laplacian_system(
     b = np.zeros((free.size, P.shape[1]))
     if fixed_idx.size and free.size:
         b = -np.asarray(L_F.T @ (L_C @ P[fixed_idx]))
-    M = (L_F.T @ L_F).tocsr()
-    M.eliminate_zeros()
+    M = Gram(L_F)
     labels, has_fixed = _components(L, fixed, free)
     d2 = omega[free] ** 2
     phi0 = bound = None
@@ -94,7 +93,8 @@ def phi_at_zero(dev: Deviation, L: sp.csr_matrix, fixed: NDArray[np.bool_]) -> f
     E0 = np.zeros_like(s.U0)
     E0[~sub] = _centroid_offsets(lab[~sub], s.d2[~sub], s.U0[~sub])
     idx = np.flatnonzero(sub)
-    part = SmoothingSystem(s.M[idx][:, idx], s.d2[idx], s.b[idx], s.U0[idx])
+    M = s.M.columns(idx) if isinstance(s.M, Gram) else s.M[idx][:, idx]
+    part = SmoothingSystem(M, s.d2[idx], s.b[idx], s.U0[idx])
     name: Any = dev.solver.name
     sub_dev = Deviation(part, solver=name)
     E0[idx] = sub_dev.deviation(sub_dev.floor)

@@ -265,7 +265,7 @@ def _polar_hull_fans(
     order = np.full((n, m + 1), -1, dtype=np.int64)
     order[:, 0] = np.where(has_any, start, -1)
     active = has_any.copy()
-    for step in range(1, m + 2):
+    for step in range(1, m + 1):  # at most m + 1 hull vertices: slots 0..m
         if not active.any():
             break
         ar = rows[active]

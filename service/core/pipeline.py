@@ -122,7 +122,7 @@ def smooth(
     system = smoothing_system(geometry, op, fixed, frame, params)
     run.tau = resolve_tau(params, geometry, fixed)
     run.emit("analysis")
-    if system.size == 0 or system.M.nnz == 0:
+    if system.empty:
         return _unchanged(geometry, params, op, run, n_fixed)
     dev = Deviation(
         system,
@@ -244,7 +244,7 @@ def find_lambda(
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
     if params.search == "rational":
         assert phi0 is not None
-        lam0 = initial_lambda(_fro(system.M), float(np.linalg.norm(system.d2)))
+        lam0 = initial_lambda(_fro(system.explicit()), float(np.linalg.norm(system.d2)))
         return search_lambda(dev, tau, phi0, lam0, params.tolerance, params.max_iterations)
     lo, hi = dev.floor, max(system.lambda_ceiling(tau), dev.floor)
     inv_d = 1.0 / np.sqrt(system.d2)[:, None]

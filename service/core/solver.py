@@ -32,6 +32,7 @@ from service.core.krylov import pcg
 
 __all__ = [
     "Direct",
+    "Gram",
     "LinearSolver",
     "MatrixFree",
     "SolverStats",
@@ -90,6 +91,57 @@ def split_fixed(
     return rows[:, free].tocsc(), rows[:, fixed_idx].tocsc(), free, fixed_idx
 
 
+class Gram:
+    """``M = A^T A`` kept as ``A``: products cost ``2 nnz(A)`` and ``M`` is formed on demand.
+
+    With ``k`` neighbours per row ``A^T A`` has about ``k^2`` entries per row (k-NN with
+    ``k = 64``: ~4000), so the matrix-free path never forms it.
+
+    Parameters
+    ----------
+    A : sparse matrix, shape (p, m)
+    """
+
+    def __init__(self, A: sp.spmatrix) -> None:
+        self.A = sp.csr_matrix(A)
+        self.AT = self.A.T.tocsr()
+        self.shape = (self.A.shape[1], self.A.shape[1])
+        self._M: sp.csr_matrix | None = None
+
+    def __matmul__(self, X: Array) -> Array:
+        return np.asarray(self.AT @ (self.A @ X))
+
+    def diagonal(self) -> Array:
+        """``diag(A^T A)``: squared column norms of ``A``."""
+        return np.asarray(self.A.multiply(self.A).sum(axis=0)).ravel()
+
+    def nnz_bound(self) -> int:
+        """Upper bound of ``nnz(A^T A)``: the sum of squared row counts of ``A``."""
+        return int(np.sum(np.diff(self.A.indptr).astype(np.int64) ** 2))
+
+    def abs_row_sums(self, scale: Array) -> Array:
+        """Row sums of ``|S A^T A S|`` bounded by ``S |A|^T |A| S 1`` (Gershgorin)."""
+        absA = abs(self.A)
+        return np.asarray(scale * (absA.T @ (absA @ scale))).ravel()
+
+    def columns(self, idx: NDArray[np.int64]) -> Gram:
+        """``M[idx][:, idx] = A[:, idx]^T A[:, idx]``."""
+        return Gram(self.A[:, idx])
+
+    def tocsr(self) -> sp.csr_matrix:
+        """``A^T A`` formed (cached)."""
+        if self._M is None:
+            M = (self.AT @ self.A).tocsr()
+            M.eliminate_zeros()
+            self._M = M
+        return self._M
+
+
+def explicit(M: sp.spmatrix | Gram) -> sp.csr_matrix:
+    """``M`` as a CSR matrix (forms a :class:`Gram`)."""
+    return M.tocsr() if isinstance(M, Gram) else sp.csr_matrix(M)
+
+
 class LinearSolver:
     """Common part: ``M`` (CSR for products), ``d2``, work counters.
 
@@ -104,8 +156,10 @@ class LinearSolver:
     name: str = ""
     path: Literal["direct", "matrix-free"] = "direct"
 
-    def __init__(self, M: sp.spmatrix, d2: Array, stats: SolverStats | None = None) -> None:
-        self.M = sp.csr_matrix(M)
+    def __init__(
+        self, M: sp.spmatrix | Gram, d2: Array, stats: SolverStats | None = None
+    ) -> None:
+        self.M = M if isinstance(M, Gram) else sp.csr_matrix(M)
         self.d2 = np.asarray(d2, dtype=np.float64)
         self.stats = stats if stats is not None else SolverStats()
 
@@ -168,7 +222,7 @@ class MatrixFree(LinearSolver):
     name = "cg"
     path = "matrix-free"
 
-    def __init__(self, M: sp.spmatrix, d2: Array, maxiter: int = 20000) -> None:
+    def __init__(self, M: sp.spmatrix | Gram, d2: Array, maxiter: int = 20000) -> None:
         super().__init__(M, d2)
         self.diag = self.M.diagonal()
         self.maxiter = maxiter
@@ -206,13 +260,14 @@ class Direct(LinearSolver):
 
     def __init__(
         self,
-        M: sp.spmatrix,
+        M: sp.spmatrix | Gram,
         d2: Array,
         method: Literal["cholmod", "superlu"] = "cholmod",
         *,
         reuse: bool = True,
         symbolic: Any = None,
     ) -> None:
+        M = explicit(M)
         super().__init__(M, d2)
         if method == "cholmod" and _cholmod is None:
             self.stats.warnings.append(

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from service.core.errors import ParameterError
 from service.core.krylov import ShiftInvert, log_bisect, shift_invert
-from service.core.solver import Direct, LinearSolver, MatrixFree, SolverStats
+from service.core.solver import Direct, Gram, LinearSolver, MatrixFree, SolverStats, explicit
 
 __all__ = ["LAMBDA_FLOOR", "Deviation", "SmoothingSystem", "make_solver"]
 
@@ -54,8 +54,9 @@ class SmoothingSystem:
 
     Parameters
     ----------
-    M : sparse matrix, shape (m, m)
-        ``A^T A`` (symmetric positive semi-definite).
+    M : sparse matrix or Gram, shape (m, m)
+        ``A^T A`` (symmetric positive semi-definite), formed or kept as ``A``
+        (:class:`~service.core.solver.Gram`).
     d2 : ndarray, shape (m,)
         Positive diagonal of ``D^2``.
     b : ndarray, shape (m, c)
@@ -68,7 +69,7 @@ class SmoothingSystem:
         An upper bound of ``phi(0)`` when known (a ``tau`` above it is out of range).
     """
 
-    M: sp.spmatrix
+    M: sp.spmatrix | Gram
     d2: Array
     b: Array
     U0: Array
@@ -77,7 +78,7 @@ class SmoothingSystem:
     r: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        M = sp.csr_matrix(self.M)
+        M = self.M if isinstance(self.M, Gram) else sp.csr_matrix(self.M)
         object.__setattr__(self, "M", M)
         object.__setattr__(self, "d2", np.asarray(self.d2, dtype=np.float64))
         object.__setattr__(self, "r", np.asarray(self.b - M @ self.U0))
@@ -88,9 +89,26 @@ class SmoothingSystem:
 
     def mu_bound(self) -> float:
         """Gershgorin bound of the largest eigenvalue of ``M_t = D^-1 M D^-1``."""
+        if not self.size:
+            return 0.0
         inv = 1.0 / np.sqrt(self.d2)
+        if isinstance(self.M, Gram):
+            return float(self.M.abs_row_sums(inv).max())
         Mt = sp.diags(inv) @ abs(self.M) @ sp.diags(inv)
-        return float(np.asarray(Mt.sum(axis=1)).max()) if self.size else 0.0
+        return float(np.asarray(Mt.sum(axis=1)).max())
+
+    @property
+    def empty(self) -> bool:
+        """No unknown, or ``M = 0`` (nothing can move)."""
+        if self.size == 0:
+            return True
+        if isinstance(self.M, Gram):
+            return self.M.A.nnz == 0 or not np.any(self.M.A.data)
+        return self.M.nnz == 0
+
+    def explicit(self) -> sp.csr_matrix:
+        """``M`` formed."""
+        return explicit(self.M)
 
     def lambda_floor(self) -> float:
         """Smallest lambda whose solution is numerically meaningful (:data:`LAMBDA_FLOOR`)."""
