@@ -217,12 +217,37 @@ def cloud_knn_neighborhoods(points: NDArray[np.float64], k: int) -> Neighborhood
 def _local_frames(
     points: NDArray[np.float64], idx: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Principal directions and variances of each point with its neighbours (least squares)."""
+    """Two largest principal variances and directions of each point with its neighbours.
+
+    From the ``s x s`` covariance when ``s <= k + 1``, else from the ``(k+1) x (k+1)`` Gram
+    matrix of the centred neighbourhood (same nonzero spectrum): the cost stays linear in the
+    dimension ``s``.
+
+    Returns
+    -------
+    evals : ndarray, shape (n, 2)
+        Decreasing.
+    dirs : ndarray, shape (n, s, 2)
+        Unit directions as columns.
+    """
     nbh = np.concatenate([points[:, None, :], points[idx]], axis=1)  # (n, k+1, s)
     centered = nbh - nbh.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centered, centered) / nbh.shape[1]
-    evals, evecs = np.linalg.eigh(cov)  # ascending
-    return evals[:, ::-1], evecs[:, :, ::-1]
+    size, s = nbh.shape[1], nbh.shape[2]
+    if s <= size:
+        cov = np.einsum("nki,nkj->nij", centered, centered) / size
+        evals, evecs = np.linalg.eigh(cov)  # ascending
+        top = evecs[:, :, ::-1][:, :, :2]
+        vals = evals[:, ::-1][:, :2]
+    else:
+        gram = np.einsum("nki,nli->nkl", centered, centered)
+        evals, U = np.linalg.eigh(gram)
+        vals = evals[:, ::-1][:, :2] / size
+        dirs = np.einsum("nki,nkj->nij", centered, U[:, :, ::-1][:, :, :2])
+        top = dirs / np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+    if s == 1:
+        vals = np.concatenate([vals, np.zeros((vals.shape[0], 1))], axis=1)
+        top = np.concatenate([top, np.zeros_like(top)], axis=2)
+    return vals, top
 
 
 def _polar_hull_fans(
