@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
+from service.core._arrays import unique_keys
 from service.core.solver import Gram, split_fixed
 from service.core.system import Deviation, SmoothingSystem
 
@@ -70,7 +71,7 @@ def _centroid_offsets(lab: NDArray[np.int64], w2: Array, U: Array) -> Array:
     """``P_bar - P`` per component: the limit ``lambda -> 0`` of the deviation (eq. 14)."""
     if lab.size == 0:
         return np.zeros_like(U)
-    _, lab = np.unique(lab, return_inverse=True)
+    _, _, _, lab = unique_keys(lab)
     sw = np.bincount(lab, weights=w2)
     cen = np.stack([np.bincount(lab, weights=w2 * U[:, c]) for c in range(U.shape[1])], axis=1)
     return cen[lab] / np.maximum(sw, 1e-300)[lab, None] - U

@@ -28,6 +28,7 @@ from service.core.operator import (
     operator_key,
 )
 from service.core.params import SmoothingParams
+from service.core.polyfilter import DEGREE, SincFilter, sinc_deviation, windowed_sinc
 from service.core.progress import ProgressCallback, ProgressEvent
 from service.core.resources import choose_solver
 from service.core.result import SmoothResult, Spectrum
@@ -124,6 +125,8 @@ def smooth(
     run.emit("analysis")
     if system.empty:
         return _unchanged(geometry, params, op, run, n_fixed)
+    if params.method == "windowed-sinc":
+        return _filtered(geometry, params, op, run, system, fixed, n_fixed)
     dev = Deviation(
         system,
         solver=choose_solver(system, params, memory_limit, run.notes),
@@ -288,6 +291,58 @@ def _check_range(
         raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
 
 
+def _filtered(
+    geometry: Geometry,
+    params: SmoothingParams,
+    op: SmoothingOperator,
+    run: Run,
+    system: SmoothingSystem,
+    fixed: NDArray[np.bool_],
+    n_fixed: int,
+) -> SmoothResult:
+    """``method="windowed-sinc"``: the pass band meeting tau from Chebyshev moments
+    (:mod:`service.core.polyfilter`), no factorization. ``lam`` given: the pass band's edge."""
+    assert run.frame is not None
+    frame = run.frame
+    if params.laplacian != "normalized":
+        raise ParameterError(
+            "method 'windowed-sinc' needs laplacian 'normalized': the row scales of L(kappa) "
+            "and L(f) spread the spectrum beyond what a polynomial filter resolves",
+            field="params.method",
+        )
+    dev = Deviation(system, solver="cg")  # products with M (counted), no solve
+    d = np.sqrt(system.d2)[:, None]
+
+    def apply_op(V: Array) -> Array:
+        return dev.solver.matvec(V / d) / d
+
+    mu_max = 1.01 * system.mu_bound()
+    c = system.r / d
+    if params.lam is not None:
+        mu_pb = min(frame.lam_in(params.lam), mu_max)
+        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, DEGREE)
+    else:
+        assert run.tau is not None
+        tau = run.tau / frame.phi_factor
+        bound = system.phi0 if system.phi0 is not None else system.phi0_bound
+        if bound is not None and tau >= bound:
+            _check_range(dev, op, fixed, params, run)
+        flt, _, _ = windowed_sinc(apply_op, c, tau, mu_max, tolerance=params.tolerance)
+    U = system.U0 + sinc_deviation(apply_op, c, flt) / d
+    phi = float(np.sum(system.d2[:, None] * (U - system.U0) ** 2))
+    lam = (flt.x_pb + 1) * mu_max / 2
+    converged = (
+        run.tau is None or abs(phi * frame.phi_factor - run.tau) <= params.tolerance * run.tau
+    )
+    if not converged:
+        run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
+    run.evaluated(lam, phi, 1)
+    X = geometry.points.copy()
+    X[~fixed] = frame.back(U)
+    search = LambdaSearch(lam, phi, converged, [(lam, phi)])
+    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed)
+
+
 def _fro(M: sp.spmatrix) -> float:
     return float(np.sqrt(np.sum(np.asarray(M.data) ** 2)))
 
@@ -356,7 +411,8 @@ def diagnostics(
         rms_deviation=float(np.sqrt(np.mean(dev_pt**2))),
         max_deviation=float(dev_pt.max()),
         timings=timings,
-        solver=dev.solver.name if dev is not None else "none",
+        solver=dev.solver.name if dev is not None and params.method == "tikhonov" else "none",
+        method=params.method,
         search="none" if params.lam is not None else params.search,
         order=params.order,
         laplacian=params.laplacian,

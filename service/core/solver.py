@@ -115,6 +115,11 @@ class Gram:
         """``diag(A^T A)``: squared column norms of ``A``."""
         return np.asarray(self.A.multiply(self.A).sum(axis=0)).ravel()
 
+    @property
+    def nnz(self) -> int:
+        """Entries of ``A`` (zero exactly when ``M = A^T A`` is zero)."""
+        return int(self.A.nnz)
+
     def nnz_bound(self) -> int:
         """Upper bound of ``nnz(A^T A)``: the sum of squared row counts of ``A``."""
         return int(np.sum(np.diff(self.A.indptr).astype(np.int64) ** 2))
