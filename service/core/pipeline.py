@@ -30,7 +30,7 @@ from service.core.operator import (
 from service.core.params import SmoothingParams
 from service.core.polyfilter import DEGREE, SincFilter, sinc_deviation, windowed_sinc
 from service.core.progress import ProgressCallback, ProgressEvent
-from service.core.resources import choose_solver
+from service.core.resources import choose_solver, prefer_matrix_free
 from service.core.result import SmoothResult, Spectrum
 from service.core.shrinkage import check_preservable, preserve_measure
 from service.core.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
@@ -259,6 +259,11 @@ def find_lambda(
         hi,
         order=dev.order,
     )
+    if params.solver == "auto" and prefer_matrix_free(system.size, lam0, system.mu_bound()):
+        dev.use_matrix_free()
+        run.notes.append(
+            "matrix-free path: conjugate gradients are cheaper at this size and lambda"
+        )
     search = newton_search(
         dev,
         dev.derivative,

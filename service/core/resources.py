@@ -24,10 +24,12 @@ from service.core.params import SmoothingParams
 from service.core.solver import Gram, cholmod_available
 
 __all__ = [
+    "MATRIX_FREE_FROM",
     "ResourceEstimate",
     "choose_solver",
     "estimate_resources",
     "factor_size",
+    "prefer_matrix_free",
 ]
 
 Path = Literal["direct", "matrix-free"]
@@ -132,6 +134,21 @@ def _colcounts(n: int, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     from service.core._symbolic import colcounts
 
     return colcounts(n, indptr, indices)
+
+
+#: Unknowns from which ``solver="auto"`` takes conjugate gradients when lambda is not small.
+MATRIX_FREE_FROM = 200_000
+#: ... and ``lambda >= MATRIX_FREE_MIN_LAMBDA * ||M_t||`` (condition number at most 1e3).
+MATRIX_FREE_MIN_LAMBDA = 1e-3
+
+
+def prefer_matrix_free(size: int, lam: float, mu_bound: float) -> bool:
+    """Whether CG beats a factorization for ``size`` unknowns at ``lambda`` (the estimate).
+
+    CG needs O(sqrt(||M_t|| / lambda)) products whatever ``n`` (issue 8: ~100 at lambda* ~ 0.05),
+    while the factorization grows like ``n^1.5``; measured crossover in service/core/README.md.
+    """
+    return size >= MATRIX_FREE_FROM and lam >= MATRIX_FREE_MIN_LAMBDA * mu_bound
 
 
 def choose_solver(

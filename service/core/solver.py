@@ -161,9 +161,7 @@ class LinearSolver:
     name: str = ""
     path: Literal["direct", "matrix-free"] = "direct"
 
-    def __init__(
-        self, M: sp.spmatrix | Gram, d2: Array, stats: SolverStats | None = None
-    ) -> None:
+    def __init__(self, M: sp.spmatrix | Gram, d2: Array, stats: SolverStats | None = None) -> None:
         self.M = M if isinstance(M, Gram) else sp.csr_matrix(M)
         self.d2 = np.asarray(d2, dtype=np.float64)
         self.stats = stats if stats is not None else SolverStats()
@@ -272,7 +270,6 @@ class Direct(LinearSolver):
         reuse: bool = True,
         symbolic: Any = None,
     ) -> None:
-        M = explicit(M)
         super().__init__(M, d2)
         if method == "cholmod" and _cholmod is None:
             self.stats.warnings.append(
@@ -282,21 +279,29 @@ class Direct(LinearSolver):
             method = "superlu"
         self.name = method
         self.reuse = reuse
-        m = self.size
+        self._symbolic = symbolic
+        self._factor: Any = None
+        self.lam_factored: float | None = None
+        self.pattern: sp.csc_matrix | None = None
+
+    def _setup(self) -> None:
+        """Form ``M``, the pattern of ``K`` and (CHOLMOD) its symbolic analysis, once, on the
+        first factorization: a solver chosen but not used (e.g. replaced by the matrix-free
+        path after the lambda estimate) costs nothing."""
+        M = explicit(self.M)
         pattern = (sp.csc_matrix(M) + sp.diags(self.d2)).tocsc()
         pattern.sum_duplicates()
         pattern.sort_indices()
         self.pattern = pattern
-        cols = np.repeat(np.arange(m), np.diff(pattern.indptr))
+        cols = np.repeat(np.arange(self.size), np.diff(pattern.indptr))
         diag_pos = np.flatnonzero(pattern.indices == cols)
         self._diag_pos = diag_pos[np.argsort(cols[diag_pos])]
         self._M_data = pattern.data.copy()
-        self._M_data[self._diag_pos] = sp.csc_matrix(M).diagonal()
-        self._factor: Any = None
-        self.lam_factored: float | None = None
-        if self.name == "cholmod":
+        self._M_data[self._diag_pos] = M.diagonal()
+        if self.name == "cholmod" and self._factor is None:
             t0 = time.perf_counter()
-            self._factor = symbolic(pattern) if symbolic is not None else analyze(pattern)
+            symbolic = self._symbolic if self._symbolic is not None else analyze
+            self._factor = symbolic(pattern)
             self.stats.analysis += time.perf_counter() - t0
 
     def with_weights(self, d2: Array) -> Direct:
@@ -306,12 +311,16 @@ class Direct(LinearSolver):
         new.d2 = np.asarray(d2, dtype=np.float64)
         new.stats = SolverStats()
         new.lam_factored = None
-        new._factor = self._factor.copy() if self.name == "cholmod" else None
+        has = self.name == "cholmod" and self._factor is not None
+        new._factor = self._factor.copy() if has else None
         return new
 
     def matrix(self, lam: float) -> sp.csc_matrix:
         """``K(lam)`` in CSC with the analysed pattern."""
+        if self.pattern is None:
+            self._setup()
         A = self.pattern
+        assert A is not None
         data = self._M_data.copy()
         data[self._diag_pos] += lam * self.d2
         return sp.csc_matrix((data, A.indices, A.indptr), shape=A.shape)
@@ -406,8 +415,19 @@ class Direct(LinearSolver):
         return self._check(X, lam)
 
 
-def analyze(pattern: sp.csc_matrix, ordering: str = "amd") -> Any:
+#: Unknowns from which METIS ordering pays for its slower analysis (service/core/README.md).
+METIS_FROM = 150_000
+
+
+def ordering_for(size: int) -> str:
+    """The fill-reducing ordering: AMD for small systems, METIS (nested dissection) above
+    :data:`METIS_FROM` unknowns (3.4x fewer flops at 655K, analysis 10x slower)."""
+    return "metis" if size >= METIS_FROM else "amd"
+
+
+def analyze(pattern: sp.csc_matrix, ordering: str | None = None) -> Any:
     """CHOLMOD symbolic analysis (fill-reducing ordering, supernodal structure)."""
+    ordering = ordering if ordering is not None else ordering_for(pattern.shape[0])
     assert _cholmod is not None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

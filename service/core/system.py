@@ -177,6 +177,15 @@ class Deviation:
     def stats(self) -> SolverStats:
         return self.solver.stats
 
+    def use_matrix_free(self) -> None:
+        """Switch to the matrix-free solver (work counted so far is kept)."""
+        if isinstance(self.solver, MatrixFree):
+            return
+        stats = self.solver.stats
+        self.solver = MatrixFree(self.system.M, self.system.d2)
+        self.solver.stats = stats
+        self._warm.clear()
+
     def _solve(self, lam: float, R: Array, role: str, offset: Array | None = None) -> Array:
         X = self.solver.solve(lam, R, self._warm.get(role), offset)
         self._warm[role] = X
