@@ -17,7 +17,7 @@ import numpy as np
 from benchmarks import shapes
 from service.core import Geometry
 
-__all__ = ["JOB_SETS", "Job", "build_input", "icosphere", "jobs"]
+__all__ = ["JOB_SETS", "Job", "build_input", "ground_truth", "icosphere", "jobs"]
 
 #: rms as a multiple of the noise's standard deviation per coordinate (issue 8 used 1.0)
 LEVELS = {"light": 0.3, "medium": 1.0, "heavy": 1.5}
@@ -51,58 +51,72 @@ class Job:
     weights: bool = False
 
 
-def icosphere(subdivisions: int, seed: int = 1) -> tuple[Geometry, float]:
-    """Unit icosphere with isotropic noise of 0.3 x the mean edge length; (geometry, sigma)."""
+def _icosphere(subdivisions: int, seed: int = 1) -> tuple[Geometry, float, np.ndarray]:
     import trimesh
 
     m = trimesh.creation.icosphere(subdivisions)
     P, F = np.asarray(m.vertices), np.asarray(m.faces)
     sigma = 0.3 * shapes.mean_edge_length(P, F)
     noisy = P + np.random.default_rng(seed).normal(0, sigma, P.shape)
-    return Geometry(noisy, faces=F), sigma
+    return Geometry(noisy, faces=F), sigma, P
 
 
-def _torus(nu: int) -> tuple[Geometry, float]:
-    case = shapes.torus_mesh(nu, nu // 3)
-    return Geometry(case.points, faces=case.faces), float(case.sigma or 0)
+def icosphere(subdivisions: int, seed: int = 1) -> tuple[Geometry, float]:
+    """Unit icosphere with isotropic noise of 0.3 x the mean edge length; (geometry, sigma)."""
+    g, sigma, _ = _icosphere(subdivisions, seed)
+    return g, sigma
 
 
-def _real(name: str) -> tuple[Geometry, float]:
+def _torus(nu: int) -> tuple[Geometry, float, np.ndarray]:
+    P, F = shapes.torus_grid(nu, nu // 3 if nu < 1000 else nu)
+    h = 2 * np.pi * 0.4 / (nu // 3 if nu < 1000 else nu)
+    sigma = 0.3 * h
+    noisy = P + np.random.default_rng(1).normal(0, sigma, P.shape)
+    return Geometry(noisy, faces=F), sigma, P
+
+
+def _real(name: str) -> tuple[Geometry, float, None]:
     P, F = shapes.load_mesh(name)
     h = shapes.mean_edge_length(P, F)
-    return Geometry(P, faces=F), 0.1 * h  # scan noise: taken as ~0.1 edge
+    return Geometry(P, faces=F), 0.1 * h, None  # scan noise: taken as ~0.1 edge
 
 
-def _curve(n: int) -> tuple[Geometry, float]:
+def _curve(n: int) -> tuple[Geometry, float, np.ndarray]:
     rng = np.random.default_rng(3)
     t = np.sort(rng.uniform(0, 8 * np.pi, n))
     P = np.c_[np.cos(t), np.sin(t), t / 8]
     sigma = 0.3 * 8 * np.pi * 1.1 / n
     edges = np.c_[np.arange(n - 1), np.arange(1, n)]
-    return Geometry(P + rng.normal(0, sigma, P.shape), edges=edges), sigma
+    return Geometry(P + rng.normal(0, sigma, P.shape), edges=edges), sigma, P
 
 
-def _cloud(n: int, neighborhood: str) -> tuple[Geometry, float]:
+def _cloud(n: int, neighborhood: str = "delaunay") -> tuple[Geometry, float, np.ndarray]:
     rng = np.random.default_rng(5)
     P = rng.normal(size=(n, 3))
     P /= np.linalg.norm(P, axis=1)[:, None]
     sigma = 0.3 * np.sqrt(4 * np.pi / n)
-    return Geometry(P + rng.normal(0, sigma, P.shape)), sigma
+    return Geometry(P + rng.normal(0, sigma, P.shape)), sigma, P
 
 
-INPUTS: dict[str, Callable[[str], tuple[Geometry, float]]] = {
-    "ico": lambda a: icosphere(int(a)),
+INPUTS: dict[str, Callable[[str], tuple[Geometry, float, np.ndarray | None]]] = {
+    "ico": lambda a: _icosphere(int(a)),
     "torus": lambda a: _torus(int(a)),
     "real": _real,
     "curve": lambda a: _curve(int(a)),
-    "cloud": lambda a: _cloud(int(a), "delaunay"),
+    "cloud": lambda a: _cloud(int(a)),
 }
+
+
+def ground_truth(job: Job) -> np.ndarray | None:
+    """The noise-free points of ``job``'s input (``None`` for real scans)."""
+    kind, _, arg = job.input.partition(":")
+    return INPUTS[kind](arg)[2]
 
 
 def build_input(job: Job) -> tuple[Geometry, float]:
     """The geometry of ``job`` and its rms target."""
     kind, _, arg = job.input.partition(":")
-    g, noise_rms = INPUTS[kind](arg)
+    g, noise_rms, _ = INPUTS[kind](arg)
     rms = LEVELS[job.level] * noise_rms
     if job.fixed or job.weights:
         rng = np.random.default_rng(11)
@@ -142,6 +156,8 @@ JOB_SETS: dict[str, Callable[[], list[Job]]] = {
         _matrix(["ico:5", "torus:240", "curve:20000", "cloud:20000"], _VARIANTS)
         + _matrix(["real:bun_zipper.ply", "real:horse.ply"], _VARIANTS[:3])
     ),
-    "sizes": lambda: _matrix(["ico:5", "ico:6", "ico:7", "ico:8"], _VARIANTS[:1]),
-    "big": lambda: _matrix(["ico:8", "cloud:1000000"], _VARIANTS[:1]),
+    "sizes": lambda: [
+        Job(f"{inp}/medium/plain", inp, "medium")
+        for inp in ("ico:5", "ico:6", "ico:7", "ico:8", "torus:1000")
+    ],
 }

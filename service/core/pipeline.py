@@ -57,6 +57,7 @@ class Run:
         self.tau: float | None = None
         self.frame = frame
         self.notes: list[str] = []
+        self.search_seconds = 0.0
 
     def emit(self, stage: str, **kw: Any) -> None:
         if self.progress is not None:
@@ -135,7 +136,9 @@ def smooth(
         symbolic=cache.analysis_of,
     )
     dev.listener = run.evaluated
+    t_search = time.perf_counter()
     search = find_lambda(dev, op, fixed, params, run)
+    run.search_seconds = time.perf_counter() - t_search
     run.emit("postprocess", iteration=len(dev.history))
     X = geometry.points.copy()
     X[~fixed] = frame.back(dev.solution(search.lam))
@@ -395,6 +398,7 @@ def diagnostics(
             solve=stats.solve,
             matvec=stats.matvec,
         )
+    timings["search"] = run.search_seconds
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
     spectrum = None
