@@ -406,7 +406,7 @@ def diagnostics(
         spectrum = _spectrum(op, geometry, frame, search.lam, n_fixed, run.notes)
     return SmoothResult(
         points=X,
-        lam=frame.lam_out(search.lam) if search.lam > 0 else 0.0,
+        lam=params.lam if params.lam is not None else frame.lam_out(search.lam),
         phi=phi,
         tau=tau,
         relative_error=None if tau is None else abs(phi - tau) / tau,

@@ -136,6 +136,9 @@ def _colcounts(n: int, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     return colcounts(n, indptr, indices)
 
 
+#: Entries per row of ``L^T L`` (its upper bound) above which ``auto`` never forms it: k-NN
+#: neighbourhoods with k = 64 give ~4000 (meshes ~50, Delaunay neighbourhoods ~50-80).
+DENSE_ROWS = 400
 #: Unknowns from which ``solver="auto"`` takes conjugate gradients when lambda is not small.
 MATRIX_FREE_FROM = 200_000
 #: ... and ``lambda >= MATRIX_FREE_MIN_LAMBDA * ||M_t||`` (condition number at most 1e3).
@@ -162,11 +165,17 @@ def choose_solver(
     if params.solver != "auto":
         return params.solver
     name: Literal["cholmod", "superlu"] = "cholmod"  # falls back to SuperLU with a warning
-    if memory_limit is None or system.size < 2000:
-        return name
     m = system.size
     M = system.M
     nnz_m = M.nnz_bound() if isinstance(M, Gram) else M.nnz
+    if m >= 2000 and nnz_m > DENSE_ROWS * m:
+        notes.append(
+            f"matrix-free path: L^T L would have about {nnz_m / m:.0f} entries per row "
+            f"(more than {DENSE_ROWS}); its factor would be far larger"
+        )
+        return "cg"
+    if memory_limit is None or m < 2000:
+        return name
     m_bytes = 12.0 * nnz_m * 3  # M, K's pattern and values, the analysis' copy
     coarse = 0.5 * nnz_m * max(math.log2(m), 1.0) * _BYTES_PER_FACTOR_ENTRY + m_bytes
     if coarse < memory_limit / 8:
