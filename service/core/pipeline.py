@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from service.core import cache
 from service.core.elimination import laplacian_system, phi_at_zero
-from service.core.errors import ParameterError, TauOutOfRange
+from service.core.errors import ParameterError, SolverError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator import (
@@ -370,6 +370,11 @@ def diagnostics(
     dev_pt = np.linalg.norm(moved, axis=1)
     # phi of the solution (before any volume rescaling), as recorded in the history
     phi = search.phi * frame.phi_factor if dev is not None else 0.0
+    if not (np.isfinite(phi) and np.isfinite(search.lam) and np.isfinite(X).all()):
+        raise SolverError(  # never report a non-finite number (issue 15)
+            "the solution is not finite at this scale (lambda, phi or the points overflowed)",
+            field="params",
+        )
     stats = dev.stats if dev is not None else None
     timings = dict(op.timings)
     if stats is not None:
