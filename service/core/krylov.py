@@ -98,6 +98,7 @@ def lanczos(
     steps: int,
     stop: Callable[[Quadrature, Quadrature], bool] | None = None,
     order: int = 1,
+    every: int = 1,
 ) -> tuple[Quadrature, Quadrature, int]:
     """Lanczos on ``M_t`` from each column of ``c``; Gauss and Gauss-Radau models of ``phi``.
 
@@ -117,6 +118,8 @@ def lanczos(
         Called with the Gauss and Radau models after every step; ``True`` ends the recurrence.
     order : int
         Iterated Tikhonov order of the models.
+    every : int
+        After the fourth step, build the models (and call ``stop``) every ``every`` steps only.
 
     Returns
     -------
@@ -142,9 +145,11 @@ def lanczos(
         alphas.append(a)
         betas.append(b)
         done = j + 1
-        gauss, radau = _models(alphas, betas, beta0, order)
-        if (stop is not None and stop(gauss, radau)) or not np.all(b > 1e-14 * np.abs(a).max()):
-            break
+        broke = not np.all(b > 1e-14 * np.abs(a).max())
+        if done <= 4 or done % every == 0 or done == steps or broke:
+            gauss, radau = _models(alphas, betas, beta0, order)
+            if (stop is not None and stop(gauss, radau)) or broke:
+                break
         V_prev, V, b_prev = V, W / b, b
     return gauss, radau, done
 
