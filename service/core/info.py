@@ -1,0 +1,111 @@
+"""``describe()``: what an input is and which smoothing factors make sense, without smoothing.
+
+Used by ``geosmooth info``, the API's ``POST /v1/info`` and the web page. It builds the
+neighbourhoods and the Laplacian once (as ``smooth`` would) to get ``phi(0)`` of eq. (14), the
+upper end of the valid range of ``tau`` (section 6.1), and estimates the noise level (see
+:mod:`service.core.noise`) to suggest a smoothing factor.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from service.core.geometry import Geometry
+from service.core.params import SmoothingParams
+
+__all__ = ["describe", "mean_spacing"]
+
+
+def mean_spacing(geometry: Geometry) -> float:
+    """Mean edge length (meshes, curves) or mean nearest-neighbour distance (point clouds)."""
+    P = geometry.points
+    if geometry.faces is not None:
+        F = geometry.faces
+        e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    elif geometry.edges is not None:
+        e = geometry.edges
+    else:
+        if geometry.n < 2:
+            return 0.0
+        d, _ = cKDTree(P).query(P, k=2)
+        return float(np.mean(d[:, 1]))
+    return float(np.mean(np.linalg.norm(P[e[:, 0]] - P[e[:, 1]], axis=1)))
+
+
+def _bbox(P: NDArray[np.float64]) -> dict[str, list[float]]:
+    return {"min": P.min(axis=0).tolist(), "max": P.max(axis=0).tolist()}
+
+
+def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, int]:
+    """``phi(0)`` (eq. 14, per component, fixed points as boundary values), the weight sum
+    ``sum omega_i^2`` over the points that can move, and the number of neighbour pairs."""
+    import scipy.sparse as sp
+
+    from service.core.pipeline import _phi_at_zero, build_laplacian
+    from service.core.solver import split_fixed
+
+    L, nb, _, _ = build_laplacian(geometry, params)
+    adj = nb.adjacency
+    n_edges = int(sp.triu(adj + adj.T, k=1).nnz)
+    fixed = geometry.fixed_mask()
+    if params.fix_boundary:
+        fixed = fixed | nb.boundary
+    coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
+    fixed = fixed | ~coupled
+    omega = geometry.omega()
+    L_F, L_C, free, fixed_idx = split_fixed(L, fixed)
+    if free.size == 0:
+        return 0.0, 0.0, n_edges
+    b = np.zeros((free.size, geometry.dim))
+    if fixed_idx.size:
+        b = -np.asarray(L_F.T @ (L_C @ geometry.points[fixed_idx]))
+    M = (L_F.T @ L_F).tocsc()
+    phi0, _ = _phi_at_zero(L, geometry.points, omega, fixed, free, M, b, params.solver)
+    return float(phi0), float(np.sum(omega[free] ** 2)), n_edges
+
+
+def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
+    """JSON-ready description of ``geometry`` and of the smoothing factors it admits.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    params : SmoothingParams, optional
+        Neighbourhood, weight and fixed-point settings to analyse with (``tau``/``rms``/``lam``
+        are ignored). Default: the defaults of :class:`SmoothingParams`.
+
+    Returns
+    -------
+    dict
+        ``n_points, dimension, kind, n_faces, n_edges, bbox {min, max}, mean_spacing, phi0,
+        tau_range [0, phi0], rms_range [0, r], sigma_estimate, suggested_tau, suggested_rms``
+        where ``r = sqrt(phi0 / sum omega_i^2)`` over the points that can move and ``n_edges``
+        counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs). The last
+        three are ``None`` when no estimate can be made.
+    """
+    if params is None:
+        params = SmoothingParams.model_construct()
+    phi0, weight_sum, n_edges = _phi0(geometry, params)
+    r = float(np.sqrt(phi0 / weight_sum)) if weight_sum > 0 else 0.0
+    sigma: float | None = None
+    suggested_tau: float | None = None
+    suggested_rms: float | None = None
+    return {
+        "n_points": geometry.n,
+        "dimension": geometry.dim,
+        "kind": geometry.kind,
+        "n_faces": 0 if geometry.faces is None else len(geometry.faces),
+        "n_edges": n_edges,
+        "bbox": _bbox(geometry.points),
+        "mean_spacing": mean_spacing(geometry),
+        "phi0": phi0,
+        "tau_range": [0.0, phi0],
+        "rms_range": [0.0, r],
+        "sigma_estimate": sigma,
+        "suggested_tau": suggested_tau,
+        "suggested_rms": suggested_rms,
+    }
