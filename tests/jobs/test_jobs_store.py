@@ -21,7 +21,7 @@ from service.core.progress import ProgressEvent
 from service.io.errors import FormatError, UnsupportedFormat
 from service.jobs import JobStatus, LocalQueue, problems
 from service.jobs.files import JobFiles, is_job_id, write_durable
-from service.jobs.local import _owner_dead
+from service.jobs.local_maintenance import owner_dead as _owner_dead
 from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
 from service.jobs.store import JobStore, NewJob
