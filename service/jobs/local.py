@@ -30,6 +30,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from service.core.threads import threads_per_worker
 from service.jobs import admit
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.files import JobFiles, is_job_id
@@ -145,7 +146,7 @@ class LocalQueue(Maintenance):
             lease=lease, kill_grace=kill_grace, poll_interval=poll_interval,
             start_method=self.start_method, progress_interval=progress_interval,
             on_settled=self._finished, retry_backoff=retry_backoff, memory_limit=memory_limit,
-            threads=threads_per_job or max(1, (os.cpu_count() or 1) // self.workers),
+            threads=threads_per_job or threads_per_worker(self.workers),
         )  # fmt: skip
         self.probe = StorageProbe(self.data_dir, min_free_bytes, self.store.check)
         self.notifier = Notifier(settings, self._webhook_payload, self.store.claim_webhook,

@@ -34,8 +34,9 @@ from typing import TYPE_CHECKING, Any
 
 from rq import Worker
 
+from service.core.threads import limit_threads, threads_per_worker
 from service.jobs import problems
-from service.jobs.limits import default_job_memory, limit_threads, thread_env
+from service.jobs.limits import default_job_memory
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
 from service.jobs.rq_backend import Backend
@@ -138,16 +139,14 @@ def make_worker(
     memory = settings.job_memory_limit
     if memory is None:
         memory = default_job_memory(settings.workers)
-    rq_tasks.configure(backend, runner, memory or None, _threads(settings))
+    rq_tasks.configure(backend, runner, memory or None)
     return GeosmoothWorker(backend, name)
 
 
 def _threads(settings: Settings) -> int:
     """BLAS threads per job: ``GEOSMOOTH_THREADS_PER_JOB``, else cores / ``GEOSMOOTH_WORKERS``
     (the worker processes sharing this machine)."""
-    if settings.threads_per_job:
-        return settings.threads_per_job
-    return max(1, (os.cpu_count() or 1) // settings.workers)
+    return settings.threads_per_job or threads_per_worker(settings.workers)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -169,7 +168,6 @@ def main(argv: list[str] | None = None) -> int:
         print("geosmooth worker: set GEOSMOOTH_QUEUE=rq (and GEOSMOOTH_REDIS_URL)",
               file=sys.stderr)  # fmt: skip
         return 2
-    os.environ.update(thread_env(_threads(settings)))
     os.environ["GEOSMOOTH_WORKER_PID"] = str(os.getpid())
     limit_threads(_threads(settings))  # inherited by every horse (a global of the libraries)
     for module in (*_PRELOAD, ns.runner.partition(":")[0]):  # loaded once, shared by every horse
