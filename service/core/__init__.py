@@ -26,6 +26,8 @@ _EXPORTS = {
     "ProgressCallback": "progress",
     "ProgressEvent": "progress",
     "smooth": "pipeline",
+    "build_operator": "operator",
+    "SmoothingOperator": "operator",
 }
 
 __all__ = [
@@ -40,10 +42,12 @@ __all__ = [
     "ProgressCallback",
     "ProgressEvent",
     "SmoothResult",
+    "SmoothingOperator",
     "SmoothingParams",
     "SolverError",
     "Spectrum",
     "TauOutOfRange",
+    "build_operator",
     "smooth",
 ]
 
@@ -60,6 +64,7 @@ if TYPE_CHECKING:  # pragma: no cover
         TauOutOfRange,
     )
     from service.core.geometry import Geometry
+    from service.core.operator import SmoothingOperator, build_operator
     from service.core.params import SmoothingParams
     from service.core.pipeline import smooth
     from service.core.progress import ProgressCallback, ProgressEvent

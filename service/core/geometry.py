@@ -27,8 +27,8 @@ __all__ = ["Geometry", "GeometryKind"]
 GeometryKind = Literal["mesh", "curve", "cloud"]
 
 
-def _first(mask: NDArray[np.bool_]) -> list[int]:
-    return np.flatnonzero(mask)[:10].tolist()
+def _first(mask: object) -> list[int]:
+    return [int(i) for i in np.flatnonzero(np.asarray(mask))[:10]]
 
 
 def _index_array(values: ArrayLike, width: int, field: str, n: int) -> NDArray[np.int64]:

@@ -45,27 +45,27 @@ def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, in
     ``sum omega_i^2`` over the points that can move, and the number of neighbour pairs."""
     import scipy.sparse as sp
 
-    from service.core.pipeline import _phi_at_zero, build_laplacian
-    from service.core.solver import split_fixed
+    from service.core.elimination import laplacian_system, phi_at_zero
+    from service.core.operator import build_operator
+    from service.core.pipeline import free_set
+    from service.core.system import Deviation
 
-    L, nb, _, _ = build_laplacian(geometry, params)
-    adj = nb.adjacency
+    op = build_operator(geometry, params)
+    adj = op.neighborhoods.adjacency
     n_edges = int(sp.triu(adj + adj.T, k=1).nnz)
-    fixed = geometry.fixed_mask()
-    if params.fix_boundary:
-        fixed = fixed | nb.boundary
-    coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
-    fixed = fixed | ~coupled
+    fixed, _ = free_set(geometry, op, params, [])
     omega = geometry.omega()
-    L_F, L_C, free, fixed_idx = split_fixed(L, fixed)
-    if free.size == 0:
+    if fixed.all():
         return 0.0, 0.0, n_edges
-    b = np.zeros((free.size, geometry.dim))
-    if fixed_idx.size:
-        b = -np.asarray(L_F.T @ (L_C @ geometry.points[fixed_idx]))
-    M = (L_F.T @ L_F).tocsc()
-    phi0, _ = _phi_at_zero(L, geometry.points, omega, fixed, free, M, b, params.solver)
-    return float(phi0), float(np.sum(omega[free] ** 2)), n_edges
+    frame = op.frame.weighted(omega[~fixed])
+    system = laplacian_system(
+        op.L, frame.points(geometry.points), omega / frame.weight_scale, fixed
+    )
+    phi0 = system.phi0
+    if phi0 is None:
+        dev = Deviation(system, solver="superlu" if params.solver == "superlu" else "cholmod")
+        phi0 = phi_at_zero(dev, op.L, fixed)
+    return float(phi0) * frame.phi_factor, float(np.sum(omega[~fixed] ** 2)), n_edges
 
 
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:

@@ -8,7 +8,9 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 __all__ = [
     "LaplacianVariant",
+    "MethodName",
     "NeighborhoodKind",
+    "SearchName",
     "SmoothingParams",
     "SolverName",
     "WeightScheme",
@@ -17,7 +19,11 @@ __all__ = [
 LaplacianVariant = Literal["normalized", "curvature", "feature"]
 WeightScheme = Literal["auto", "uniform", "reciprocal", "mean-value", "cotangent"]
 NeighborhoodKind = Literal["knn", "delaunay"]
-SolverName = Literal["cholmod", "superlu"]
+# --- core-engine block (search, solver path, method, order) --------------------------------
+SolverName = Literal["auto", "cholmod", "superlu", "cg"]
+SearchName = Literal["auto", "newton", "rational"]
+MethodName = Literal["tikhonov", "windowed-sinc"]
+# --- end core-engine block --------------------------------------------------------------------
 
 
 class SmoothingParams(BaseModel):
@@ -115,11 +121,34 @@ class SmoothingParams(BaseModel):
             "the deviation before rescaling."
         ),
     )
+    # --- core-engine block (search, solver path, method, order) ----------------------------
     solver: SolverName = Field(
-        default="cholmod",
-        description="CHOLMOD (scikit-sparse) or SciPy's SuperLU; CHOLMOD falls back to SuperLU "
-        "with a warning when scikit-sparse is unavailable.",
+        default="auto",
+        description="Linear solver: 'auto' (CHOLMOD when the factor fits the memory budget, "
+        "else the matrix-free conjugate gradients), 'cholmod' (scikit-sparse; falls back to "
+        "SciPy's SuperLU with a warning when unavailable), 'superlu', or 'cg' (matrix-free, "
+        "O(n) memory).",
     )
+    search: SearchName = Field(
+        default="auto",
+        description="lambda search for tau/rms: 'newton' (Lanczos estimate, then safeguarded "
+        "Newton on phi^(-1/2k) reusing one factorization), 'rational' (the report's rational "
+        "interpolation, section 6.3), 'auto' (newton).",
+    )
+    method: MethodName = Field(
+        default="tikhonov",
+        description="'tikhonov': eq. (4) (with `order`); 'windowed-sinc': a polynomial low-pass "
+        "filter of the same Laplacian whose pass band is chosen so that phi = tau (no "
+        "factorization).",
+    )
+    order: int = Field(
+        default=1,
+        ge=1,
+        le=8,
+        description="Iterated Tikhonov order k: filter 1 - (mu/(mu+lambda))^k, k solves per "
+        "lambda with one factorization (1 = the report's eq. 4).",
+    )
+    # --- end core-engine block ------------------------------------------------------------
     spectrum: bool = Field(
         default=False,
         description="Also return the singular values of L and the filter factors of eq. (12) "

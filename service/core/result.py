@@ -53,6 +53,9 @@ class SmoothResult:
         lambda values tried (each one a numeric factorization and a solve).
     factorizations : int
         Numeric factorizations done.
+    solves, matvecs : int
+        Solves with a factorization (each for all coordinate columns) and products with
+        ``L^T L`` (Lanczos, conjugate gradients, residual checks).
     history : list of (float, float)
         ``(lambda, phi)`` for every lambda tried, in order.
     deviation : ndarray, shape (n,)
@@ -62,7 +65,14 @@ class SmoothResult:
     timings : dict
         Seconds per stage: neighborhoods, laplacian, analysis, factorization, solve, total.
     solver : str
-        ``"cholmod"`` or ``"superlu"``.
+        ``"cholmod"``, ``"superlu"`` or ``"cg"`` (matrix-free).
+    search : str
+        lambda search used: ``"auto"``, ``"newton"``, ``"rational"`` or ``"none"``.
+    method : str
+        ``"tikhonov"`` or ``"windowed-sinc"`` (then ``lam`` is the pass band's edge on the
+        same scale, and ``solver`` is ``"none"``).
+    order : int
+        Iterated Tikhonov order.
     laplacian, weights : str
         Variant and resolved weight scheme actually used.
     kind : str
@@ -94,6 +104,11 @@ class SmoothResult:
     laplacian: str
     weights: str
     kind: str
+    solves: int = 0
+    matvecs: int = 0
+    search: str = "none"
+    method: str = "tikhonov"
+    order: int = 1
     n_fixed: int = 0
     volume_scale: float | None = None
     warnings: list[str] = field(default_factory=list)
@@ -117,6 +132,8 @@ class SmoothResult:
             "converged": self.converged,
             "iterations": self.iterations,
             "factorizations": self.factorizations,
+            "solves": self.solves,
+            "matvecs": self.matvecs,
             "history": [{"lambda": lam, "phi": phi} for lam, phi in self.history],
             "n_points": self.n_points,
             "dimension": self.dimension,
@@ -129,6 +146,9 @@ class SmoothResult:
             "volume_scale": self.volume_scale,
             "timings": dict(self.timings),
             "solver": self.solver,
+            "search": self.search,
+            "method": self.method,
+            "order": self.order,
             "warnings": list(self.warnings),
         }
         if self.spectrum is not None:

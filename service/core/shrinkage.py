@@ -12,13 +12,27 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["enclosed_measure", "is_closed_curve_set", "is_closed_mesh", "rescale_to_measure"]
+from service.core._arrays import unique_keys
+from service.core.errors import ParameterError
+from service.core.geometry import Geometry
+from service.core.neighborhoods import unique_faces
+
+__all__ = [
+    "check_preservable",
+    "enclosed_measure",
+    "is_closed_curve_set",
+    "is_closed_mesh",
+    "preserve_measure",
+    "rescale_to_measure",
+]
 
 
 def is_closed_mesh(faces: NDArray[np.int64]) -> bool:
     """Every (undirected) edge is shared by exactly two faces."""
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(e, axis=0, return_counts=True)
+    a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]]).astype(np.int64)
+    b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]]).astype(np.int64)
+    n = int(max(a.max(), b.max())) + 1 if a.size else 1
+    _, _, counts, _ = unique_keys(np.minimum(a, b) * n + np.maximum(a, b))
     return bool(np.all(counts == 2))
 
 
@@ -99,3 +113,35 @@ def rescale_to_measure(
     c = X[referenced].mean(axis=0)
     out[referenced] = c + (X[referenced] - c) * scale
     return out, scale
+
+
+def check_preservable(geometry: Geometry, fixed: NDArray[np.bool_]) -> None:
+    """Preservation needs a closed mesh in 3D or closed polygons in 2D, and no fixed points."""
+    ok = False
+    if geometry.faces is not None:
+        ok = geometry.dim == 3 and is_closed_mesh(unique_faces(geometry.faces))
+    elif geometry.edges is not None:
+        ok = geometry.dim == 2 and is_closed_curve_set(geometry.edges, geometry.n)
+    if not ok:
+        raise ParameterError(
+            "preserve_volume needs a closed triangle mesh in 3D or closed polygons in 2D",
+            field="params.preserve_volume",
+        )
+    if fixed.any():
+        raise ParameterError(
+            "preserve_volume cannot be combined with fixed points (rescaling would move them)",
+            field="params.preserve_volume",
+        )
+
+
+def preserve_measure(
+    geometry: Geometry, X: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float]:
+    """Rescale ``X`` so that it encloses the input's volume (3D mesh) or area (2D polygons)."""
+    faces = unique_faces(geometry.faces) if geometry.faces is not None else None
+    edges = geometry.edges if faces is None else None
+    before = enclosed_measure(geometry.points, faces, edges)
+    after = enclosed_measure(X, faces, edges)
+    referenced = np.zeros(geometry.n, dtype=bool)
+    referenced[(faces if faces is not None else edges).ravel()] = True  # type: ignore[union-attr]
+    return rescale_to_measure(X, referenced, before, after, geometry.dim)

@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-__all__ = ["SPECTRUM_MAX_POINTS", "filter_factors", "singular_values", "spectral_solution"]
+__all__ = ["SPECTRUM_MAX_POINTS", "filter_factors", "singular_values"]
 
 SPECTRUM_MAX_POINTS = 3000
 """Largest input (free points) for which the dense SVD of the spectral view is computed."""
@@ -51,13 +51,3 @@ def singular_values(
 def filter_factors(sigma: NDArray[np.float64], lam: float) -> NDArray[np.float64]:
     """``gamma_i = lambda / (sigma_i^2 + lambda)`` (eq. 12)."""
     return lam / (sigma**2 + lam)
-
-
-def spectral_solution(
-    L: sp.spmatrix, omega: NDArray[np.float64], P: NDArray[np.float64], lam: float
-) -> NDArray[np.float64]:
-    """Solution of eq. (4) through the SVD of ``L D^-1`` (eq. 12); dense, for small inputs."""
-    sigma, V = singular_values(L, omega)
-    gamma = filter_factors(sigma, lam)
-    Y = V @ (gamma[:, None] * (V.T @ (omega[:, None] * P)))
-    return np.asarray(Y / omega[:, None])

@@ -1,5 +1,17 @@
 """Finding lambda so that the deviation ``phi(lambda)`` equals the smoothing factor ``tau``.
 
+Two searches, selectable by name (``SmoothingParams.search``):
+
+* ``"newton"`` (the default): a lambda estimate with no factorization from the Gauss quadrature
+  of a few Lanczos steps (:mod:`service.core.krylov`), then Newton's method on
+  ``h(lambda) = phi^(-1/(2k)) - tau^(-1/(2k))`` (Reinsch 1967; More and Sorensen 1983) with
+  ``phi'`` from one extra solve. ``h`` is concave and increasing (:mod:`service.core.system`),
+  so from the left Newton never overshoots the root, and a bracket ``lo < lambda* <= hi`` with
+  ``hi = ||c|| / sqrt(tau)`` (one product) makes every step safe: a step leaving the bracket is
+  replaced by a geometric bisection. The solver reuses its factorization at nearby lambdas,
+  so the common case costs one numeric factorization.
+* ``"rational"``: the report's rational interpolation (below), kept to reproduce its behaviour.
+
 ``phi(lambda) = ||D(X(lambda) - P)||_F^2`` (eq. 15) is convex and strictly decreasing, from
 ``phi(0) = ||D(P - P_bar)||_F^2`` (eq. 14) to ``phi(inf) = 0``. Section 6.3 of the report finds
 ``phi(lambda*) = tau`` by rational interpolation as in Dierckx's FITPACK (``fprati``): through
@@ -16,7 +28,19 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-__all__ = ["LambdaSearch", "initial_lambda", "rational_step", "search_lambda"]
+import numpy as np
+from numpy.typing import NDArray
+
+from service.core.krylov import Quadrature, lanczos
+
+__all__ = [
+    "LambdaSearch",
+    "estimate_lambda",
+    "initial_lambda",
+    "newton_search",
+    "rational_step",
+    "search_lambda",
+]
 
 
 @dataclass
@@ -140,3 +164,142 @@ def search_lambda(
     assert best is not None
     lam, phi = best
     return LambdaSearch(lam, phi, False, history)
+
+
+def estimate_lambda(
+    apply_mt: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    c: NDArray[np.float64],
+    tau: float,
+    lo: float,
+    hi: float,
+    *,
+    order: int = 1,
+    max_steps: int = 60,
+    ratio: float = 1.01,
+) -> tuple[float, float, float, int]:
+    """lambda estimate from Gauss and Gauss-Radau quadrature models (no factorization).
+
+    For ``k = 1`` the root of the Gauss model is a lower bound of ``lambda*`` and the root of
+    the Radau model an upper bound (in exact arithmetic, :func:`~service.core.krylov.lanczos`);
+    the steps stop when they agree within ``ratio`` or after ``max_steps``. For ``k > 1``,
+    ``phi_k(lambda) <= phi_1(k lambda)`` termwise (Bernoulli's inequality), so ``lambda*_k``
+    lies below ``upper_1 / k``; the estimate is the root of the order-``k`` Gauss model below it.
+
+    Parameters
+    ----------
+    apply_mt : callable
+        Products with ``M_t = D^-1 M D^-1``.
+    c : ndarray, shape (m, s)
+        ``D^-1 r``.
+    tau, lo, hi : float
+        Target and the search's bracket.
+    order : int
+        Iterated Tikhonov order.
+    max_steps : int
+        Lanczos steps at most.
+    ratio : float
+        Target ratio of the upper to the lower bound.
+
+    Returns
+    -------
+    lam : float
+        The estimate.
+    lower, upper : float
+        Bounds for order 1 (``upper / k`` bounds ``lambda*_k`` from above).
+    steps : int
+        Products with ``M_t``.
+    """
+    bounds = [lo, hi, lo]
+
+    def stop(gauss: Quadrature, radau: Quadrature) -> bool:
+        bounds[0] = gauss.root(tau, lo, hi, order=1)
+        bounds[1] = radau.root(tau, lo, hi, order=1)
+        if order > 1:
+            bounds[2] = gauss.root(tau, lo, hi)
+        return lo < bounds[0] and bounds[1] <= ratio * bounds[0]
+
+    _, _, steps = lanczos(apply_mt, c, max_steps, stop, order)
+    lower, upper, root_k = bounds
+    if order > 1:
+        cap = upper / order
+        return (min(root_k, cap) if root_k > lo else cap), lower, upper, steps
+    # close bounds: their geometric mean; else the upper bound, from where the shift-invert
+    # model of the factorization made there converges fastest (krylov.ShiftInvert)
+    lam = math.sqrt(lower * upper) if upper <= 1.5 * lower else upper
+    return lam, lower, upper, steps
+
+
+def newton_search(
+    dev: Callable[[float], float],
+    derivative: Callable[[float], float],
+    tau: float,
+    lam0: float,
+    lo: float,
+    hi: float,
+    *,
+    order: int = 1,
+    tolerance: float = 1e-3,
+    max_iterations: int = 50,
+    propose: Callable[[float, float, float, float], float | None] | None = None,
+    below: Callable[[], None] | None = None,
+) -> LambdaSearch:
+    """Safeguarded Newton on ``h = phi^(-1/(2k)) - tau^(-1/(2k))`` inside ``[lo, hi]``.
+
+    ``propose(lam, tau, lo, hi)``, when given and not ``None``, replaces Newton's step (e.g.
+    the root of a shift-invert model built with the factorization just made); the same
+    safeguard applies to it. ``below()`` is called once when Newton's tangent from a point with
+    ``phi < tau`` falls below ``lo`` (``tau`` may exceed ``phi(0)``; it raises if so).
+
+    Parameters
+    ----------
+    dev : callable
+        ``phi(lambda)`` (eq. 15).
+    derivative : callable
+        ``phi'(lambda)``.
+    tau : float
+    lam0 : float
+        First lambda (e.g. :func:`estimate_lambda`).
+    lo, hi : float
+        Bracket: ``phi(hi) <= tau``; ``lo`` is the smallest lambda allowed.
+    order : int
+        ``k``.
+    tolerance, max_iterations
+        ``xi`` and the cap on evaluations of ``phi``.
+
+    Returns
+    -------
+    LambdaSearch
+        ``converged`` is false when the cap was hit or the bracket collapsed.
+    """
+    e = -1.0 / (2 * order)
+    target = tau**e
+    history: list[tuple[float, float]] = []
+    lam = min(max(lam0, lo), hi)
+    best: tuple[float, float] | None = None
+    for _ in range(max_iterations):
+        phi = dev(lam)
+        history.append((lam, phi))
+        if best is None or abs(phi - tau) < abs(best[1] - tau):
+            best = (lam, phi)
+        if abs(phi - tau) <= tolerance * tau:
+            return LambdaSearch(lam, phi, True, history)
+        if phi > tau:
+            lo = lam
+        else:
+            hi = lam
+        if hi - lo <= 1e-14 * hi:
+            break  # bracket collapsed: tau cannot be met more closely
+        new = propose(lam, tau, lo, hi) if propose is not None else None
+        if new is None or new in (lo, hi):
+            slope = e * phi ** (e - 1.0) * derivative(lam) if phi > 0 else 0.0
+            new = lam - (phi**e - target) / slope if slope > 0 else math.nan
+            if below is not None and phi < tau and not new > lo:
+                below()
+                below = None
+        if not (math.isfinite(new) and lo < new < hi):
+            new = math.sqrt(lo * hi) if lo > 0 else hi * 1e-3
+        if new == lam:
+            break
+        lam = new
+    assert best is not None
+    return LambdaSearch(best[0], best[1], False, history)

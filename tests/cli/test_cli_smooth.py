@@ -161,7 +161,7 @@ def test_point_cloud_xyz_on_a_terminal(data: Callable[[str], Path], tmp_path: Pa
     out = tmp_path / "cloud.xyz"
     master, slave = pty.openpty()
     try:
-        args = ["smooth", str(src), "-o", str(out), "--rms", "0.05"]
+        args = ["smooth", str(src), "-o", str(out), "--rms", "0.05", "--search", "rational"]
         proc = subprocess.Popen(
             [sys.executable, "-m", "service.cli", *args],
             stdout=subprocess.DEVNULL,

@@ -325,7 +325,11 @@ def test_superlu_matches_cholmod_and_fallback(monkeypatch: pytest.MonkeyPatch) -
 
 
 def test_one_analysis_and_one_factorization_per_lambda(monkeypatch: pytest.MonkeyPatch) -> None:
-    from service.core import solver
+    """The report's search (rational, section 6.3): one numeric factorization per lambda tried
+    and one symbolic analysis per run (the analysis cache is emptied first)."""
+    from service.core import cache, solver
+
+    cache.clear()
 
     calls = {"analyze": 0}
     real = solver._cholmod.analyze
@@ -336,7 +340,7 @@ def test_one_analysis_and_one_factorization_per_lambda(monkeypatch: pytest.Monke
 
     monkeypatch.setattr(solver._cholmod, "analyze", counting)
     P, F = noisy_icosphere(2, 0.02)
-    res = smooth(Geometry(P, faces=F), SmoothingParams(tau=0.05))
+    res = smooth(Geometry(P, faces=F), SmoothingParams(tau=0.05, search="rational"))
     assert calls["analyze"] == 1
     assert res.factorizations == res.iterations
 

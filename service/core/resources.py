@@ -1,0 +1,192 @@
+"""Memory and time of a smoothing run: estimated before it runs, and the path it takes.
+
+Two estimates:
+
+* :func:`estimate_resources` from the sizes alone (``n``, dimension, kind, parameters), for
+  admission control at submit time (jobs, HTTP): a model calibrated on the benchmark of
+  ``benchmarks/speed`` (see ``service/core/README.md``).
+* :func:`factor_size` from the symbolic analysis of the actual matrix (elimination tree and
+  column counts of the Cholesky factor under the fill-reducing ordering), before any numeric
+  factorization; :func:`choose_solver` uses it to take the matrix-free path when the factor
+  would not fit the memory budget.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+import scipy.sparse as sp
+
+from service.core.params import SmoothingParams
+from service.core.solver import Gram, cholmod_available
+
+__all__ = [
+    "MATRIX_FREE_FROM",
+    "ResourceEstimate",
+    "choose_solver",
+    "estimate_resources",
+    "factor_size",
+    "prefer_matrix_free",
+]
+
+Path = Literal["direct", "matrix-free"]
+_BYTES_PER_FACTOR_ENTRY = 8 * 1.25  # value plus supernodal padding (measured 1.1-1.3)
+
+
+@dataclass(frozen=True)
+class ResourceEstimate:
+    """Predicted peak memory (bytes), seconds on one core, and the solver path."""
+
+    memory_bytes: int
+    seconds: float
+    path: Path
+
+
+def _neighbours(kind: str, params: SmoothingParams | None) -> float:
+    if kind == "mesh":
+        return 6.0
+    if kind == "curve":
+        return 2.0
+    k = params.k if params is not None else 12
+    return 6.0 if params is None or params.neighborhood == "delaunay" else float(k)
+
+
+def _factor_entries(n: int, kind: str, nbr: float) -> float:
+    """Entries of the Cholesky factor of ``L^T L + lambda D^2`` (model; see README)."""
+    if kind == "curve":
+        return 5.0 * n
+    return 4.0 * nbr * n * max(math.log2(max(n, 2)), 1.0)
+
+
+def estimate_resources(
+    n: int,
+    dim: int,
+    kind: str,
+    params: SmoothingParams | None = None,
+    n_faces: int | None = None,
+    *,
+    memory_limit: int | None = None,
+) -> ResourceEstimate:
+    """Peak memory, time and path of smoothing ``n`` points of dimension ``dim``.
+
+    Parameters
+    ----------
+    n, dim : int
+    kind : {"mesh", "curve", "cloud"}
+    params : SmoothingParams, optional
+    n_faces : int, optional
+        Triangles (meshes); default ``2 n``.
+    memory_limit : int, optional
+        With ``solver="auto"``, the path switches to matrix-free when the direct path's
+        estimate exceeds it.
+
+    Returns
+    -------
+    ResourceEstimate
+    """
+    nbr = _neighbours(kind, params)
+    k = params.k if params is not None and kind == "cloud" else 0
+    faces = n_faces if n_faces is not None else (2 * n if kind == "mesh" else 0)
+    # input + output points, neighbourhoods, weights, L, M = L^T L (values + indices), work
+    base = 8.0 * n * dim * 6 + 24.0 * faces * 3 + n * (nbr * 40 + (nbr**2) * 14) + 8.0 * n * k * 4
+    if kind == "cloud":
+        base += 8.0 * n * k * (dim + 2) * 4  # k-NN query and local frames
+    entries = _factor_entries(n, kind, nbr)
+    direct = base + entries * _BYTES_PER_FACTOR_ENTRY + 8.0 * n * dim * 6
+    matfree = base + 8.0 * n * dim * 10
+    solver = params.solver if params is not None else "auto"
+    path: Path = "direct"
+    if solver == "cg" or (solver == "auto" and memory_limit is not None and direct > memory_limit):
+        path = "matrix-free"
+    mem = direct if path == "direct" else matfree
+    flops = entries**2 / max(n, 1)  # sum of squared column counts ~ |L|^2 / n
+    build = 2e-6 * n * (1 + nbr / 6) * (1 + k / 12)
+    seconds = build + (flops / 2e9 * 1.5 if path == "direct" else 400 * n * nbr**2 * dim / 5e8)
+    return ResourceEstimate(int(mem), float(seconds), path)
+
+
+def factor_size(pattern: sp.spmatrix, perm: np.ndarray | None) -> tuple[int, float]:
+    """Entries and flops of the Cholesky factor of ``pattern[perm][:, perm]`` (symbolic).
+
+    Elimination tree (Liu) and the row subtrees give the column counts exactly, in time
+    proportional to the factor's entries (compiled with numba).
+
+    Returns
+    -------
+    entries : int
+    flops : float
+        ``sum_j c_j^2`` over the column counts ``c_j``.
+    """
+    A = sp.csr_matrix(pattern)
+    if perm is not None:
+        A = A[perm][:, perm]
+    A = sp.tril(A, k=-1, format="csr")
+    A.sort_indices()
+    counts = _colcounts(A.shape[0], A.indptr.astype(np.int64), A.indices.astype(np.int64))
+    c = counts.astype(np.float64)
+    return int(counts.sum()), float(np.sum(c * c))
+
+
+def _colcounts(n: int, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    from service.core._symbolic import colcounts
+
+    return colcounts(n, indptr, indices)
+
+
+#: Unknowns from which ``solver="auto"`` takes conjugate gradients when lambda is not small.
+MATRIX_FREE_FROM = 200_000
+#: ... and ``lambda >= MATRIX_FREE_MIN_LAMBDA * ||M_t||`` (condition number at most 1e3).
+MATRIX_FREE_MIN_LAMBDA = 1e-3
+
+
+def prefer_matrix_free(size: int, lam: float, mu_bound: float) -> bool:
+    """Whether CG beats a factorization for ``size`` unknowns at ``lambda`` (the estimate).
+
+    CG needs O(sqrt(||M_t|| / lambda)) products whatever ``n`` (issue 8: ~100 at lambda* ~ 0.05),
+    while the factorization grows like ``n^1.5``; measured crossover in service/core/README.md.
+    """
+    return size >= MATRIX_FREE_FROM and lam >= MATRIX_FREE_MIN_LAMBDA * mu_bound
+
+
+def choose_solver(
+    system: Any, params: SmoothingParams, memory_limit: int | None, notes: list[str]
+) -> Literal["cholmod", "superlu", "cg"]:
+    """The solver of a run: the named one, or for ``"auto"`` CHOLMOD unless it would not fit.
+
+    With a ``memory_limit``, the factor's size is counted from the symbolic analysis of
+    ``K = M + D^2`` (AMD ordering) when the coarse model says it might not fit.
+    """
+    if params.solver != "auto":
+        return params.solver
+    name: Literal["cholmod", "superlu"] = "cholmod"  # falls back to SuperLU with a warning
+    if memory_limit is None or system.size < 2000:
+        return name
+    m = system.size
+    M = system.M
+    nnz_m = M.nnz_bound() if isinstance(M, Gram) else M.nnz
+    m_bytes = 12.0 * nnz_m * 3  # M, K's pattern and values, the analysis' copy
+    coarse = 0.5 * nnz_m * max(math.log2(m), 1.0) * _BYTES_PER_FACTOR_ENTRY + m_bytes
+    if coarse < memory_limit / 8:
+        return name
+    if m_bytes > memory_limit / 2:
+        notes.append(
+            f"matrix-free path: L^T L alone would take {m_bytes / 2**20:.0f} MiB, more than "
+            f"half the memory limit of {memory_limit / 2**20:.0f} MiB"
+        )
+        return "cg"
+    from service.core import cache
+
+    pattern = (sp.csc_matrix(system.explicit()) + sp.diags(system.d2)).tocsc()
+    perm = cache.analysis_of(pattern).P() if cholmod_available() else None
+    entries, _ = factor_size(pattern, perm)
+    need = entries * _BYTES_PER_FACTOR_ENTRY
+    if need > memory_limit / 2:
+        notes.append(
+            f"matrix-free path: the Cholesky factor would take {need / 2**20:.0f} MiB, more "
+            f"than half the memory limit of {memory_limit / 2**20:.0f} MiB"
+        )
+        return "cg"
+    return name
