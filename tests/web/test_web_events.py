@@ -45,10 +45,13 @@ def read_stream(response: httpx.Response) -> Iterator[dict[str, Any]]:
                 event[name] = value
 
 
-def submit_grid(client: httpx.Client, m: int, rms: float) -> dict[str, Any]:
+def submit_grid(client: httpx.Client, m: int, rms: float, slow: bool = False) -> dict[str, Any]:
     points, faces = grid_mesh(m)
     files = {"file": ("grid.ply", ply_ascii(points, faces))}
-    response = client.post("/v1/jobs", files=files, data={"params": json.dumps({"rms": rms})})
+    params: dict[str, Any] = {"rms": rms}
+    if slow:  # the report's search with SuperLU: 7 factorizations instead of 1
+        params.update(search="rational", solver="superlu")
+    response = client.post("/v1/jobs", files=files, data={"params": json.dumps(params)})
     assert response.status_code == 202, response.text
     return response.json()
 
@@ -156,7 +159,7 @@ def test_pings_and_stop_on_disconnect(tmp_path: Path) -> None:
             deadline = time.monotonic() + 30
             while not server.started and time.monotonic() < deadline:
                 time.sleep(0.02)
-            job = submit_grid(client, 200, 0.004)  # 40K points: runs for seconds
+            job = submit_grid(client, 200, 0.004, slow=True)  # 40K points: runs for seconds
             comments = 0
             with client.stream("GET", f"/v1/jobs/{job['id']}/events") as response:
                 start = time.monotonic()
