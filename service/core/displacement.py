@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 #: ``displacement="auto"`` per kind of input (chosen on the quality benchmark).
-DEFAULT_DISPLACEMENT = {"mesh": "free", "curve": "free", "cloud": "normal"}
+DEFAULT_DISPLACEMENT = {"mesh": "normal", "curve": "free", "cloud": "normal"}
 FRAME_NEIGHBOURS = 12
 #: Averaging steps before the normals are estimated (sphere with noise 0.5 h: 0 steps give
 #: normals 19 degrees off, 3 steps 6.5, 10 steps 2.3; 10 steps round the creases of

@@ -73,6 +73,25 @@ def _phi0(
     return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
 
 
+def _knee(
+    geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_], tau0: float
+) -> float:
+    """The automatic tau as :func:`~service.core.pipeline.smooth` chooses it: the knee of
+    ``phi(lambda)`` near the discrepancy estimate ``tau0`` (Lanczos, no factorization)."""
+    from service.core.autotau import knee_tau
+    from service.core.operator import build_operator
+    from service.core.pipeline import smoothing_system
+    from service.core.system import Deviation
+
+    op = build_operator(geometry, params)
+    frame = op.frame.weighted(geometry.omega()[~fixed])
+    system, _ = smoothing_system(geometry, op, fixed, frame, params)
+    solver = "superlu" if params.solver == "superlu" else "cholmod"
+    dev = Deviation(system, solver=solver, order=params.order)
+    tau = knee_tau(dev, tau0 / frame.phi_factor)
+    return tau0 if tau is None else tau * frame.phi_factor
+
+
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
     """JSON-ready description of ``geometry`` and of the smoothing factors it admits.
 
@@ -114,9 +133,10 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
             auto = None
         if auto is not None:
             sigma = auto.sigma
-            if 0 < auto.tau < phi0:
-                suggested_tau = auto.tau
-                suggested_rms = float(np.sqrt(auto.tau / weight_sum))
+            tau = _knee(geometry, params, fixed, auto.tau) if auto.tau > 0 else auto.tau
+            if 0 < tau < phi0:
+                suggested_tau = tau
+                suggested_rms = float(np.sqrt(tau / weight_sum))
     return {
         "n_points": geometry.n,
         "dimension": geometry.dim,

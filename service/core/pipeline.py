@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core import cache
-from service.core.autotau import auto_tau, gcv_lambda
+from service.core.autotau import auto_tau, gcv_lambda, knee_tau
 from service.core.displacement import normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
 from service.core.errors import ParameterError, TauOutOfRange
@@ -142,6 +142,8 @@ def smooth(
         symbolic=cache.analysis_of,
     )
     dev.listener = run.evaluated
+    if params.tau_rule == "auto" and run.tau:
+        _knee(dev, run)
     if params.tau_rule == "gcv":
         search = _gcv(dev, geometry, params, fixed, run)
     else:
@@ -357,6 +359,20 @@ def _gcv(
     run.tau = phi * run.frame.phi_factor
     run.tau_how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
     return LambdaSearch(lam, phi, True, list(dev.history))
+
+
+def _knee(dev: Deviation, run: Run) -> None:
+    """Automatic tau: move the discrepancy estimate to the knee of ``phi(lambda)`` near it."""
+    assert run.frame is not None and run.tau is not None
+    tau = knee_tau(dev, run.tau / run.frame.phi_factor)
+    if tau is None:
+        run.tau_how = (run.tau_how or "") + "; no knee of phi(lambda) near it: used as is"
+        return
+    run.tau_how = (run.tau_how or "") + (
+        f"; moved to the knee of phi(lambda) at tau = {tau * run.frame.phi_factor:.6g} "
+        f"({tau * run.frame.phi_factor / run.tau:.3g} x)"
+    )
+    run.tau = tau * run.frame.phi_factor
 
 
 def _bounded(
