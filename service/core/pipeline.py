@@ -353,7 +353,8 @@ def _gcv(
             )
     except ParameterError:  # no noise estimate: start from the middle of the range
         pass
-    hi = max(system.lambda_ceiling(1e-12 * float(np.sum(system.d2[:, None] * system.U0**2))), lo)
+    scale = float(np.sum(system.r**2 / system.d2[:, None]))  # ||D^-1 r||^2 >= phi(lambda) lambda^2
+    hi = max(system.lambda_ceiling(1e-12 * scale), lo) if scale > 0 else lo
     lam = gcv_lambda(dev, lo, hi, start if start else math.sqrt(lo * hi))
     phi = dev(lam)
     run.tau = phi * run.frame.phi_factor
