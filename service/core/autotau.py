@@ -210,10 +210,12 @@ def knee_tau(dev: Deviation, tau0: float) -> float | None:
     checkpoints = [j for j in KNEE_CHECKPOINTS if j < cap] + [cap]
     lam: float | None = None
     previous: float | None = None
-    for gauss, radau in _lanczos_checkpoints(
+    for checks, (gauss, radau) in enumerate(_lanczos_checkpoints(
         lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * s.r, checkpoints, dev.order
-    ):
+    )):
         lam = knee(gauss, radau)
+        if lam is None and checks > 0 and previous is None:
+            break  # two checkpoints without a knee in the window: there is none to find
         if lam is not None and previous is not None and abs(math.log(lam / previous)) < 0.01:
             break
         previous = lam
