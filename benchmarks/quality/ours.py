@@ -28,10 +28,9 @@ __all__ = ["MODES", "geometry_of", "modes_for", "run_auto", "run_mode"]
 MODES: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
     "report": (("mesh", "curve", "cloud"), {"preset": "report"}),
     "default": (("mesh", "curve", "cloud"), {}),
-    "free, order 1": (("mesh", "curve", "cloud"), {"displacement": "free", "order": 1}),
     "free, order 2": (("mesh", "curve", "cloud"), {"displacement": "free", "order": 2}),
     "free, order 3": (("mesh", "curve", "cloud"), {"displacement": "free", "order": 3}),
-    "normal, order 1": (("mesh", "cloud"), {"displacement": "normal", "order": 1}),
+    "normal, order 2": (("mesh", "cloud"), {"displacement": "normal", "order": 2}),
     "free, L(f)": (("mesh",), {"displacement": "free", "laplacian": "feature"}),
     "windowed-sinc": (("mesh", "curve"), {"displacement": "free", "method": "windowed-sinc"}),
 }
