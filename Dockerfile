@@ -24,11 +24,15 @@ RUN python -m venv /opt/geosmooth \
 # Dependencies first (this layer stays cached while only the sources change; scikit-sparse is
 # compiled here against Debian's SuiteSparse), then the package itself.
 COPY pyproject.toml README.md ./
+# The pure-Python client (a dependency of the server package, not on PyPI) before the rest.
+COPY clients/python/ clients/python/
+RUN /opt/geosmooth/bin/pip install ./clients/python
 RUN /opt/geosmooth/bin/python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" > /tmp/requirements.txt \
     && /opt/geosmooth/bin/pip install -r /tmp/requirements.txt
 COPY service/ service/
+COPY geosmooth/ geosmooth/
 RUN /opt/geosmooth/bin/pip install --no-deps . \
-    && /opt/geosmooth/bin/python -c "import sksparse.cholmod, service.api.app, service.cli"
+    && /opt/geosmooth/bin/python -c "import sksparse.cholmod, service.api.app, service.cli, geosmooth, geosmooth_client"
 
 # ---------------------------------------------------------------------------- runtime
 FROM ${PYTHON_IMAGE} AS runtime

@@ -14,8 +14,10 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 
-$(VENV)/.installed: pyproject.toml | $(BIN)/python
+# The client package (clients/python, pure Python) first: the server package depends on it.
+$(VENV)/.installed: pyproject.toml clients/python/pyproject.toml | $(BIN)/python
 	scripts/install-system-deps.sh
+	$(BIN)/pip install -q -e clients/python
 	$(BIN)/pip install -q -e .
 	touch $@
 

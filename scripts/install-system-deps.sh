@@ -3,7 +3,8 @@
 # Used by the Makefile (make setup / run / test), .ci/run and the Dockerfile, so CI exercises the
 # same install path as the Docker image. Idempotent: does nothing when everything is present.
 #
-#   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, venv)
+#   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, venv),
+#                                             plus Debian's chromium for the web page's browser tests
 #   scripts/install-system-deps.sh --build    only what compiling scikit-sparse needs (Docker builder,
 #                                             whose Python is the image's own, not Debian's)
 #   scripts/install-system-deps.sh --runtime  only what the running service needs (Docker final stage)
@@ -13,13 +14,15 @@ set -euo pipefail
 build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc)
 python_pkgs=(python3-dev python3-venv)  # Debian's python3 needs these for venv + C extensions
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
+# tests/web drive this browser with Playwright; no browser is ever downloaded (fonts: screenshots).
+test_pkgs=(chromium fonts-dejavu-core)
 pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
 case "${1:-}" in
   --build) pkgs=("${build_pkgs[@]}") ;;
   --runtime) pkgs=("${runtime_pkgs[@]}") ;;
   --bench) pkgs+=("${bench_pkgs[@]}") ;;
-  "") ;;
+  "") pkgs+=("${test_pkgs[@]}") ;;
   *) echo "usage: $0 [--build|--runtime|--bench]" >&2; exit 2 ;;
 esac
 

@@ -34,10 +34,19 @@ EXIT_REJECTED = 8
 EXIT_JOB_FAILED = 9
 EXIT_CANCELLED = 10
 
-#: Further statuses of ``geosmooth submit``, set by ``service.client.submit``.
+#: Further statuses of ``geosmooth submit`` (``service.cli.submit``).
 SUBMIT_EXIT_CODES: dict[int, str] = {
     EXIT_UNREACHABLE: "submit: the server cannot be reached",
     EXIT_REJECTED: "submit: the server rejected the input or the parameters",
     EXIT_JOB_FAILED: "submit: the job failed on the server",
     EXIT_CANCELLED: "submit: the job was cancelled",
+}
+
+EXIT_ADDRESS = 11
+
+#: Further statuses of ``geosmooth serve`` (``service.api.server``).
+SERVE_EXIT_CODES: dict[int, str] = {
+    EXIT_USAGE: "serve: invalid setting (the message names the GEOSMOOTH_ variable), keys "
+    "file, or a non-loopback address without API keys (see --insecure-no-auth)",
+    EXIT_ADDRESS: "serve: the address cannot be bound (port in use, permission, unknown host)",
 }

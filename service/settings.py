@@ -64,6 +64,19 @@ class Settings(BaseSettings):
         description="Largest input accepted by the synchronous POST /v1/smooth (points).",
     )
 
+    # --- web page and job events (service/api/routers/events.py) ---
+    events_poll_seconds: float = Field(
+        default=0.2,
+        gt=0,
+        le=10,
+        description="How often GET /v1/jobs/{id}/events reads the job record (seconds).",
+    )
+    events_ping_seconds: float = Field(
+        default=15.0,
+        gt=0,
+        description="Interval of the keep-alive ``: ping`` comments of the events stream.",
+    )
+
 
 @lru_cache(maxsize=1)
 def get_settings() -> Settings:

@@ -15,7 +15,7 @@ from starlette.concurrency import run_in_threadpool
 from service.api.limits import BodySizeLimitMiddleware
 from service.api.metrics import Metrics
 from service.api.problems import PROBLEM_MEDIA_TYPE, install_problem_handlers
-from service.api.routers import health, jobs, smooth
+from service.api.routers import events, health, info, jobs, smooth, web
 from service.api.schemas import (
     COMPONENT_REFS,
     GEOMETRY_EXAMPLE,
@@ -142,6 +142,8 @@ def create_app(settings: Settings | None = None, queue: JobQueue | None = None) 
         summary="Smoothing of meshes, polylines and point clouds with a deviation budget.",
         description=DESCRIPTION,
         lifespan=_lifespan,
+        docs_url=None,  # /docs and /redoc: served offline by routers/web.py
+        redoc_url=None,
         openapi_tags=[
             {"name": "jobs", "description": "Asynchronous smoothing jobs."},
             {"name": "smooth", "description": "Synchronous smoothing of small inputs."},
@@ -158,5 +160,8 @@ def create_app(settings: Settings | None = None, queue: JobQueue | None = None) 
     app.include_router(jobs.router)
     app.include_router(smooth.router)
     app.include_router(health.router)
+    app.include_router(events.router)
+    app.include_router(info.router)
+    app.include_router(web.router)
     app.openapi = lambda: _openapi_with_extra_models(app)  # type: ignore[method-assign]
     return app

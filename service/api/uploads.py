@@ -177,9 +177,7 @@ async def _from_multipart(
         upload = form.get("file")
         if not isinstance(upload, UploadFile):
             raise _missing("file", "a file part named 'file' is required")
-        params = form.get("params")
-        if params is None:
-            raise _missing("params", "a 'params' field (JSON object) is required")
+        params = form.get("params")  # None: checked by read_smooth_input
         fmt = form.get("format")
         weld = _flag(form.get("weld"))
         data = await upload.read()
@@ -212,15 +210,13 @@ async def _from_json(request: Request) -> tuple[bytes, Any, Any, bool]:
             title="Invalid request",
             field=unknown[0],
         )
-    if "params" not in obj:
-        raise _missing("params", "a 'params' member (object) is required")
     if not isinstance(obj.get("geometry"), dict):
         raise _missing("geometry", "a 'geometry' member (object with points) is required")
     weld = obj.get("weld", False)
     if not isinstance(weld, bool):
         raise _bad_weld()
     data = (await run_in_threadpool(_compact, obj["geometry"])).encode()
-    return data, obj["params"], obj["geometry"], weld
+    return data, obj.get("params"), obj["geometry"], weld
 
 
 def _compact(obj: Any) -> str:
@@ -243,7 +239,17 @@ def _inline_document(geometry: Any, weld: bool) -> GeometryDocument:
         raise InvalidInlineGeometry(exc) from None
 
 
-async def read_smooth_input(request: Request, max_points: int) -> SmoothInput:
+def _given_params(raw: Any, required: bool) -> SmoothingParams:
+    if raw is not None:
+        return _params(raw)
+    if required:
+        raise _missing("params", "a 'params' part or member (JSON object) is required")
+    return SmoothingParams.model_construct()  # the defaults, no target (POST /v1/info)
+
+
+async def read_smooth_input(
+    request: Request, max_points: int, *, params_required: bool = True
+) -> SmoothInput:
     """Read, validate and parse the smoothing request of ``request``.
 
     Parameters
@@ -253,6 +259,8 @@ async def read_smooth_input(request: Request, max_points: int) -> SmoothInput:
         ``application/json`` (``{"geometry": {...}, "params": {...}}``).
     max_points : int
         Largest input accepted (points); larger gives 413.
+    params_required : bool
+        ``False`` (``POST /v1/info``): without ``params`` the defaults are used, with no target.
 
     Raises
     ------
@@ -262,14 +270,14 @@ async def read_smooth_input(request: Request, max_points: int) -> SmoothInput:
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype == "multipart/form-data":
         data, filename, explicit, raw_params, weld = await _from_multipart(request)
-        params = _params(raw_params)
+        params = _given_params(raw_params, params_required)
         fmt = _format(explicit, filename)
         if not data:
             raise ApiProblem(400, "the uploaded file is empty", code="format-error", field="file")
         document = await run_in_threadpool(_read_file, data, fmt, filename, weld)
     elif ctype == "application/json" or ctype.endswith("+json"):
         data, raw_params, geometry, weld = await _from_json(request)
-        params = _params(raw_params)
+        params = _given_params(raw_params, params_required)
         filename, fmt = None, "json"
         document = await run_in_threadpool(_inline_document, geometry, weld)
     else:

@@ -263,7 +263,9 @@ def tangential_ratio(
 
 
 def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> SmoothingParams:
-    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input."""
+    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input
+    (free for ``method="windowed-sinc"``, Taubin's filter of the points themselves)."""
     if params.displacement != "auto":
         return params
-    return params.model_copy(update={"displacement": DEFAULT_DISPLACEMENT[geometry.kind]})
+    mode = "free" if params.method == "windowed-sinc" else DEFAULT_DISPLACEMENT[geometry.kind]
+    return params.model_copy(update={"displacement": mode})

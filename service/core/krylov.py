@@ -54,18 +54,18 @@ class Quadrature:
     weights: list[Array]
     order: int = 1
 
-    def phi(self, lam: float) -> float:
-        """``phi_j(lambda)``: sum over columns of ``sum_i w_i f(theta_i)``."""
-        k = self.order
+    def phi(self, lam: float, order: int | None = None) -> float:
+        """``phi_j(lambda)``: sum over columns of ``sum_i w_i f(theta_i)`` (order ``k``)."""
+        k = self.order if order is None else order
         total = 0.0
         for th, w in zip(self.nodes, self.weights, strict=True):
             th = np.maximum(th, 0.0)
             total += float(np.sum(w * th ** (2 * k - 2) / (th + lam) ** (2 * k)))
         return total
 
-    def root(self, tau: float, lo: float, hi: float) -> float:
+    def root(self, tau: float, lo: float, hi: float, order: int | None = None) -> float:
         """``lambda`` in ``[lo, hi]`` with ``phi_j(lambda) = tau``."""
-        return log_bisect(self.phi, tau, lo, hi)
+        return log_bisect(lambda lam: self.phi(lam, order), tau, lo, hi)
 
 
 def log_bisect(
@@ -180,11 +180,13 @@ def pcg(
     x0: Array | None = None,
     rtol: float = 1e-10,
     maxiter: int = 5000,
+    bound: Callable[[Array, Array], float] | None = None,
 ) -> tuple[Array, int, bool]:
     """Preconditioned CG for ``K X = R`` column by column, ``K = M + lambda diag(d2)``.
 
-    Stops when the true residual satisfies ``||D^-1 (R - K X)||_F <= rtol * lambda * ||D X||_F``,
-    which bounds the error ``||D (X - X*)||_F / ||D X||_F`` by ``rtol`` (module docstring).
+    Stops when ``bound(R_k, Z_k) <= rtol ||D X||_F`` for the true residual ``R_k`` and the
+    preconditioned one ``Z_k``, where ``bound`` bounds the error ``||D (X - X*)||_F``; by default
+    ``||D^-1 R_k||_F / lambda`` (module docstring).
 
     Returns
     -------
@@ -195,11 +197,12 @@ def pcg(
     """
     d = np.sqrt(d2)[:, None]
     X = np.zeros_like(R) if x0 is None else np.array(x0, dtype=np.float64, copy=True)
+    if bound is None:
+        bound = lambda Rk, Zk: float(np.linalg.norm(Rk / d)) / lam  # noqa: E731
     products = 0
 
-    def small(Rk: Array) -> bool:
-        size = max(float(np.linalg.norm(d * X)), 1e-300)
-        return bool(float(np.linalg.norm(Rk / d)) <= rtol * lam * size)
+    def small(Rk: Array, Zk: Array) -> bool:
+        return bound(Rk, Zk) <= rtol * max(float(np.linalg.norm(d * X)), 1e-300)
 
     if not np.any(R):
         return np.zeros_like(R), 0, True
@@ -207,13 +210,12 @@ def pcg(
     if x0 is not None:
         Rk -= apply_k(X)
         products += 1
+    ok = False
     for _restart in range(4):
         Z = precond(Rk)
         Pk = Z.copy()
         rz = np.einsum("ij,ij->j", Rk, Z)
-        for _ in range(maxiter):
-            if small(Rk):
-                break
+        while products < maxiter and not small(Rk, Z):
             KP = apply_k(Pk)
             products += 1
             pKp = np.einsum("ij,ij->j", Pk, KP)
@@ -225,13 +227,12 @@ def pcg(
             beta = np.divide(rz_new, rz, out=np.zeros_like(rz), where=rz > 0)
             Pk = Z + Pk * beta
             rz = rz_new
-            if products >= maxiter:
-                break
         Rk = R - apply_k(X)  # the recursive residual drifts: confirm with the true one
         products += 1
-        if small(Rk) or products >= maxiter:
+        ok = small(Rk, precond(Rk))
+        if ok or products >= maxiter:
             break
-    return X, products, small(Rk)
+    return X, products, ok
 
 
 @dataclass
@@ -259,13 +260,16 @@ class ShiftInvert:
             total += float(nrm**2 * np.sum(Z[0] ** 2 * g))
         return total
 
-    def first_solution(self, lam: float) -> Array:
-        """``(M_t + lambda I)^-1 c`` from the Krylov basis (Galerkin), shape (m, s)."""
+    def vector(self, lam: float, h: Callable[[Array, float], Array]) -> Array:
+        """``h(S) c`` from the Krylov basis (Galerkin), shape (m, s); ``h(theta, delta)``.
+
+        E.g. ``h = theta / (1 + delta theta)`` gives ``(M_t + lambda I)^-1 c``.
+        """
         d = lam - self.lam0
         out = np.zeros((self.basis[0].shape[0], self.live.size))
         cols = np.flatnonzero(self.live)
         for col, (nrm, th, Z) in enumerate(zip(self.norms, self.thetas, self.vectors, strict=True)):
-            coef = Z @ (th / (1 + d * th) * Z[0]) * nrm
+            coef = Z @ (h(th, d) * Z[0]) * nrm
             for i in range(coef.size):
                 out[:, cols[col]] += coef[i] * self.basis[i][:, col]
         return out

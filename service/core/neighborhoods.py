@@ -29,6 +29,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from service.core._arrays import unique_keys
+
 __all__ = [
     "Neighborhoods",
     "cloud_delaunay_neighborhoods",
@@ -76,16 +78,41 @@ class Neighborhoods:
 
 
 def _adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
-    adj = sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
-    adj.sum_duplicates()
-    adj.data[:] = 1.0
-    return adj
+    """Pattern (ones) of the pairs ``(i, j)``, duplicates merged, via integer keys ``i n + j``."""
+    keys = np.sort(i.astype(np.int64) * n + j.astype(np.int64))
+    keys = keys[np.concatenate([[True], keys[1:] != keys[:-1]])] if keys.size else keys
+    rows, cols = np.divmod(keys, n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    return sp.csr_matrix((np.ones(keys.size), cols, indptr), shape=(n, n))
+
+
+def _row_keys(rows: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """One integer per row of small non-negative integers below ``n`` (sorted rows recommended):
+    exact mixed-radix keys when they fit in int64, else the row's index among distinct rows."""
+    width = rows.shape[1]
+    if width * np.log2(max(n, 2)) < 62:
+        key = np.zeros(rows.shape[0], dtype=np.int64)
+        for c in range(width):
+            key = key * n + rows[:, c]
+        return key
+    order = np.lexsort(rows.T[::-1])
+    srt = rows[order]
+    new = np.ones(len(rows), dtype=bool)
+    new[1:] = (srt[1:] != srt[:-1]).any(axis=1)
+    key = np.empty(len(rows), dtype=np.int64)
+    key[order] = np.cumsum(new) - 1
+    return key
 
 
 def unique_faces(faces: NDArray[np.int64]) -> NDArray[np.int64]:
     """Drop duplicate triangles (same vertex set, any order or winding), keeping the first."""
-    key = np.sort(faces, axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
+    if len(faces) == 0:
+        return faces
+    key = _row_keys(np.sort(faces, axis=1), int(faces.max()) + 1)
+    _, first, _, _ = unique_keys(key)
+    if first.size == len(faces):
+        return faces
     return faces[np.sort(first)]
 
 
@@ -156,11 +183,14 @@ def mesh_neighborhoods(
     i = np.concatenate([wedges[:, 0], wedges[:, 0]])
     j = np.concatenate([wedges[:, 1], wedges[:, 2]])
     adj = _adjacency(i, j, n)
-    # boundary: undirected edges used by exactly one face
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    # boundary: undirected edges used by exactly one face (integer keys min * n + max)
+    a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    uniq, _, counts, _ = unique_keys(np.minimum(a, b) * n + np.maximum(a, b))
     boundary = np.zeros(n, dtype=bool)
-    boundary[uniq[counts == 1].ravel()] = True
+    single = uniq[counts == 1]
+    boundary[single // n] = True
+    boundary[single % n] = True
     chains = _EMPTY3
     if edges is not None and len(edges):
         in_face = np.zeros(n, dtype=bool)
@@ -217,12 +247,37 @@ def cloud_knn_neighborhoods(points: NDArray[np.float64], k: int) -> Neighborhood
 def _local_frames(
     points: NDArray[np.float64], idx: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Principal directions and variances of each point with its neighbours (least squares)."""
+    """Two largest principal variances and directions of each point with its neighbours.
+
+    From the ``s x s`` covariance when ``s <= k + 1``, else from the ``(k+1) x (k+1)`` Gram
+    matrix of the centred neighbourhood (same nonzero spectrum): the cost stays linear in the
+    dimension ``s``.
+
+    Returns
+    -------
+    evals : ndarray, shape (n, 2)
+        Decreasing.
+    dirs : ndarray, shape (n, s, 2)
+        Unit directions as columns.
+    """
     nbh = np.concatenate([points[:, None, :], points[idx]], axis=1)  # (n, k+1, s)
     centered = nbh - nbh.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centered, centered) / nbh.shape[1]
-    evals, evecs = np.linalg.eigh(cov)  # ascending
-    return evals[:, ::-1], evecs[:, :, ::-1]
+    size, s = nbh.shape[1], nbh.shape[2]
+    if s <= size:
+        cov = np.einsum("nki,nkj->nij", centered, centered) / size
+        evals, evecs = np.linalg.eigh(cov)  # ascending
+        top = evecs[:, :, ::-1][:, :, :2]
+        vals = evals[:, ::-1][:, :2]
+    else:
+        gram = np.einsum("nki,nli->nkl", centered, centered)
+        evals, U = np.linalg.eigh(gram)
+        vals = evals[:, ::-1][:, :2] / size
+        dirs = np.einsum("nki,nkj->nij", centered, U[:, :, ::-1][:, :, :2])
+        top = dirs / np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+    if s == 1:
+        vals = np.concatenate([vals, np.zeros((vals.shape[0], 1))], axis=1)
+        top = np.concatenate([top, np.zeros_like(top)], axis=2)
+    return vals, top
 
 
 def _polar_hull_fans(
@@ -265,7 +320,7 @@ def _polar_hull_fans(
     order = np.full((n, m + 1), -1, dtype=np.int64)
     order[:, 0] = np.where(has_any, start, -1)
     active = has_any.copy()
-    for step in range(1, m + 2):
+    for step in range(1, m + 1):  # at most m + 1 hull vertices: slots 0..m
         if not active.any():
             break
         ar = rows[active]

@@ -34,8 +34,9 @@ from service.core.operator import (
     operator_key,
 )
 from service.core.params import SmoothingParams
+from service.core.polyfilter import DEGREE, SincFilter, sinc_deviation, windowed_sinc
 from service.core.progress import ProgressCallback, ProgressEvent
-from service.core.resources import choose_solver
+from service.core.resources import choose_solver, prefer_matrix_free
 from service.core.result import SmoothResult, Spectrum
 from service.core.shrinkage import check_preservable, preserve_measure
 from service.core.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
@@ -62,6 +63,7 @@ class Run:
         self.tau: float | None = None
         self.frame = frame
         self.notes: list[str] = []
+        self.search_seconds = 0.0
         self.sigma: float | None = None  # core-quality: automatic tau, max-norm bound
         self.tau_how: str | None = None
         self.bound: dict[str, Any] | None = None
@@ -132,8 +134,10 @@ def smooth(
     system, to_points = smoothing_system(geometry, op, fixed, frame, params)
     run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
-    if system.size == 0 or system.M.nnz == 0:
+    if system.empty:
         return _unchanged(geometry, params, op, run, n_fixed)
+    if params.method == "windowed-sinc":
+        return _filtered(geometry, params, op, run, system, to_points, fixed, n_fixed)
     dev = Deviation(
         system,
         solver=choose_solver(system, params, memory_limit, run.notes),
@@ -142,12 +146,14 @@ def smooth(
         symbolic=cache.analysis_of,
     )
     dev.listener = run.evaluated
+    t_search = time.perf_counter()
     if params.tau_rule == "auto" and run.tau:
         _knee(dev, run)
     if params.tau_rule == "gcv":
         search = _gcv(dev, geometry, params, fixed, run)
     else:
         search = find_lambda(dev, op, fixed, params, run)
+    run.search_seconds = time.perf_counter() - t_search
     run.emit("postprocess", iteration=len(dev.history))
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
@@ -282,7 +288,7 @@ def find_lambda(
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
     if params.search == "rational":
         assert phi0 is not None
-        lam0 = initial_lambda(_fro(system.M), float(np.linalg.norm(system.d2)))
+        lam0 = initial_lambda(_fro(system.explicit()), float(np.linalg.norm(system.d2)))
         return search_lambda(dev, tau, phi0, lam0, params.tolerance, params.max_iterations)
     lo, hi = dev.floor, max(system.lambda_ceiling(tau), dev.floor)
     inv_d = 1.0 / np.sqrt(system.d2)[:, None]
@@ -294,6 +300,11 @@ def find_lambda(
         hi,
         order=dev.order,
     )
+    if params.solver == "auto" and prefer_matrix_free(system.size, lam0, system.mu_bound()):
+        dev.use_matrix_free()
+        run.notes.append(
+            "matrix-free path: conjugate gradients are cheaper at this size and lambda"
+        )
     search = newton_search(
         dev,
         dev.derivative,
@@ -398,6 +409,59 @@ def _bounded(
     return dev.system.U0 + res.E, LambdaSearch(res.lam, res.phi, converged, history)
 
 
+def _filtered(
+    geometry: Geometry,
+    params: SmoothingParams,
+    op: SmoothingOperator,
+    run: Run,
+    system: SmoothingSystem,
+    to_points: Callable[[Array], Array],
+    fixed: NDArray[np.bool_],
+    n_fixed: int,
+) -> SmoothResult:
+    """``method="windowed-sinc"``: the pass band meeting tau from Chebyshev moments
+    (:mod:`service.core.polyfilter`), no factorization. ``lam`` given: the pass band's edge."""
+    assert run.frame is not None
+    frame = run.frame
+    if params.laplacian != "normalized":
+        raise ParameterError(
+            "method 'windowed-sinc' needs laplacian 'normalized': the row scales of L(kappa) "
+            "and L(f) spread the spectrum beyond what a polynomial filter resolves",
+            field="params.method",
+        )
+    dev = Deviation(system, solver="cg")  # products with M (counted), no solve
+    d = np.sqrt(system.d2)[:, None]
+
+    def apply_op(V: Array) -> Array:
+        return dev.solver.matvec(V / d) / d
+
+    mu_max = 1.01 * system.mu_bound()
+    c = system.r / d
+    if params.lam is not None:
+        mu_pb = min(frame.lam_in(params.lam), mu_max)
+        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, DEGREE)
+    else:
+        assert run.tau is not None
+        tau = run.tau / frame.phi_factor
+        bound = system.phi0 if system.phi0 is not None else system.phi0_bound
+        if bound is not None and tau >= bound:
+            _check_range(dev, op, fixed, params, run)
+        flt, _, _ = windowed_sinc(apply_op, c, tau, mu_max, tolerance=params.tolerance)
+    U = system.U0 + sinc_deviation(apply_op, c, flt) / d
+    phi = float(np.sum(system.d2[:, None] * (U - system.U0) ** 2))
+    lam = (flt.x_pb + 1) * mu_max / 2
+    converged = (
+        run.tau is None or abs(phi * frame.phi_factor - run.tau) <= params.tolerance * run.tau
+    )
+    if not converged:
+        run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
+    run.evaluated(lam, phi, 1)
+    X = geometry.points.copy()
+    X[~fixed] = frame.back(to_points(U))
+    search = LambdaSearch(lam, phi, converged, [(lam, phi)])
+    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed)
+
+
 def _fro(M: sp.spmatrix) -> float:
     return float(np.sqrt(np.sum(np.asarray(M.data) ** 2)))
 
@@ -448,6 +512,7 @@ def diagnostics(
     checks = shape_checks(geometry, X)
     ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
     run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
+    timings["search"] = run.search_seconds
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
     spectrum = None
@@ -469,7 +534,8 @@ def diagnostics(
         rms_deviation=float(np.sqrt(np.mean(dev_pt**2))),
         max_deviation=float(dev_pt.max()),
         timings=timings,
-        solver=dev.solver.name if dev is not None else "none",
+        solver=dev.solver.name if dev is not None and params.method == "tikhonov" else "none",
+        method=params.method,
         search="none" if params.lam is not None else params.search,
         order=params.order,
         laplacian=params.laplacian,

@@ -21,13 +21,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from service.core.params import SmoothingParams
-from service.core.solver import cholmod_available
+from service.core.solver import Gram, cholmod_available
 
 __all__ = [
+    "MATRIX_FREE_FROM",
     "ResourceEstimate",
     "choose_solver",
     "estimate_resources",
     "factor_size",
+    "prefer_matrix_free",
 ]
 
 Path = Literal["direct", "matrix-free"]
@@ -134,6 +136,21 @@ def _colcounts(n: int, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     return colcounts(n, indptr, indices)
 
 
+#: Unknowns from which ``solver="auto"`` takes conjugate gradients when lambda is not small.
+MATRIX_FREE_FROM = 200_000
+#: ... and ``lambda >= MATRIX_FREE_MIN_LAMBDA * ||M_t||`` (condition number at most 1e3).
+MATRIX_FREE_MIN_LAMBDA = 1e-3
+
+
+def prefer_matrix_free(size: int, lam: float, mu_bound: float) -> bool:
+    """Whether CG beats a factorization for ``size`` unknowns at ``lambda`` (the estimate).
+
+    CG needs O(sqrt(||M_t|| / lambda)) products whatever ``n`` (issue 8: ~100 at lambda* ~ 0.05),
+    while the factorization grows like ``n^1.5``; measured crossover in service/core/README.md.
+    """
+    return size >= MATRIX_FREE_FROM and lam >= MATRIX_FREE_MIN_LAMBDA * mu_bound
+
+
 def choose_solver(
     system: Any, params: SmoothingParams, memory_limit: int | None, notes: list[str]
 ) -> Literal["cholmod", "superlu", "cg"]:
@@ -148,13 +165,21 @@ def choose_solver(
     if memory_limit is None or system.size < 2000:
         return name
     m = system.size
-    nnz_row = system.M.nnz / max(m, 1)
-    coarse = 0.5 * nnz_row * m * max(math.log2(m), 1.0) * _BYTES_PER_FACTOR_ENTRY
+    M = system.M
+    nnz_m = M.nnz_bound() if isinstance(M, Gram) else M.nnz
+    m_bytes = 12.0 * nnz_m * 3  # M, K's pattern and values, the analysis' copy
+    coarse = 0.5 * nnz_m * max(math.log2(m), 1.0) * _BYTES_PER_FACTOR_ENTRY + m_bytes
     if coarse < memory_limit / 8:
         return name
+    if m_bytes > memory_limit / 2:
+        notes.append(
+            f"matrix-free path: L^T L alone would take {m_bytes / 2**20:.0f} MiB, more than "
+            f"half the memory limit of {memory_limit / 2**20:.0f} MiB"
+        )
+        return "cg"
     from service.core import cache
 
-    pattern = (sp.csc_matrix(system.M) + sp.diags(system.d2)).tocsc()
+    pattern = (sp.csc_matrix(system.explicit()) + sp.diags(system.d2)).tocsc()
     perm = cache.analysis_of(pattern).P() if cholmod_available() else None
     entries, _ = factor_size(pattern, perm)
     need = entries * _BYTES_PER_FACTOR_ENTRY

@@ -12,7 +12,7 @@ import pytest
 
 import service.core
 from service import cli
-from service.cli_progress import ProgressDisplay, format_summary
+from service.cli.progress import ProgressDisplay, format_summary
 from service.core import SmoothingParams
 from service.core.progress import ProgressEvent
 
@@ -182,18 +182,27 @@ def test_help_documents_exit_codes(capsys: pytest.CaptureFixture[str]):
         assert "--" + name.replace("_", "-") in out
 
 
-def test_submit_exit_codes_match_the_client():
-    from service import client
+def test_exit_status_tables_are_disjoint_and_cover_every_error_class():
+    from service import exit_codes
+    from service.core.errors import GeosmoothError
+    from service.io.errors import FormatError
 
     assert set(cli.SUBMIT_EXIT_CODES) == {
-        client.EXIT_UNREACHABLE,
-        client.EXIT_REJECTED,
-        client.EXIT_JOB_FAILED,
-        client.EXIT_CANCELLED,
+        exit_codes.EXIT_UNREACHABLE,
+        exit_codes.EXIT_REJECTED,
+        exit_codes.EXIT_JOB_FAILED,
+        exit_codes.EXIT_CANCELLED,
     }
     assert not set(cli.SUBMIT_EXIT_CODES) & set(cli.EXIT_CODES)
-    assert client.EXIT_INPUT == cli.EXIT_INPUT and client.EXIT_OUTPUT == cli.EXIT_OUTPUT
-    assert client.EXIT_INTERRUPTED == cli.EXIT_INTERRUPTED
+    assert not set(cli.SERVE_EXIT_CODES) & set(cli.SUBMIT_EXIT_CODES)
+    # uvicorn's own startup failure status (3) is "input file missing" here: serve has its own
+    assert 3 not in cli.SERVE_EXIT_CODES and exit_codes.EXIT_ADDRESS not in cli.EXIT_CODES
+
+    def classes(base: type) -> list[type]:
+        return [base] + [c for sub in base.__subclasses__() for c in classes(sub)]
+
+    for cls in classes(GeosmoothError) + classes(FormatError):
+        assert cls.exit_code in cli.EXIT_CODES, cls  # every typed error's status is documented
 
 
 def test_internal_error_is_one_line_and_debug_shows_traceback(
@@ -264,47 +273,46 @@ def test_ctrl_c_exits_130_quietly(
     assert not out.exists()
 
 
-def test_serve_and_submit_are_lazy_and_forward_arguments(monkeypatch: pytest.MonkeyPatch):
+def test_serve_and_submit_are_lazy_and_forward_arguments(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+):
+    import json
+    import socket
     import sys
     import types
+
+    from service.cli import submit as submit_command
 
     calls: dict[str, object] = {}
     server = types.ModuleType("service.api.server")
     server.serve = lambda host, port, workers, data_dir: calls.update(  # type: ignore[attr-defined]
         serve=(host, port, workers, data_dir)
     )
-    client = types.ModuleType("service.client")
-
-    def submit(
-        input_path, server_url, params, output, report=None, fmt=None, quiet=False, weld=False
-    ):
-        calls["submit"] = (input_path, server_url, params, output, report, fmt, quiet)
-        calls["weld"] = weld
-        return 7
-
-    client.submit = submit  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "service.api.server", server)
-    monkeypatch.setitem(sys.modules, "service.client", client)
+    with socket.socket() as sock:  # a port that is free now
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    argv = ["serve", "--port", str(port), "--workers", "2", "--data-dir", str(tmp_path / "d")]
+    assert cli.main(argv) == 0
+    assert calls["serve"] == ("127.0.0.1", port, 2, str(tmp_path / "d"))
 
-    assert cli.main(["serve", "--port", "8123", "--workers", "2", "--data-dir", "/tmp/x"]) == 0
-    assert calls["serve"] == ("127.0.0.1", 8123, 2, "/tmp/x")
+    def remote(ns, params, out_fmt, progress):  # what would go to the server
+        calls["submit"] = (ns.input, ns.server, params, out_fmt, ns.weld)
+        return b"smoothed", {"history": [], "tau": None}
+
+    monkeypatch.setattr(submit_command, "_remote", remote)
+    src, out, rep = tmp_path / "in.ply", tmp_path / "o.obj", tmp_path / "r.json"
+    src.write_bytes(b"ply")
     rc = cli.main([
-        "submit", "in.ply", "--server", "http://h:1", "-o", "o.ply", "--rms", "0.1",
-        "--laplacian", "feature", "--report", "r.json", "-q", "--weld",
+        "submit", str(src), "--server", "http://h:1", "-o", str(out), "--rms", "0.1",
+        "--laplacian", "feature", "--report", str(rep), "-q", "--weld",
     ])  # fmt: skip
-    assert rc == 7
-    assert calls["weld"] is True
-    path, url, params, output, report, fmt, quiet = calls["submit"]  # type: ignore[misc]
-    assert (path, url, output, report, fmt, quiet) == (
-        "in.ply",
-        "http://h:1",
-        "o.ply",
-        "r.json",
-        None,
-        True,
-    )
-    assert isinstance(params, SmoothingParams)
-    assert params.rms == 0.1 and params.laplacian == "feature"
+    assert rc == 0
+    path, url, params, fmt, weld = calls["submit"]  # type: ignore[misc]
+    assert (path, url, fmt, weld) == (str(src), "http://h:1", "obj", True)
+    assert params == {"rms": 0.1, "laplacian": "feature"}  # only what was given
+    assert out.read_bytes() == b"smoothed"
+    assert json.loads(rep.read_text()) == {"history": [], "tau": None}
 
 
 def test_smooth_does_not_import_the_http_stack(tmp_path: Path):

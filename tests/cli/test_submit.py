@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -25,7 +27,7 @@ from api_helpers import (
     phi,
 )
 
-from service.client import (
+from service.exit_codes import (
     EXIT_CANCELLED,
     EXIT_JOB_FAILED,
     EXIT_REJECTED,
@@ -79,14 +81,23 @@ def test_submit_downloads_result_and_report(live: LiveServer, tmp_path: Path) ->
 
 
 def test_submit_shows_progress(live: LiveServer, tmp_path: Path) -> None:
+    """Every iteration the job went through is shown, even those between two looks at the job
+    (the events stream delivers each one; without it, the report's history fills the gaps)."""
     src = tmp_path / "cloud.xyz"
-    src.write_bytes(encode("xyz", noisy_plane_cloud(20000, seed=41), None))
-    out = tmp_path / "cloud.out.xyz"
-    done = _run(src, "--server", live.url, "-o", out, "--tau", "1", "--tolerance", "1e-9")
+    src.write_bytes(encode("xyz", noisy_plane_cloud(2000, seed=41), None))
+    out, report = tmp_path / "cloud.out.xyz", tmp_path / "report.json"
+    done = _run(src, "--server", live.url, "-o", out, "--tau", "1", "--tolerance", "1e-9",
+                "--report", report)  # fmt: skip
     assert done.returncode == 0, done.stderr
-    lines = [ln for ln in done.stderr.splitlines() if "iteration" in ln]
+    data = json.loads(report.read_text())
+    lines = [ln for ln in done.stderr.splitlines() if ln.startswith("geosmooth: iteration")]
     assert lines, done.stderr
-    assert "lambda=" in lines[0] and "phi=" in lines[0] and "rel.error=" in lines[0]
+    numbers = [int(ln.split()[2]) for ln in lines]
+    assert numbers == sorted(set(numbers)) and numbers[-1] == data["iterations"] >= 2
+    for line in lines:
+        assert "lambda=" in line and "phi=" in line and "tau=" in line and "rel.error=" in line
+    assert f"lambda={data['lambda']:.4e}" in lines[-1] and f"phi={data['phi']:.4e}" in lines[-1]
+    assert "upload, queue, smooth, download" in done.stderr
 
 
 def test_submit_rejected_input(live: LiveServer, tmp_path: Path) -> None:
@@ -99,13 +110,21 @@ def test_submit_rejected_input(live: LiveServer, tmp_path: Path) -> None:
     assert not (tmp_path / "o.xyz").exists()
 
 
-def test_submit_failed_job(live: LiveServer, tmp_path: Path) -> None:
-    pts, faces = noisy_sphere(1)
-    src = tmp_path / "s.obj"
-    src.write_bytes(encode("obj", pts, faces))
-    done = _run(src, "--server", live.url, "-o", tmp_path / "o.obj", "--tau", "1e9")
+def test_submit_failed_job(tmp_path: Path) -> None:
+    """A job that fails on the server (here: over the server's time limit per job; invalid
+    parameters are refused before a job exists) ends with exit status 9 and the reason."""
+    env = {"GEOSMOOTH_JOB_TIMEOUT": "0.3"}
+    server = LiveServer(tmp_path / "data", workers=1, env=env).start()
+    try:
+        src = tmp_path / "slow.xyz"
+        src.write_bytes(encode("xyz", noisy_plane_cloud(30000, seed=45), None))
+        slow = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "48"]
+        done = _run(src, "--server", server.url, "-o", tmp_path / "o.xyz", *slow)
+    finally:
+        server.stop()
     assert done.returncode == EXIT_JOB_FAILED, done.stderr
-    assert "failed" in done.stderr.splitlines()[-1]
+    last = done.stderr.splitlines()[-1]
+    assert last.startswith("geosmooth: error: job ") and "failed: Job timed out" in last, last
 
 
 def test_submit_unreachable_server(tmp_path: Path) -> None:
@@ -184,3 +203,43 @@ def test_submit_weld_keeps_split_vertices_together(live: LiveServer, tmp_path: P
         assert np.all(after[copies] == after[copies[0]])
     assert json.loads(report.read_text())["n_points"] == 6
     assert not np.allclose(after, pts)  # it did smooth: a welded octahedron shrinks
+
+
+def _bytes_acked(port: int) -> int:
+    """Bytes the server acknowledged on established connections to ``port`` (``ss -ti``)."""
+    out = subprocess.run(
+        ["ss", "-Htin", "state", "established", f"( dport = :{port} )"],
+        capture_output=True, text=True, check=True,
+    ).stdout  # fmt: skip
+    return max((int(n) for n in re.findall(r"bytes_acked:(\d+)", out)), default=0)
+
+
+@pytest.mark.skipif(shutil.which("ss") is None, reason="needs ss (iproute2)")
+def test_ctrl_c_after_the_upload_cancels_the_new_job(live: LiveServer, tmp_path: Path) -> None:
+    """Ctrl-C once every byte is sent, while the server still parses the upload: the client
+    waits for the job id and cancels that job (issue 12: it used to keep running)."""
+    src = tmp_path / "big.xyz"
+    src.write_bytes(encode("xyz", noisy_plane_cloud(200_000, seed=44), None))
+    size = src.stat().st_size
+    with live.client() as client:
+        before = {j["id"] for j in client.get("/v1/jobs", params={"limit": 500}).json()["items"]}
+    args = ["--tau", "1", "--tolerance", "1e-9", "--neighborhood", "knn", "--k", "16"]
+    cmd = [str(GEOSMOOTH), "submit", str(src), "--server", live.url, "-o", str(tmp_path / "o")]
+    proc = subprocess.Popen([*cmd, *args], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while _bytes_acked(live.port) < size and time.monotonic() < deadline:
+            time.sleep(0.002)  # the server's kernel has every byte of the file
+        proc.send_signal(signal.SIGINT)
+        with live.client() as client:  # the server is still parsing: no new job yet
+            listed = client.get("/v1/jobs", params={"limit": 500}).json()["items"]
+        assert {j["id"] for j in listed} == before, "the upload was not interrupted in time"
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    with live.client() as client:
+        jobs = client.get("/v1/jobs", params={"limit": 500}).json()["items"]
+    new = [j for j in jobs if j["id"] not in before]
+    assert proc.returncode == 130, stderr
+    assert len(new) == 1 and new[0]["status"] == "cancelled", (new, stderr)
+    assert f"job {new[0]['id']} cancelled" in stderr

@@ -1,19 +1,23 @@
-"""Terminal output of ``geosmooth smooth``: the lambda-search progress line and the summary.
+"""Terminal output of ``smooth`` and ``submit``: the lambda-search progress line and the summary.
 
 Everything here writes to a text stream (stderr in the CLI) so that stdout stays free for
-``-o -``. Nothing here imports numpy or the engine: the summary reads a
-:meth:`service.core.SmoothResult.report` dictionary.
+``-o -``. Nothing here imports numpy or the engine: the progress line shows
+``(iteration, lambda, phi, tau)`` from a local progress event or a remote job alike, and the
+summary reads a :meth:`service.core.SmoothResult.report` dictionary (local, or a job's report).
 """
 
 from __future__ import annotations
 
+import argparse
+import time
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, TextIO
 
 if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
     from service.core.progress import ProgressEvent
 
-__all__ = ["ProgressDisplay", "format_summary"]
+__all__ = ["ProgressDisplay", "format_summary", "show_summary"]
 
 
 def _g(value: float | None, digits: int = 4) -> str:
@@ -60,6 +64,7 @@ class ProgressDisplay:
             tty = bool(isatty()) if callable(isatty) else False
         self.tty = tty
         self.calls = 0
+        self.last_iteration = 0
         self._width = 0
 
     def line(self, iteration: int, lam: float, phi: float) -> str:
@@ -83,20 +88,36 @@ class ProgressDisplay:
         return text
 
     def __call__(self, event: ProgressEvent) -> None:
+        """The ``progress`` callback of :func:`service.core.smooth`."""
         if event.tau is not None:
             self.tau = event.tau
         if event.lam is None or event.phi is None:
             return
+        self.show(event.iteration, event.lam, event.phi)
+
+    def show(self, iteration: int, lam: float, phi: float, tau: float | None = None) -> None:
+        """Show one lambda iteration (``tau``: the target, when newly known)."""
+        if tau is not None:
+            self.tau = tau
         self.calls += 1
+        self.last_iteration = max(self.last_iteration, iteration)
         if not self.enabled:
             return
-        text = self.line(event.iteration, event.lam, event.phi)
+        text = self.line(iteration, lam, phi)
         if self.tty:
             pad = max(0, self._width - len(text))
             self.stream.write("\r" + text + " " * pad)
             self._width = len(text)
         else:
             self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def note(self, text: str) -> None:
+        """A line of its own (e.g. a job's status), below the updating line."""
+        if not self.enabled:
+            return
+        self.finish()
+        self.stream.write(text + "\n")
         self.stream.flush()
 
     def finish(self) -> None:
@@ -122,6 +143,7 @@ def format_summary(
     source: str,
     target: str,
     wall_seconds: float,
+    wall_label: str = "read, smooth, write",
     tolerance: float | None = None,
     details: Sequence[str] = (),
     notes: Sequence[str] = (),
@@ -135,7 +157,9 @@ def format_summary(
     source, target : str
         Input and output file names as the user gave them.
     wall_seconds : float
-        Time measured by the CLI for reading, smoothing and writing (start-up excluded).
+        Time measured by the CLI for the whole run (start-up excluded).
+    wall_label : str
+        What ``wall_seconds`` covers (``"upload, queue, smooth, download"`` for ``submit``).
     tolerance : float, optional
         The relative tolerance xi the search used.
     details : sequence of str
@@ -185,7 +209,7 @@ def format_summary(
     timings: Mapping[str, float] = report.get("timings") or {}
     total = timings.get("total")
     lines.append(
-        f"  time {wall_seconds:.2f} s (read, smooth, write)"
+        f"  time {wall_seconds:.2f} s ({wall_label})"
         + (f", smoothing {float(total):.3f} s{_timings(timings)}" if total is not None else "")
         + "."
     )
@@ -193,3 +217,29 @@ def format_summary(
     warnings: Sequence[str] = report.get("warnings") or []
     lines.extend(f"  warning: {w}" for w in warnings)
     return "\n".join(lines)
+
+
+def show_summary(
+    display: ProgressDisplay,
+    report: Mapping[str, Any],
+    ns: argparse.Namespace,
+    params: SmoothingParams,
+    started: float,
+    **extra: Any,
+) -> None:
+    """The summary of a finished ``smooth`` or ``submit`` run, below its progress lines.
+
+    ``started`` is a :func:`time.perf_counter` reading; ``extra`` goes to
+    :func:`format_summary` (``details``, ``notes``, ``wall_label``). Nothing with ``--quiet``.
+    """
+    if not display.enabled:
+        return
+    text = format_summary(
+        report,
+        source=ns.input,
+        target=ns.output,
+        wall_seconds=time.perf_counter() - started,
+        tolerance=params.tolerance if params.lam is None else None,
+        **extra,
+    )
+    display.note(text)

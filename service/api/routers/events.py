@@ -1,0 +1,163 @@
+"""``GET /v1/jobs/{id}/events``: a job's progress as server-sent events.
+
+The server reads the job record every ``events_poll_seconds`` (default 0.2 s) through the
+:class:`~service.jobs.queue.JobQueue` protocol, so the stream works the same for every queue
+backend, and sends what changed:
+
+* ``event: progress``: ``data`` = the job's ``progress`` object (stage, iteration, lambda, phi,
+  tau, ...), whenever it changes while the job runs;
+* ``event: status``: ``data`` = the job, exactly as ``GET /v1/jobs/{id}`` answers it, on the first
+  read and on every status change. The last one carries a final status (succeeded, failed,
+  cancelled), and then the stream ends.
+
+Every event has an increasing ``id:``; a client that reconnects with ``Last-Event-ID`` gets ids
+that continue from it (and the current state again). ``: ping`` comments keep idle connections
+open (every ``events_ping_seconds``, default 15 s). The stream stops reading the queue as soon
+as the client disconnects.
+
+Programs can read it with any SSE client; the web page uses ``fetch()`` and a stream reader so
+that it can send the ``Authorization`` header (``EventSource`` cannot).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Annotated, Any
+
+import anyio
+from fastapi import APIRouter, Header, Request
+from sse_starlette import EventSourceResponse, ServerSentEvent
+from starlette.concurrency import run_in_threadpool
+
+from service.api.deps import JobDep, QueueDep, SettingsDep
+from service.api.docs import problem_responses
+from service.jobs.queue import JobQueue, JobRecord
+
+__all__ = ["job_event_stream", "router"]
+
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+
+_SEP = "\n"
+_EXAMPLE = (
+    'id: 1\nevent: status\ndata: {"id": "3f2a9c", "status": "running", ...}\n\n'
+    'id: 2\nevent: progress\ndata: {"stage": "search", "iteration": 3, '
+    '"lambda": 0.011, "phi": 0.47, "tau": 0.5, ...}\n\n'
+    ": ping\n\n"
+    'id: 7\nevent: status\ndata: {"id": "3f2a9c", "status": "succeeded", ...}\n\n'
+)
+
+
+def _job_json(record: JobRecord) -> dict[str, Any]:
+    """The job exactly as ``GET /v1/jobs/{id}`` renders it."""
+    public = getattr(record, "public_dict", None)  # the jobs protocol v2 record renders itself
+    if callable(public):
+        return dict(public())
+    from service.api.views import job_view  # the view of the protocol v1 record
+
+    return job_view(record).model_dump(mode="json", by_alias=True)
+
+
+def _event(kind: str, data: dict[str, Any], seq: int) -> ServerSentEvent:
+    text = json.dumps(data, separators=(",", ":"), allow_nan=False)
+    return ServerSentEvent(data=text, event=kind, id=str(seq), sep=_SEP)
+
+
+async def job_event_stream(
+    queue: JobQueue,
+    first: JobRecord,
+    *,
+    poll_seconds: float,
+    disconnected: Callable[[], Awaitable[bool]],
+    start_id: int = 0,
+) -> AsyncIterator[ServerSentEvent]:
+    """The events of one job, from ``first`` (its current record) until it is finished.
+
+    Parameters
+    ----------
+    queue : JobQueue
+        Read with ``queue.get(id)`` every ``poll_seconds``.
+    first : JobRecord
+        The record already read (and authorized) by the route.
+    poll_seconds : float
+        Interval between two reads of the record.
+    disconnected : callable
+        ``await disconnected()`` is true once the client has gone: the stream stops.
+    start_id : int
+        The first event gets id ``start_id + 1``.
+    """
+    seq = start_id
+    status: str | None = None
+    progress: Any = None
+    record: JobRecord | None = first
+    while record is not None:
+        job = _job_json(record)
+        if job.get("progress") is not None and job["progress"] != progress:
+            progress = job["progress"]
+            seq += 1
+            yield _event("progress", progress, seq)
+        if job["status"] != status:
+            status = job["status"]
+            seq += 1
+            yield _event("status", job, seq)
+        if record.finished:
+            return
+        await anyio.sleep(poll_seconds)
+        if await disconnected():
+            return
+        record = await run_in_threadpool(queue.get, record.id)
+    # The job was deleted meanwhile (e.g. its TTL ran out): nothing more will happen to it.
+
+
+def _last_id(value: str | None) -> int:
+    try:
+        return max(0, int(value or 0))
+    except ValueError:
+        return 0
+
+
+@router.get(
+    "/{job_id}/events",
+    summary="Job progress as server-sent events",
+    description=(
+        "A ``text/event-stream`` of the job's progress: ``event: progress`` (data: the job's "
+        "``progress`` object, whenever it changes: stage, iteration, lambda, phi, tau, ...) and "
+        "``event: status`` (data: the job as ``GET /v1/jobs/{id}`` returns it, first at once "
+        "and then on every status change). The last ``status`` event carries the final state "
+        "(succeeded, failed or cancelled) and the stream ends after it. Events have increasing "
+        "``id``s (continued after ``Last-Event-ID`` on reconnection); ``: ping`` comments are "
+        "sent every 15 s (``GEOSMOOTH_EVENTS_PING_SECONDS``). The server reads the job every "
+        "0.2 s (``GEOSMOOTH_EVENTS_POLL_SECONDS``), whatever the queue backend."
+    ),
+    response_class=EventSourceResponse,
+    responses={
+        200: {
+            "description": "The event stream (ends after the final status).",
+            "content": {"text/event-stream": {"schema": {"type": "string"}, "example": _EXAMPLE}},
+        },
+        **problem_responses(404, 503),
+    },
+)
+async def job_events(
+    request: Request,
+    job: JobDep,
+    queue: QueueDep,
+    settings: SettingsDep,
+    last_event_id: Annotated[
+        str | None,
+        Header(description="Id of the last event received (reconnection); ids continue after it."),
+    ] = None,
+) -> EventSourceResponse:
+    stream = job_event_stream(
+        queue,
+        job,
+        poll_seconds=settings.events_poll_seconds,
+        disconnected=request.is_disconnected,
+        start_id=_last_id(last_event_id),
+    )
+    return EventSourceResponse(
+        stream,
+        ping=settings.events_ping_seconds,
+        sep=_SEP,
+        ping_message_factory=lambda: ServerSentEvent(comment="ping", sep=_SEP),
+    )

@@ -1,0 +1,213 @@
+"""``POST /v1/info``: what an input is and which smoothing factors it admits, without smoothing.
+
+Takes the same request as ``POST /v1/smooth`` (multipart ``file`` [+ ``params``, ``format``,
+``weld``] or JSON ``{geometry, params?, weld?}``); ``params`` is optional here (neighbourhood,
+weights and fixed points change ``phi(0)``; ``tau``/``rms``/``lam`` are ignored). Answers
+:func:`service.core.info.describe` plus what the reader saw (format, polylines, notes).
+
+``?preview=true`` adds the geometry for display (the web page's 3-D viewer): positions as
+little-endian float32 relative to ``origin`` (the bounding-box centre, so that large coordinates
+keep their precision), faces and line segments as uint32, each base64-encoded, all in the
+file's vertex order (the order of a job's result).
+"""
+
+from __future__ import annotations
+
+import base64
+import copy
+from typing import Annotated, Any
+
+import anyio
+import numpy as np
+from fastapi import APIRouter, Depends, Query, Request
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+
+from service.api.deps import SettingsDep
+from service.api.docs import JOB_SUBMIT_OPENAPI, problem_responses
+from service.api.schemas import GEOMETRY_EXAMPLE
+from service.api.uploads import SmoothInput, read_smooth_input
+from service.core.info import describe
+from service.io import GeometryDocument
+
+__all__ = ["Info", "Preview", "preview_arrays", "router"]
+
+router = APIRouter(prefix="/v1", tags=["smooth"])
+
+
+class Preview(BaseModel):
+    """The geometry for display, in the file's vertex order."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "origin": [0.5, 0.5, 0.0],
+                    "n_points": 3,
+                    "dimension": 3,
+                    "positions": "AAAAvwAAAL8AAAAAAAAAPwAAAL8AAAAAAAAAvwAAAD8AAAAA",
+                    "faces": "AAAAAAEAAAACAAAA",
+                    "segments": None,
+                }
+            ]
+        }
+    )
+
+    origin: list[float] = Field(description="Added to ``positions`` to get the coordinates.")
+    n_points: int = Field(description="Vertices (the file's count, also when welded).")
+    dimension: int = Field(description="Coordinates per point in the file.")
+    positions: str = Field(
+        description="base64 of float32 little-endian (n_points, 3): the first three coordinates "
+        "minus origin (2-D data get z = 0)."
+    )
+    faces: str | None = Field(default=None, description="base64 of uint32 (n_faces, 3).")
+    segments: str | None = Field(
+        default=None, description="base64 of uint32 (n_segments, 2): polyline and other edges."
+    )
+
+
+class Info(BaseModel):
+    """``describe()`` of the input plus what the reader saw."""
+
+    model_config = ConfigDict(
+        extra="allow",
+        json_schema_extra={
+            "examples": [
+                {
+                    "n_points": 642,
+                    "dimension": 3,
+                    "kind": "mesh",
+                    "n_faces": 1280,
+                    "n_edges": 1920,
+                    "bbox": {"min": [-1.0, -1.0, -1.0], "max": [1.0, 1.0, 1.0]},
+                    "mean_spacing": 0.095,
+                    "phi0": 641.6,
+                    "tau_range": [0.0, 641.6],
+                    "rms_range": [0.0, 1.0],
+                    "sigma_estimate": 0.0098,
+                    "suggested_tau": 0.062,
+                    "suggested_rms": 0.0098,
+                    "format": "ply",
+                    "filename": "noisy-sphere.ply",
+                    "n_polylines": 0,
+                    "notes": [],
+                    "weld": False,
+                }
+            ]
+        },
+    )
+
+    n_points: int = Field(description="Points the engine smooths (after welding).")
+    dimension: int = Field(description="Coordinates per point.")
+    kind: str = Field(description="mesh, curve or cloud.")
+    n_faces: int = Field(description="Triangles.")
+    n_edges: int = Field(description="Neighbour pairs (mesh, curve or neighbourhood edges).")
+    bbox: dict[str, list[float]] = Field(description="Bounding box ``{min, max}``.")
+    mean_spacing: float = Field(description="Mean edge length or nearest-neighbour distance.")
+    phi0: float = Field(description="phi(0) of eq. (14): the largest meaningful tau.")
+    tau_range: list[float] = Field(description="Valid tau: the open interval (0, phi(0)).")
+    rms_range: list[float] = Field(description="Valid rms: the open interval it maps to.")
+    sigma_estimate: float | None = Field(description="Estimated noise level, when available.")
+    suggested_tau: float | None = Field(description="A suggested tau, when available.")
+    suggested_rms: float | None = Field(description="A suggested rms, when available.")
+    format: str = Field(description="Format the input was read as.")
+    filename: str | None = Field(default=None, description="Uploaded file name.")
+    n_polylines: int = Field(description="Polylines in the file.")
+    notes: list[str] = Field(description="What the reader repaired or ignored.")
+    weld: bool = Field(description="Whether coincident vertices were welded.")
+    preview: Preview | None = Field(default=None, description="With ``?preview=true``.")
+
+
+def _info_openapi() -> dict[str, Any]:
+    """The request body of ``POST /v1/jobs``, with ``params`` optional."""
+    spec = copy.deepcopy(JOB_SUBMIT_OPENAPI)
+    body = spec["requestBody"]
+    body["description"] = "An uploaded file (``params`` optional), or the geometry inline as JSON."
+    content = body["content"]
+    multipart = content["multipart/form-data"]["schema"]
+    multipart["required"] = [name for name in multipart.get("required", []) if name != "params"]
+    content["application/json"] = {
+        "schema": {
+            "type": "object",
+            "required": ["geometry"],
+            "additionalProperties": False,
+            "properties": {
+                "geometry": {"$ref": "#/components/schemas/GeometryJson"},
+                "params": {"$ref": "#/components/schemas/SmoothingParams"},
+                "weld": {"type": "boolean", "default": False},
+            },
+        },
+        "example": {"geometry": GEOMETRY_EXAMPLE},
+    }
+    return spec
+
+
+def _b64(array: NDArray[Any]) -> str:
+    return base64.b64encode(np.ascontiguousarray(array).tobytes()).decode("ascii")
+
+
+def preview_arrays(document: GeometryDocument) -> Preview:
+    """Display arrays of ``document`` in its file's vertex order (see the module docstring)."""
+    points = document.output_points()
+    n, dim = points.shape
+    xyz = np.zeros((n, 3), dtype=np.float64)
+    xyz[:, : min(dim, 3)] = points[:, :3]
+    origin = (xyz.min(axis=0) + xyz.max(axis=0)) / 2 if n else np.zeros(3)
+    faces = document.output_faces()
+    segments = document.output_edges()
+    return Preview(
+        origin=origin.tolist(),
+        n_points=n,
+        dimension=dim,
+        positions=_b64((xyz - origin).astype("<f4")),
+        faces=None if faces is None else _b64(faces.astype("<u4")),
+        segments=None if segments is None else _b64(segments.astype("<u4")),
+    )
+
+
+def _info(smooth_input: SmoothInput, with_preview: bool) -> dict[str, Any]:
+    document = smooth_input.document
+    out = describe(document.geometry, smooth_input.params)
+    out.update(
+        format=smooth_input.fmt,
+        filename=smooth_input.filename,
+        n_polylines=len(document.polylines),
+        notes=list(document.notes),
+        weld=smooth_input.weld,
+    )
+    if with_preview:
+        out["preview"] = preview_arrays(document)
+    return out
+
+
+async def get_info_input(request: Request, settings: SettingsDep) -> SmoothInput:
+    """The request of ``POST /v1/smooth`` with optional ``params``."""
+    return await read_smooth_input(request, settings.max_points, params_required=False)
+
+
+@router.post(
+    "/info",
+    response_model=Info,
+    response_model_exclude_none=False,
+    response_description="What was read and the valid smoothing factors.",
+    summary="Describe an input (valid tau / rms range) without smoothing it",
+    description=(
+        "Same request as ``POST /v1/smooth`` (``params`` optional: only neighbourhood, weights "
+        "and fixed-point settings matter). Answers the number of points, dimension, kind "
+        "(mesh, curve, cloud), faces, edges, polylines, bounding box, mean spacing, "
+        "``phi0`` = phi(0) of eq. (14) and the valid ranges of ``tau`` and ``rms`` it implies, "
+        "the noise estimate and suggested values when available, and the reader's notes. "
+        "``preview=true`` adds the geometry as base64 arrays for display."
+    ),
+    openapi_extra=_info_openapi(),
+    responses=problem_responses(400, 413, 415, 422),
+)
+async def info(
+    request: Request,
+    smooth_input: Annotated[SmoothInput, Depends(get_info_input)],
+    preview: Annotated[
+        bool, Query(description="Include the geometry for display (base64 arrays).")
+    ] = False,
+) -> dict[str, Any]:
+    limiter: anyio.CapacityLimiter | None = request.app.state.sync_limiter
+    return await anyio.to_thread.run_sync(_info, smooth_input, preview, limiter=limiter)

@@ -1,0 +1,31 @@
+"""The ``geosmooth`` command line: ``smooth`` a file, ``serve`` the HTTP API, ``submit`` to it.
+
+``geosmooth smooth INPUT -o OUTPUT --tau T`` reads a mesh, polyline network or point cloud
+(``service.io``), smooths it with :func:`service.core.smooth` and writes the result in the same
+vertex order. Every failure is one line on stderr and a documented exit status
+(:mod:`service.exit_codes`); ``GEOSMOOTH_DEBUG=1`` adds the traceback.
+
+Modules: :mod:`.main` (dispatch, error handling), :mod:`.parser` (commands and their options),
+:mod:`.params` (options generated from ``SmoothingParams``), :mod:`.output` (output format,
+the file writer, the report), :mod:`.progress` (progress line, summary), and one module per
+command (:mod:`.smooth`, :mod:`.serve`, :mod:`.submit`), imported only when it runs.
+"""
+
+from service.exit_codes import EXIT_CODES, SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
+
+from .errors import CliError
+from .main import main
+from .params import params_from_args
+from .parser import build_parser
+from .smooth import read_fixed_indices
+
+__all__ = [
+    "EXIT_CODES",
+    "SERVE_EXIT_CODES",
+    "SUBMIT_EXIT_CODES",
+    "CliError",
+    "build_parser",
+    "main",
+    "params_from_args",
+    "read_fixed_indices",
+]

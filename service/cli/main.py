@@ -1,0 +1,96 @@
+"""``geosmooth``'s entry point: parse, run one command, turn any failure into one line.
+
+A failure's exit status is the ``exit_code`` its class declares (the typed errors of the
+engine, the readers, the settings and :class:`~service.cli.errors.CliError`); the line names
+the option at fault when the error's ``field`` is a smoothing parameter, else the input file.
+Anything else is an internal error (exit status 1), also one line unless ``GEOSMOOTH_DEBUG``
+is set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import traceback
+from collections.abc import Sequence
+from typing import TextIO
+
+from service.core.params import SmoothingParams
+from service.exit_codes import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE
+
+from .errors import CliError, exit_code_of, fail, message_of
+from .params import option_name
+from .parser import build_parser
+
+__all__ = ["main"]
+
+#: command -> module with ``run(ns, err) -> int`` (imported when the command runs, so that
+#: ``smooth`` never loads the HTTP stack).
+_COMMANDS = {"smooth": ".smooth", "serve": ".serve", "submit": ".submit"}
+
+
+def _debug() -> bool:
+    return os.environ.get("GEOSMOOTH_DEBUG", "").strip() not in ("", "0", "false", "no")
+
+
+def _where(exc: BaseException, ns: argparse.Namespace | None) -> str | None:
+    """What a typed error is about: ``--option`` for a parameter, else the input file."""
+    field = str(getattr(exc, "field", "") or "")
+    name = field.removeprefix("params.")
+    if field.startswith("params.") and name in SmoothingParams.model_fields:
+        return option_name(name)
+    source = getattr(ns, "input", None)
+    return str(source) if source else None
+
+
+def _typed_message(exc: BaseException, ns: argparse.Namespace | None) -> str:
+    if isinstance(exc, CliError):
+        return exc.message
+    where = _where(exc, ns)
+    return f"{where}: {message_of(exc)}" if where else message_of(exc)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``geosmooth``.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        Exit status (see :mod:`service.exit_codes`).
+    """
+    err = sys.stderr
+    ns: argparse.Namespace | None = None
+    try:
+        try:
+            ns = build_parser().parse_args(list(argv) if argv is not None else None)
+        except SystemExit as exc:  # --help / --version
+            return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
+        command = importlib.import_module(_COMMANDS[ns.command], __package__)
+        return int(command.run(ns, err))
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        return EXIT_OUTPUT
+    except Exception as exc:
+        return _report(exc, ns, err)
+
+
+def _report(exc: Exception, ns: argparse.Namespace | None, err: TextIO) -> int:
+    """Print one line for ``exc``; its exit status."""
+    if _debug():
+        traceback.print_exc(file=err)
+    code = exit_code_of(exc)
+    if code is not None:
+        fail(_typed_message(exc, ns), err)
+        return code
+    text = message_of(exc) if str(exc) else "(no message)"
+    hint = "" if _debug() else " (set GEOSMOOTH_DEBUG=1 for the traceback)"
+    fail(f"internal error: {type(exc).__name__}: {text}{hint}", err)
+    return EXIT_INTERNAL

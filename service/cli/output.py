@@ -1,0 +1,219 @@
+"""Where results go: the output format, the one file writer, the JSON report.
+
+:func:`write_file` is the only way ``smooth`` and ``submit`` write a file. A regular file (or
+a new one) is replaced atomically: the data go to a temporary file in the same directory, are
+flushed to disk, and the temporary file is renamed over the target, so a reader never sees half
+a file and a failure leaves the old file intact. A symbolic link is followed: the file it points
+to is replaced and the link stays a link. Anything that is not a regular file (``/dev/null``,
+``/dev/full``, a FIFO, a terminal, ``/dev/stdout``) is written in place, never replaced.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import inspect
+import json
+import math
+import os
+import stat
+import sys
+import tempfile
+import typing
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from service.exit_codes import EXIT_OUTPUT, EXIT_USAGE
+
+from .errors import CliError, os_reason
+from .params import literal_names
+
+__all__ = [
+    "check_format",
+    "check_writable",
+    "given_writer_options",
+    "output_format",
+    "write_file",
+    "write_json_report",
+    "write_output",
+    "writer_options",
+]
+
+
+# --------------------------------------------------------------------------- formats
+
+
+def check_format(fmt: str | None, option: str) -> str | None:
+    """``fmt`` if it is a format name of the registry (or ``None``); else exit status 2."""
+    from service.io import FORMATS
+
+    if fmt is not None and fmt not in FORMATS:
+        raise CliError(f"{option}: must be one of {', '.join(FORMATS)}, got {fmt!r}", EXIT_USAGE)
+    return fmt
+
+
+def output_format(output: str, explicit: str | None) -> str | None:
+    """The format to write: the output's extension, else ``--format``, else ``None``.
+
+    ``None`` means "the input's format" (``-o -``, or a name without an extension).
+
+    Raises
+    ------
+    CliError
+        Exit status 2 when ``--format`` contradicts the extension, or the extension is not a
+        format geosmooth writes and no ``--format`` says otherwise.
+    """
+    from service.io import UnsupportedFormat, detect_format
+
+    check_format(explicit, "--format")
+    by_ext: str | None = None
+    if output != "-":
+        with contextlib.suppress(UnsupportedFormat):
+            by_ext = detect_format(output)
+    if by_ext and explicit and by_ext != explicit:
+        raise CliError(
+            f"--format {explicit} contradicts the output file name {output!r} ({by_ext})",
+            EXIT_USAGE,
+        )
+    if by_ext or explicit:
+        return by_ext or explicit
+    if output != "-" and Path(output).suffix:
+        raise CliError(f"cannot tell the output format from {output!r}; give --format", EXIT_USAGE)
+    return None
+
+
+def writer_options() -> dict[str, tuple[tuple[str, ...], str]]:
+    """Options of :func:`service.io.write_geometry` that take a name, with their default.
+
+    The keyword-only parameters typed as a ``Literal`` (``normals``, ``precision``): the
+    ``smooth`` command offers each as ``--name``, so a writer option added in ``service.io``
+    appears on the command line by itself.
+    """
+    from service.io import write_geometry
+
+    hints = typing.get_type_hints(write_geometry)
+    out = {}
+    for name, parameter in inspect.signature(write_geometry).parameters.items():
+        choices = literal_names(hints.get(name))
+        if parameter.kind is parameter.KEYWORD_ONLY and choices:
+            out[name] = (choices, str(parameter.default))
+    return out
+
+
+def given_writer_options(ns: argparse.Namespace) -> dict[str, str]:
+    """The writer options given on the command line (the writer's defaults apply otherwise)."""
+    return {name: getattr(ns, name) for name in writer_options() if getattr(ns, name, None)}
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def _is_special(target: str) -> bool:
+    """Whether ``target`` exists and is not a regular file (after following links)."""
+    try:
+        return not stat.S_ISREG(os.stat(target).st_mode)
+    except OSError:
+        return False
+
+
+def _in_place(target: str) -> bool:
+    """Whether to write into ``target`` rather than replace it: not a regular file, or a path
+    under ``/dev`` or ``/proc`` (``/dev/stdout`` links to whatever the shell opened)."""
+    top = Path(os.path.abspath(target)).parts[1:2]
+    return _is_special(target) or top in (("dev",), ("proc",))
+
+
+def _real_target(target: str) -> Path:
+    """The regular file to replace: ``target`` with every symbolic link resolved."""
+    return Path(os.path.realpath(target))
+
+
+def check_writable(target: str, what: str) -> None:
+    """Fail early (exit status 6) when ``target`` cannot be written, before any work."""
+    if target == "-":
+        return
+    if _is_special(target):
+        if Path(target).is_dir():
+            raise CliError(f"cannot write {what} {target}: Is a directory", EXIT_OUTPUT)
+        if not os.access(target, os.W_OK):
+            raise CliError(f"cannot write {what} {target}: Permission denied", EXIT_OUTPUT)
+        return
+    parent = _real_target(target).parent
+    if not parent.is_dir():
+        raise CliError(f"cannot write {what} {target}: No such directory {parent}", EXIT_OUTPUT)
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise CliError(f"cannot write {what} {target}: Permission denied", EXIT_OUTPUT)
+
+
+def write_file(target: str | os.PathLike[str], data: bytes) -> None:
+    """Write ``data`` to ``target``: atomically for regular files, in place otherwise.
+
+    Raises
+    ------
+    OSError
+        As the system reports it; a failed atomic write leaves no temporary file behind.
+    """
+    name = os.fspath(target)
+    if _in_place(name):
+        with open(name, "wb") as fh:  # a device, FIFO, terminal or /dev/stdout: never replace
+            fh.write(data)
+        return
+    path = _real_target(name)
+    try:
+        mode = stat.S_IMODE(path.stat().st_mode)  # keep an existing file's permissions
+    except FileNotFoundError:
+        mode = 0o666 & ~_umask()
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_output(target: str, data: bytes, what: str) -> None:
+    """:func:`write_file` for the CLI: ``-`` is stdout; failures are exit status 6."""
+    try:
+        if target == "-":
+            sys.stdout.buffer.write(data)
+            sys.stdout.buffer.flush()
+        else:
+            write_file(target, data)
+    except OSError as exc:
+        where = "to stdout" if target == "-" else target
+        raise CliError(f"cannot write {what} {where}: {os_reason(exc)}", EXIT_OUTPUT) from exc
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# --------------------------------------------------------------------------- report
+
+
+def json_safe(value: Any) -> Any:
+    """Make a report JSON-clean: numpy scalars/arrays to Python, non-finite floats to null."""
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, str):
+        return json_safe(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_json_report(target: str, report: Mapping[str, Any]) -> None:
+    """Write a report as indented, strict JSON (exit status 6 on failure)."""
+    text = json.dumps(json_safe(report), indent=2, allow_nan=False) + "\n"
+    write_output(target, text.encode("utf-8"), "report")

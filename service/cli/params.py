@@ -1,0 +1,166 @@
+"""Command-line options generated from :class:`service.core.params.SmoothingParams`.
+
+Every field of the model becomes an option ``--`` + the field name with ``_`` -> ``-``, in the
+model's order, with the model's description and default as help: a field added to the model
+appears in ``geosmooth smooth`` and ``geosmooth submit`` by itself. Values stay strings until
+the model parses them, so validation happens once, by pydantic; its complaints become one line
+naming the option (:func:`params_from_args`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import textwrap
+import typing
+
+from pydantic import ValidationError
+from pydantic.fields import FieldInfo
+from pydantic_core import PydanticUndefined
+
+from service.core.params import SmoothingParams
+from service.exit_codes import EXIT_USAGE
+
+from .errors import CliError
+
+__all__ = [
+    "TARGET_FIELDS",
+    "add_smoothing_options",
+    "literal_names",
+    "option_name",
+    "params_from_args",
+]
+
+#: The ways to pick lambda: mutually exclusive options. Whether one is required is the model's
+#: business (its validator), not argparse's.
+TARGET_FIELDS = tuple(f for f in ("tau", "rms", "lam") if f in SmoothingParams.model_fields)
+_METAVARS = {
+    "tau": "T",
+    "rms": "R",
+    "lam": "L",
+    "k": "K",
+    "sigma_f": "SIGMA",
+    "sigma_h": "SIGMA",
+    "tolerance": "XI",
+    "max_iterations": "N",
+}
+_SHORT = {"k": "-k"}
+_HELP_PREFIX = {
+    "tau": "Smoothing factor: target for phi = sum_i w_i^2 ||x_i - p_i||^2.",
+    "rms": "Target RMS displacement (tau = sum_i w_i^2 * R^2).",
+    "lam": "Use this lambda directly (no tau search).",
+}
+
+
+def option_name(field: str) -> str:
+    """``max_iterations`` -> ``--max-iterations``."""
+    return "--" + field.replace("_", "-")
+
+
+def _default_text(info: FieldInfo) -> str:
+    if info.default is PydanticUndefined or info.default_factory is not None:
+        return "auto"
+    return "off" if info.default is False else str(info.default)
+
+
+def _field_help(name: str) -> str:
+    info = SmoothingParams.model_fields[name]
+    text = _HELP_PREFIX.get(name) or (info.description or "")
+    text = text.replace("%", "%%")
+    if name not in TARGET_FIELDS:
+        text += f" [default: {_default_text(info)}]"
+    return text
+
+
+def _literals(annotation: object) -> list[object]:
+    """The members of a ``Literal`` (or of several, in a union); other types as themselves."""
+    if typing.get_origin(annotation) is typing.Literal:
+        return list(typing.get_args(annotation))
+    args = typing.get_args(annotation)
+    if not args:
+        return [annotation]
+    return [m for a in args if a is not type(None) for m in _literals(a)]
+
+
+def literal_names(annotation: object) -> tuple[str, ...] | None:
+    """The names a type allows (``{normalized,curvature,feature}``), if it allows only names."""
+    members = _literals(annotation)
+    if members and all(isinstance(m, str) for m in members):
+        return tuple(str(m) for m in members)
+    return None
+
+
+def add_smoothing_options(parser: argparse.ArgumentParser) -> None:
+    """Add one option per :class:`SmoothingParams` field (defaults stay in the model)."""
+    target = parser.add_argument_group(
+        "smoothing target",
+        textwrap.fill(
+            "tau is the budget for the weighted sum of squared displacements (report eq. 3 and "
+            "15); it must lie in (0, phi(0)), phi(0) being the deviation from the weighted "
+            "centroid (of each connected part).",
+            78,
+        ),
+    )
+    group = target.add_mutually_exclusive_group()
+    for target_name in TARGET_FIELDS:
+        group.add_argument(
+            option_name(target_name),
+            dest=target_name,
+            metavar=_METAVARS[target_name],
+            help=_field_help(target_name),
+        )
+    opts = parser.add_argument_group("smoothing options")
+    for name, info in SmoothingParams.model_fields.items():
+        if name in TARGET_FIELDS:
+            continue
+        flags = [option_name(name)] + ([_SHORT[name]] if name in _SHORT else [])
+        if info.annotation is bool:
+            action = argparse.BooleanOptionalAction if info.default is True else "store_true"
+            opts.add_argument(
+                *flags, dest=name, action=action, default=None, help=_field_help(name)
+            )
+            continue
+        choices = literal_names(info.annotation)
+        metavar = "{" + ",".join(choices) + "}" if choices else _METAVARS.get(name, name.upper())
+        opts.add_argument(*flags, dest=name, metavar=metavar, default=None, help=_field_help(name))
+
+
+def params_from_args(ns: argparse.Namespace) -> SmoothingParams:
+    """Build the :class:`SmoothingParams` of a parsed ``smooth`` or ``submit`` command line.
+
+    Only options the user gave are passed, so every default comes from the model (and
+    ``model_dump(exclude_unset=True)`` gives back exactly what the user set).
+
+    Raises
+    ------
+    CliError
+        Exit status 2, with pydantic's complaints as one line naming the options, e.g.
+        ``--tau: must be greater than 0``.
+    """
+    given = {
+        name: getattr(ns, name)
+        for name in SmoothingParams.model_fields
+        if getattr(ns, name, None) is not None
+    }
+    try:
+        return SmoothingParams.model_validate(given)
+    except ValidationError as exc:
+        raise CliError(_validation_message(exc), EXIT_USAGE) from exc
+
+
+def _validation_message(exc: ValidationError) -> str:
+    """Pydantic's errors as one line: ``--option: must be ...`` joined by ``; ``."""
+    parts = []
+    for err in exc.errors(include_url=False):
+        msg = str(err.get("msg", "invalid value"))
+        msg = re.sub(r"^Value error, ", "", msg)
+        msg = re.sub(r"^Input should be ", "must be ", msg)
+        msg = re.sub(r"^Extra inputs are not permitted", "unknown parameter", msg)
+        loc = [str(part) for part in err.get("loc", ()) if part != "__root__"]
+        if loc:
+            parts.append(f"{option_name(loc[0])}: {msg}")
+            continue
+        for name in TARGET_FIELDS:  # a message of the model's own validator
+            msg = re.sub(rf"\b{name}\b", option_name(name), msg)
+        parts.append(msg)
+    return "; ".join(parts) or "invalid parameters"

@@ -1,0 +1,200 @@
+"""The ``geosmooth`` argument parser: commands, their file options and the exit status table.
+
+The smoothing options come from :mod:`service.cli.params` (generated from the model); the
+format choices from the io registry; the exit statuses from :mod:`service.exit_codes`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import textwrap
+from collections.abc import Mapping
+from typing import NoReturn
+
+from service.exit_codes import EXIT_CODES, EXIT_USAGE, SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
+
+from .errors import CliError
+from .output import writer_options
+from .params import add_smoothing_options
+
+__all__ = ["build_parser", "version"]
+
+_EXAMPLES = (
+    "geosmooth smooth bunny.ply -o bunny-smooth.ply --tau 2e-4 --report report.json",
+    "geosmooth smooth track.obj -o track-smooth.obj --rms 3 --fix-boundary",
+    "geosmooth serve --port 8000",
+    "geosmooth submit bunny.ply --server http://127.0.0.1:8000 -o out.ply --tau 2e-4",
+)
+
+
+#: Help of the writer options (``service.io.write_geometry``'s keyword arguments).
+_WRITER_HELP = {
+    "normals": "normals of the input: recomputed from the smoothed geometry, or left out",
+    "precision": "coordinates as the input stored them (type, or digits for text formats), or "
+    "forced to float32 / float64",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line (no usage block) and do not exit."""
+
+    def error(self, message: str) -> NoReturn:
+        raise CliError(f"{message} (see '{self.prog} --help')", EXIT_USAGE)
+
+
+def version() -> str:
+    """The installed geosmooth version (``unknown`` in an uninstalled source tree)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("geosmooth")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _wrap(text: str) -> str:
+    return textwrap.fill(text, 78)
+
+
+def _epilog(*extra: Mapping[int, str]) -> str:
+    table = dict(EXIT_CODES)
+    for more in extra:
+        for code, text in more.items():
+            table[code] = f"{table[code]}; {text}" if code in table else text
+    codes = "\n".join(
+        textwrap.fill(text, 78, initial_indent=f"  {code:>3}  ", subsequent_indent=" " * 7)
+        for code, text in sorted(table.items())
+    )
+    examples = "\n".join(f"  {line}" for line in _EXAMPLES)
+    return (
+        f"examples:\n{examples}\n\nexit status:\n{codes}\n\n"
+        "Errors are one line on stderr; set GEOSMOOTH_DEBUG=1 for a traceback."
+    )
+
+
+def _formats() -> str:
+    from service.io import FORMATS
+
+    return "{" + ",".join(FORMATS) + "}"
+
+
+def _add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
+    """Where the result goes: -o, --format, --weld, --report, -q (``smooth`` and ``submit``)."""
+    files = parser.add_argument_group("files")
+    files.add_argument(
+        "-o", "--output", required=True, metavar="OUTPUT",
+        help="output file ('-' writes stdout); its extension picks the format",
+    )  # fmt: skip
+    files.add_argument(
+        "--format", dest="format", metavar=_formats(),
+        help="output format when the OUTPUT extension does not say [default: the input's]",
+    )  # fmt: skip
+    files.add_argument(
+        "--weld", action="store_true",
+        help="weld exactly coincident vertices before smoothing (meshes stored with split "
+        "normals, e.g. STL exports); the output keeps the input's vertices",
+    )  # fmt: skip
+    what = "the run's diagnostics" if local else "the job's report"
+    files.add_argument("--report", metavar="REPORT.json", help=f"write {what} as JSON")
+    files.add_argument(
+        "-q", "--quiet", action="store_true", help="print nothing on success (errors still go)"
+    )
+
+
+def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
+    sm = sub.add_parser(
+        "smooth",
+        help="smooth a file",
+        description=_wrap(
+            "Smooth a mesh, polyline network or point cloud. The output keeps the "
+            "input's vertex count, order and connectivity."
+        ),
+        epilog=_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sm.add_argument(
+        "input", metavar="INPUT", help="input file ('-' reads stdin; the format is sniffed)"
+    )
+    add_smoothing_options(sm)
+    _add_result_options(sm, local=True)
+    more = sm.add_argument_group("input and output details")
+    more.add_argument(
+        "--fixed", metavar="FILE",
+        help="text file of 0-based point indices to keep fixed (bit-identical): separated by "
+        "whitespace, commas or newlines; '#' starts a comment",
+    )  # fmt: skip
+    more.add_argument(
+        "--input-format", metavar=_formats(),
+        help="input format when the INPUT extension does not say",
+    )  # fmt: skip
+    more.add_argument(
+        "--xyz-dims", type=int, metavar="D",
+        help="XYZ input: the first D columns are coordinates (any dimension) [default: 2 for "
+        "two columns, else 3; other columns are ignored]",
+    )  # fmt: skip
+    more.add_argument(
+        "--ascii", action="store_true", help="write ASCII PLY [default: binary little-endian]"
+    )
+    for name, (choices, default) in writer_options().items():
+        more.add_argument(
+            "--" + name.replace("_", "-"), dest=name, choices=choices,
+            help=_WRITER_HELP.get(name, "writer option") + f" [default: {default}]",
+        )  # fmt: skip
+
+
+def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:
+    sv = sub.add_parser(
+        "serve",
+        help="run the HTTP service",
+        description="Run the HTTP service (embedded job queue, no Redis needed).",
+        epilog=_epilog(SERVE_EXIT_CODES),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sv.add_argument("--host", default="127.0.0.1", help="interface to bind [default: %(default)s]")
+    sv.add_argument("--port", type=int, default=8000, help="TCP port [default: %(default)s]")
+    sv.add_argument(
+        "--workers", type=int, default=None, help="solver worker processes [default: settings]"
+    )
+    sv.add_argument("--data-dir", default=None, help="job store directory [default: settings]")
+
+
+def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:
+    su = sub.add_parser(
+        "submit",
+        help="smooth a file on a running geosmooth server",
+        description=_wrap(
+            "Upload INPUT to a geosmooth server, follow the job and download the result. "
+            "Ctrl-C cancels the job on the server."
+        ),
+        epilog=_epilog(SUBMIT_EXIT_CODES),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    su.add_argument("input", metavar="INPUT", help="input file")
+    su.add_argument("--server", required=True, metavar="URL", help="e.g. http://127.0.0.1:8000")
+    su.add_argument(
+        "--api-key", metavar="KEY", default=os.environ.get("GEOSMOOTH_API_KEY"),
+        help="API key of the server [default: $GEOSMOOTH_API_KEY]",
+    )  # fmt: skip
+    add_smoothing_options(su)
+    _add_result_options(su, local=False)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``geosmooth`` argument parser with its ``smooth``, ``serve`` and ``submit`` commands."""
+    parser = _Parser(
+        prog="geosmooth",
+        description=_wrap(
+            "Smooth triangle meshes, polylines / curve networks and point clouds in any "
+            "dimension with a global deviation budget tau (KU Leuven report TW 451)."
+        ),
+        epilog=_epilog(SUBMIT_EXIT_CODES, SERVE_EXIT_CODES),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"geosmooth {version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    _add_smooth(sub)
+    _add_serve(sub)
+    _add_submit(sub)
+    return parser

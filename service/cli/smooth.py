@@ -1,0 +1,212 @@
+"""``geosmooth smooth INPUT -o OUTPUT``: read, smooth with :func:`service.core.smooth`, write.
+
+Everything that can be checked without reading the input is checked first (parameters,
+formats, the ``--fixed`` file, whether the output can be written), so a mistake costs nothing.
+Typed errors of the engine and the readers propagate to :func:`service.cli.main`, which prints
+them with their class's exit status.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
+
+from service.core.params import SmoothingParams
+from service.exit_codes import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE
+
+from .errors import CliError, os_reason
+from .output import (
+    check_format,
+    check_writable,
+    given_writer_options,
+    output_format,
+    write_json_report,
+    write_output,
+)
+from .params import params_from_args
+from .parser import version
+from .progress import ProgressDisplay, show_summary
+
+if TYPE_CHECKING:
+    from service.core.errors import TauOutOfRange
+    from service.core.geometry import Geometry
+    from service.io import GeometryDocument
+
+__all__ = ["read_fixed_indices", "run"]
+
+
+def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
+    """Read the point indices of a ``--fixed`` file.
+
+    Indices are 0-based integers separated by whitespace, commas, semicolons or newlines;
+    ``#`` starts a comment that runs to the end of the line.
+
+    Raises
+    ------
+    CliError
+        Exit status 3 when the file cannot be read or holds something other than integers.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CliError(f"--fixed: cannot read {path}: {os_reason(exc)}", EXIT_INPUT) from exc
+    out: list[int] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        for token in re.split(r"[\s,;]+", raw.split("#", 1)[0]):
+            if not token:
+                continue
+            try:
+                out.append(int(token))
+            except ValueError:
+                raise CliError(
+                    f"--fixed: {path}, line {lineno}: {token!r} is not an integer point index",
+                    EXIT_INPUT,
+                ) from None
+    return out
+
+
+def _read_input(
+    source: str, fmt: str | None, weld: bool, xyz_dims: int | None
+) -> GeometryDocument:
+    """Read INPUT (``-``: stdin); the format from ``fmt``, the name, or the content."""
+    from service.io import detect_format, read_geometry, sniff_format
+
+    name = None if source == "-" else Path(source).name
+    kind = fmt or (detect_format(name) if name and Path(name).suffix else None)
+    if xyz_dims is not None and kind not in (None, "xyz"):  # before reading anything
+        raise CliError(f"--xyz-dims applies to XYZ input only, not {kind}", EXIT_USAGE)
+    try:
+        data = sys.stdin.buffer.read() if source == "-" else Path(source).read_bytes()
+    except OSError as exc:
+        raise CliError(f"cannot read {source}: {os_reason(exc)}", EXIT_INPUT) from exc
+    kind = kind or sniff_format(data)
+    if xyz_dims is not None and kind not in (None, "xyz"):
+        raise CliError(f"--xyz-dims applies to XYZ input only, not {kind}", EXIT_USAGE)
+    return read_geometry(data, kind, filename=name, weld=weld, xyz_dims=xyz_dims)
+
+
+def _with_fixed(doc: GeometryDocument, indices: Sequence[int] | None) -> Geometry:
+    """The document's geometry plus the ``--fixed`` points (file indices when welded)."""
+    import numpy as np
+
+    from service.core.errors import GeosmoothError, IndexOutOfRange
+
+    geometry = doc.geometry
+    if indices is None:
+        return geometry
+    try:
+        extra = list(indices)
+        if doc.weld is not None:  # the file's vertex i is the geometry's doc.weld.index[i]
+            n_file = int(doc.weld.index.size)
+            bad = [i for i in indices if not 0 <= i < n_file]
+            if bad:
+                raise IndexOutOfRange(
+                    f"fixed index {bad[0]} is outside [0, {n_file})",
+                    field="geometry.fixed",
+                    indices=bad,
+                )
+            extra = [int(doc.weld.index[i]) for i in indices]
+        previous = [] if geometry.fixed is None else geometry.fixed.tolist()
+        return replace(geometry, fixed=np.asarray(previous + extra, dtype=np.int64))
+    except GeosmoothError as exc:
+        raise CliError.located(exc, "--fixed") from exc
+
+
+def tau_message(exc: TauOutOfRange, params: SmoothingParams) -> str:
+    """TauOutOfRange as one line that states the valid range of the option the user gave."""
+    tau_max = float(exc.tau_max)
+    if tau_max <= 0.0:
+        return str(exc.message)
+    if params.rms is not None and exc.tau > 0:
+        # tau = rms^2 * sum of the free points' w_i^2, so rms scales with sqrt(tau).
+        rms_max = params.rms * math.sqrt(tau_max / float(exc.tau))
+        return (
+            f"--rms {params.rms:g} is out of range for this input: the valid range is "
+            f"(0, {rms_max:.6g}) (it gives tau = {float(exc.tau):.6g}, and tau must lie in "
+            f"(0, phi(0) = {tau_max:.6g}))"
+        )
+    return (
+        f"--tau {float(exc.tau):g} is out of range for this input: the valid range is "
+        f"(0, {tau_max:.6g}), the upper bound phi(0) being the deviation of the fully smoothed "
+        "shape (each connected part collapsed onto its weighted centroid)"
+    )
+
+
+def _details(doc: GeometryDocument) -> list[str]:
+    """Facts about the input for the summary (``"16301 faces"``, ...)."""
+    g = doc.geometry
+    out = []
+    if g.faces is not None:
+        out.append(f"{len(g.faces)} faces")
+    if g.edges is not None:
+        out.append(f"{len(g.edges)} edges")
+    if doc.polylines:
+        out.append(f"{len(doc.polylines)} polylines")
+    if doc.weld is not None:
+        out.append(f"welded from {doc.weld.n_original} vertices")
+    return out
+
+
+def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]:
+    """Everything that needs no input file: parameters, formats, outputs."""
+    params = params_from_args(ns)
+    check_format(ns.input_format, "--input-format")
+    if ns.xyz_dims is not None and ns.xyz_dims < 1:
+        raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
+    out_fmt = output_format(ns.output, ns.format)
+    check_writable(ns.output, "output")
+    if ns.report:
+        check_writable(ns.report, "report")
+    return params, out_fmt
+
+
+def run(ns: argparse.Namespace, err: TextIO) -> int:
+    """Run ``geosmooth smooth``; returns the exit status (errors are raised)."""
+    from service import core
+    from service.core.errors import TauOutOfRange
+    from service.io import FormatError, write_geometry
+
+    started = time.perf_counter()
+    params, out_fmt = _check_options(ns)
+    fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
+    doc = _read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+    geometry = _with_fixed(doc, fixed)
+    out_fmt = out_fmt or doc.source_format
+
+    progress = ProgressDisplay(err, enabled=not ns.quiet)
+    try:
+        result = core.smooth(geometry, params, progress=progress)
+    except TauOutOfRange as exc:
+        raise CliError(tau_message(exc, params), exc.exit_code) from exc
+    finally:
+        progress.finish()
+    try:
+        options = given_writer_options(ns)
+        data = write_geometry(doc, out_fmt, points=result.points, ply_ascii=ns.ascii, **options)
+    except FormatError as exc:  # the format cannot hold this geometry: an output problem
+        raise CliError(f"cannot write {out_fmt}: {exc.message}", EXIT_OUTPUT) from exc
+    write_output(ns.output, data, "output")
+
+    report: dict[str, Any] = dict(result.report())
+    if ns.report:
+        report.update(
+            input=ns.input,
+            input_format=doc.source_format,
+            output=ns.output,
+            output_format=out_fmt,
+            params=params.model_dump(mode="json"),
+            geosmooth_version=version(),
+            wall_seconds=time.perf_counter() - started,
+        )
+        write_json_report(ns.report, report)
+    show_summary(progress, report, ns, params, started, details=_details(doc), notes=doc.notes)
+    return EXIT_OK
+
