@@ -20,7 +20,7 @@ EXIT_CODES: dict[int, str] = {
     EXIT_OK: "success",
     EXIT_INTERNAL: "unexpected internal error (GEOSMOOTH_DEBUG=1 shows the traceback)",
     EXIT_USAGE: "invalid command line or parameter value (e.g. --tau -1, --tau with --lam)",
-    EXIT_INPUT: "input file missing, unreadable, malformed or in an unsupported format (GPX, ...)",
+    EXIT_INPUT: "input file missing, unreadable, malformed or in an unsupported format",
     EXIT_GEOMETRY: "invalid geometry, or a parameter this geometry cannot take "
     "(e.g. tau outside (0, phi(0)); the message gives the valid range)",
     EXIT_SOLVER: "the linear solver failed",

@@ -1,19 +1,28 @@
-"""File formats: PLY, OBJ, XYZ and geosmooth JSON  <->  :class:`~service.core.geometry.Geometry`.
+"""File formats <-> :class:`~service.core.geometry.Geometry`, keeping everything else of the file.
 
-Public API (see ``docs/CONTRACTS.md``)::
+Public API (see ``/work/notes/CONTRACTS.md`` and ``service/io/README.md``)::
 
-    doc = read_geometry("bunny.ply", weld=False)     # -> GeometryDocument
+    doc = read_geometry("bunny.ply")                  # -> GeometryDocument
     doc.geometry                                      # validated Geometry for the engine
-    data = write_geometry(doc, "obj", smoothed_points)  # -> bytes
+    data = write_geometry(doc, "ply", smoothed_points, normals="recompute", precision="input")
+    save_geometry(doc, "out.laz", points=smoothed)    # streamed to a file
 
-Each format lives in its own module (:mod:`.ply`, :mod:`.obj`, :mod:`.xyz`, :mod:`.jsonfmt`),
-whose docstring states exactly what is read and written. Welding is in :mod:`.weld`.
+Every format is an entry of :data:`FORMATS` (:mod:`.registry`) with its own module, whose
+docstring states exactly what is read and written. Writers receive the plain document of
+:mod:`.plain` (un-welded once, normals recomputed once).
 """
 
-from service.io.document import GeometryDocument, Polyline, WeldMap
+from service.io.document import GeometryDocument, Polyline, Precision, WeldMap
 from service.io.errors import FormatError, UnsupportedFormat
-from service.io.formats import detect_format, read_geometry, sniff_format, write_geometry
-from service.io.jsonfmt import GEOMETRY_JSON_SCHEMA, document_to_json_obj, geometry_from_json_obj
+from service.io.formats import (
+    detect_format,
+    read_geometry,
+    save_geometry,
+    sniff_format,
+    write_geometry,
+)
+from service.io.json_schema import GEOMETRY_JSON_SCHEMA
+from service.io.jsonfmt import document_to_json_obj, geometry_from_json_obj
 from service.io.registry import FORMATS, Format, get_format
 
 __all__ = [
@@ -23,6 +32,7 @@ __all__ = [
     "FormatError",
     "GeometryDocument",
     "Polyline",
+    "Precision",
     "UnsupportedFormat",
     "WeldMap",
     "detect_format",
@@ -30,6 +40,7 @@ __all__ = [
     "geometry_from_json_obj",
     "get_format",
     "read_geometry",
+    "save_geometry",
     "sniff_format",
     "write_geometry",
 ]

@@ -1,32 +1,40 @@
-"""What a reader returns and a writer needs: :class:`GeometryDocument` and :class:`Polyline`.
+"""What a reader returns: :class:`GeometryDocument`, :class:`Polyline`, :class:`WeldMap`.
 
 A document wraps the validated :class:`~service.core.geometry.Geometry` the engine smooths, plus
-what is needed to write the result back in the input's shape:
+everything needed to write the result back in the input's shape:
 
-* ``polylines``: OBJ ``l`` elements and JSON ``polylines``, in geometry indexing. Their edges
-  (consecutive pairs, plus the closing pair of a closed polyline) are part of ``geometry.edges``.
-* ``standalone_edges``: edges that belong to no polyline (PLY ``edge`` elements, JSON ``edges``).
+* ``polylines``: OBJ ``l`` elements, GPX segments, GeoJSON/DXF lines, JSON ``polylines``, in
+  geometry indexing. Their edges are part of ``geometry.edges``.
+* ``standalone_edges``: edges that belong to no polyline (PLY ``edge``, JSON ``edges``).
   ``geometry.edges`` is these followed by the polyline edges.
 * ``weld``: set when the file was read with ``weld=True``. The geometry then holds one vertex per
-  distinct position, and :attr:`WeldMap.index` maps every vertex of the file to its welded vertex.
-  Writers use :meth:`GeometryDocument.output_points` and the ``output_*`` accessors, so the file
-  written keeps the input's vertex count, order and connectivity: each original vertex gets the
-  (smoothed) position of its welded vertex.
-* ``notes``: what the reader repaired or ignored (dropped degenerate faces, skipped elements, ...).
-* ``comments``: header comments of the file (PLY ``comment`` lines, OBJ/XYZ leading ``#`` lines),
-  written back so attributions (e.g. CC BY notices) survive a round trip.
+  distinct position and :attr:`WeldMap.index` maps every vertex of the file to its welded vertex.
+  Writers never see it: :func:`service.io.plain.plain_document` expands the document back to the
+  file's vertices once, before writing.
+* ``attributes``: every per-vertex value of the file other than the coordinates and normals
+  (colours, alpha, confidence, intensity, labels, LAS dimensions, XYZ extra columns ...), in file
+  order, per **original** vertex, in the file's own dtype. Written back unchanged.
+* ``normals``: per-vertex normals as read (``None`` if the file has none). Writers get them
+  recomputed from the smoothed geometry, or dropped.
+* ``precision``: how the file stored coordinates (dtype; printf specs matching the input's digits
+  for text formats), so outputs keep the input's precision and size.
+* ``layout``: a format-specific object that lets the same format write the file back with its
+  structure (PLY elements and property order, OBJ statements, LAS header, GPX tree, ...).
+* ``notes``: what the reader repaired or ignored; ``comments``: header comments, written back.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from service.core.geometry import Geometry
 
-__all__ = ["GeometryDocument", "Polyline", "WeldMap"]
+__all__ = ["GeometryDocument", "Polyline", "Precision", "WeldMap"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,8 +77,7 @@ class WeldMap:
     index : ndarray of int, shape (n_original,)
         ``index[i]`` is the welded vertex of original vertex ``i``.
     faces, standalone_edges : ndarray of int or None
-        Connectivity as read, in original vertex indexing (degenerate elements of the file
-        already dropped; nothing dropped by welding).
+        Connectivity as read, in original vertex indexing.
     polylines : list of Polyline
         Polylines as read, in original vertex indexing.
     weights : ndarray of float or None
@@ -92,6 +99,26 @@ class WeldMap:
         return int(self.index.size)
 
 
+@dataclass(frozen=True)
+class Precision:
+    """How a file stored its coordinates.
+
+    Parameters
+    ----------
+    dtype : str
+        ``"float32"`` or ``"float64"`` (numpy names): what ``precision="input"`` writes.
+    text : tuple of str, optional
+        Text formats: one printf spec per coordinate reproducing the input's digits (see
+        :mod:`service.io.numfmt`); ``None``: shortest round-trip form of ``dtype``.
+    attribute_text : mapping of str to str
+        Text formats: printf spec of each attribute column, likewise.
+    """
+
+    dtype: str = "float64"
+    text: tuple[str, ...] | None = None
+    attribute_text: Mapping[str, str] = field(default_factory=dict)
+
+
 @dataclass(frozen=True, eq=False)
 class GeometryDocument:
     """A geometry read from a file, with what is needed to write it back.
@@ -103,15 +130,23 @@ class GeometryDocument:
     polylines : list of Polyline
         Polylines in geometry indexing; their edges are included in ``geometry.edges``.
     source_format : str
-        The format read (``"ply"``, ``"obj"``, ``"xyz"`` or ``"json"``).
+        The registry name of the format read.
     standalone_edges : ndarray of int, shape (k, 2), optional
         Edges belonging to no polyline, in geometry indexing.
     notes : list of str
         What the reader repaired or ignored, one sentence each.
     weld : WeldMap, optional
-        Set when the vertices were welded; writers then restore the original vertex count.
+        Set when the vertices were welded.
     comments : list of str
-        Header comments of the file, written back by the PLY, OBJ and XYZ writers.
+        Header comments of the file, written back by the formats that hold comments.
+    attributes : dict of str to ndarray
+        Per original vertex, file order, file dtype (see the module docstring).
+    normals : ndarray, shape (n_original, 3), optional
+        Normals as read.
+    precision : Precision
+        How the coordinates were stored.
+    layout : object, optional
+        Format-specific structure for writing the file back in its own format.
     """
 
     geometry: Geometry
@@ -121,6 +156,10 @@ class GeometryDocument:
     notes: list[str] = field(default_factory=list)
     weld: WeldMap | None = None
     comments: list[str] = field(default_factory=list)
+    attributes: dict[str, NDArray[Any]] = field(default_factory=dict)
+    normals: NDArray[np.floating[Any]] | None = None
+    precision: Precision = field(default_factory=Precision)
+    layout: object | None = None
 
     @classmethod
     def from_geometry(cls, geometry: Geometry, source_format: str = "json") -> GeometryDocument:
@@ -140,12 +179,23 @@ class GeometryDocument:
         ValueError
             If ``points`` does not have the shape of ``geometry.points``.
         """
-        pts = self._checked_points(points)
+        pts = self.checked_points(points)
         g = self.geometry
         new = Geometry(pts, faces=g.faces, edges=g.edges, weights=g.weights, fixed=g.fixed)
         return replace(self, geometry=new)
 
-    def _checked_points(self, points: ArrayLike | None) -> NDArray[np.float64]:
+    def with_extras(self, **changes: Any) -> GeometryDocument:
+        """A copy with some fields replaced (readers add attributes, layout, ... this way)."""
+        return replace(self, **changes)
+
+    def checked_points(self, points: ArrayLike | None) -> NDArray[np.float64]:
+        """``points`` as float64 with the shape of ``geometry.points`` (default: the geometry's).
+
+        Raises
+        ------
+        ValueError
+            On a shape mismatch.
+        """
         if points is None:
             return self.geometry.points
         pts = np.asarray(points, dtype=np.float64)
@@ -155,39 +205,3 @@ class GeometryDocument:
                 f" got {pts.shape}"
             )
         return pts
-
-    def output_points(self, points: ArrayLike | None = None) -> NDArray[np.float64]:
-        """Points to write: ``points`` (default: the geometry's), un-welded to the file's order."""
-        pts = self._checked_points(points)
-        if self.weld is not None:
-            return pts[self.weld.index]
-        return pts
-
-    def output_faces(self) -> NDArray[np.int64] | None:
-        """Triangles to write, in output vertex indexing."""
-        return self.weld.faces if self.weld is not None else self.geometry.faces
-
-    def output_standalone_edges(self) -> NDArray[np.int64] | None:
-        """Edges that belong to no polyline, in output vertex indexing."""
-        return self.weld.standalone_edges if self.weld is not None else self.standalone_edges
-
-    def output_polylines(self) -> list[Polyline]:
-        """Polylines to write, in output vertex indexing."""
-        return self.weld.polylines if self.weld is not None else self.polylines
-
-    def output_edges(self) -> NDArray[np.int64] | None:
-        """All edges to write (standalone, then polyline edges), in output vertex indexing."""
-        parts = [p.edges() for p in self.output_polylines()]
-        standalone = self.output_standalone_edges()
-        if standalone is not None:
-            parts.insert(0, standalone)
-        parts = [p for p in parts if len(p)]
-        return np.concatenate(parts).astype(np.int64) if parts else None
-
-    def output_weights(self) -> NDArray[np.float64] | None:
-        """Per-vertex weights to write, in output vertex indexing."""
-        return self.weld.weights if self.weld is not None else self.geometry.weights
-
-    def output_fixed(self) -> NDArray[np.int64] | None:
-        """Fixed vertex indices to write, in output vertex indexing."""
-        return self.weld.fixed if self.weld is not None else self.geometry.fixed

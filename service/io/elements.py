@@ -15,6 +15,8 @@ Rules (the same for every format):
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -30,7 +32,7 @@ __all__ = [
 ]
 
 
-def as_indices(values: NDArray[np.generic], *, what: str, fmt: str) -> NDArray[np.int64]:
+def as_indices(values: NDArray[Any], *, what: str, fmt: str) -> NDArray[Any]:
     """Index values (integers, or floats holding integers) as int64.
 
     Raises
@@ -44,7 +46,10 @@ def as_indices(values: NDArray[np.generic], *, what: str, fmt: str) -> NDArray[n
         if not np.all(ok):
             bad = float(values.reshape(-1)[~ok.reshape(-1)][0])
             raise FormatError(f"{what} indices must be integers, found {bad!r}", fmt=fmt)
-    return values.astype(np.int64)
+        return values.astype(np.int64)
+    if values.dtype.kind == "u" and values.dtype.itemsize == 8:
+        return values.astype(np.int64)  # beyond int64 wraps negative: caught as out of range
+    return values  # integers stay in their own (compact) dtype; Geometry makes them int64
 
 
 def check_indices(
@@ -84,7 +89,7 @@ def check_indices(
         return
     pos = int(np.flatnonzero(bad)[0])
     elem = pos if counts is None else int(np.searchsorted(np.cumsum(counts), pos, side="right"))
-    vertex = int(flat[pos]) + base
+    vertex = int(flat.reshape(-1)[pos]) + base
     if lines is not None:
         line = int(lines[elem])
         raise FormatError(
@@ -95,6 +100,9 @@ def check_indices(
     raise FormatError(
         f"{what} {elem + start} refers to vertex {vertex} but the file has {n} vertices", fmt=fmt
     )
+
+
+_BLOCK = 1 << 16
 
 
 def fan_triangulate(
@@ -108,20 +116,39 @@ def fan_triangulate(
     n_small : int
         Number of polygons with fewer than three vertices (dropped).
     """
-    counts = np.asarray(counts, dtype=np.int64)
-    flat = np.asarray(flat, dtype=np.int64)
+    counts = np.asarray(counts)
+    flat = np.asarray(flat)
     if counts.size == 0:
         return np.zeros((0, 3), dtype=np.int64), 0
-    n_small = int(np.count_nonzero(counts < 3))
-    if counts.min() == counts.max() and counts[0] == 3:
+    if counts.min() == counts.max() == 3:
         return flat.reshape(-1, 3), 0
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    ntri = np.clip(counts - 2, 0, None)
-    poly = np.repeat(np.arange(counts.size), ntri)
-    first_tri = np.concatenate([[0], np.cumsum(ntri)[:-1]])
-    j = np.arange(int(ntri.sum())) - np.repeat(first_tri, ntri)
-    s = starts[poly]
-    tris = np.column_stack([flat[s], flat[s + j + 1], flat[s + j + 2]])
+    n_small = sum(
+        int(np.count_nonzero(counts[a : a + _BLOCK] < 3)) for a in range(0, counts.size, _BLOCK)
+    )
+    flat = flat.reshape(-1)
+    total = sum(
+        int(np.clip(counts[a : a + _BLOCK].astype(np.int64) - 2, 0, None).sum())
+        for a in range(0, counts.size, _BLOCK)
+    )
+    tris = np.empty((total, 3), dtype=flat.dtype)
+    offset = at = 0
+    for a in range(0, counts.size, _BLOCK):  # blocks: temporaries stay O(block)
+        c = counts[a : a + _BLOCK].astype(np.int64)
+        starts = offset + np.concatenate([[0], np.cumsum(c)[:-1]])
+        offset += int(c.sum())
+        keep = c >= 3
+        if not keep.any():
+            continue
+        c, starts = c[keep], starts[keep]
+        ntri = c - 2
+        first_tri = np.concatenate([[0], np.cumsum(ntri)[:-1]])
+        j = np.arange(int(ntri.sum())) - np.repeat(first_tri, ntri)
+        s = np.repeat(starts, ntri)
+        k = s.size
+        tris[at : at + k, 0] = flat[s]
+        tris[at : at + k, 1] = flat[s + j + 1]
+        tris[at : at + k, 2] = flat[s + j + 2]
+        at += k
     return tris, n_small
 
 
@@ -129,8 +156,15 @@ def drop_repeating(elements: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]
     """Drop rows that repeat a vertex index; return the kept rows and how many were dropped."""
     if elements.size == 0:
         return elements, 0
-    srt = np.sort(elements, axis=1)
-    rep = (srt[:, 1:] == srt[:, :-1]).any(axis=1)
+    k = elements.shape[1]
+    if k <= 4:  # pairwise comparisons: no sorted copy of the elements
+        rep = np.zeros(len(elements), dtype=bool)
+        for i in range(k):
+            for j in range(i + 1, k):
+                rep |= elements[:, i] == elements[:, j]
+    else:
+        srt = np.sort(elements, axis=1)
+        rep = (srt[:, 1:] == srt[:, :-1]).any(axis=1)
     n_rep = int(np.count_nonzero(rep))
     return (elements[~rep] if n_rep else elements), n_rep
 

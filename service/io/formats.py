@@ -1,54 +1,35 @@
-"""Format dispatch: :func:`detect_format`, :func:`read_geometry`, :func:`write_geometry`.
+"""Format dispatch: :func:`read_geometry`, :func:`write_geometry`, :func:`save_geometry`.
 
-Supported formats are :data:`FORMATS`. Formats people commonly try (GPX, GeoJSON, DXF, STL,
-...) are refused with an :class:`~service.io.errors.UnsupportedFormat` that says what to
-convert the data to.
+Every format is an entry of :data:`~service.io.registry.FORMATS`; the format of an input comes
+from the explicit name, else the file name's extension, else the content (magic numbers, then
+the text formats' first lines). Writers get the plain document of :mod:`service.io.plain`.
 """
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
-import numpy as np
 from numpy.typing import ArrayLike
 
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
-from service.io.registry import FORMATS, format_for_name, get_format, supported_text
+from service.io.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
+from service.io.registry import FORMATS, format_for_name, get_format, sniff, supported_text
+from service.io.source import Source
 
-__all__ = ["FORMATS", "detect_format", "read_geometry", "sniff_format", "write_geometry"]
+__all__ = [
+    "FORMATS",
+    "detect_format",
+    "read_geometry",
+    "save_geometry",
+    "sniff_format",
+    "write_geometry",
+]
 
-_TO_POLYLINE = "as OBJ polylines ('v' + 'l' lines) or geosmooth JSON {points, polylines}"
-_REFUSED: dict[str, str] = {
-    "gpx": "GPX is not supported: convert each track segment to a polyline and save it "
-    + _TO_POLYLINE,
-    "geojson": "GeoJSON is not supported: convert each LineString to a polyline and save it "
-    + _TO_POLYLINE,
-    "dxf": "DXF is not supported: discretise the outline (lines and arcs) to polylines and save "
-    "them " + _TO_POLYLINE,
-    "svg": "SVG is not supported: discretise the paths to polylines and save them " + _TO_POLYLINE,
-    "kml": "KML is not supported: convert the tracks to polylines and save them " + _TO_POLYLINE,
-    "stl": "STL is not supported: convert the mesh to PLY or OBJ (e.g. with trimesh or MeshLab)",
-    "off": "OFF is not supported: convert the mesh to PLY or OBJ (e.g. with trimesh or MeshLab)",
-    "gltf": "glTF is not supported: export the mesh as PLY or OBJ",
-    "glb": "glTF is not supported: export the mesh as PLY or OBJ",
-    "fbx": "FBX is not supported: export the mesh as PLY or OBJ",
-    "3ds": "3DS is not supported: export the mesh as PLY or OBJ",
-    "vtk": "VTK is not supported: convert the data to PLY (e.g. with pyvista's save('x.ply'))",
-    "vtp": "VTK is not supported: convert the data to PLY (e.g. with pyvista's save('x.ply'))",
-    "pcd": "PCD is not supported: convert the point cloud to PLY or XYZ (e.g. with Open3D)",
-    "las": "LAS/LAZ is not supported: convert the point cloud to PLY or XYZ (e.g. with PDAL)",
-    "laz": "LAS/LAZ is not supported: convert the point cloud to PLY or XYZ (e.g. with PDAL)",
-}
-
-
-def _check_fmt(fmt: str) -> str:
-    key = fmt.lower().lstrip(".")
-    if key in _REFUSED and key not in FORMATS:
-        raise UnsupportedFormat(_REFUSED[key], fmt=key)
-    return get_format(key).name
+SourceLike = bytes | bytearray | memoryview | str | os.PathLike[str] | Source
 
 
 def detect_format(filename: str) -> str:
@@ -57,8 +38,7 @@ def detect_format(filename: str) -> str:
     Raises
     ------
     UnsupportedFormat
-        For GPX, GeoJSON, DXF and other known formats (the message says what to convert to),
-        unknown extensions, and names without an extension.
+        For unknown extensions and names without one.
     """
     name = Path(str(filename)).name
     suffix = Path(name).suffix.lower().lstrip(".")
@@ -68,104 +48,94 @@ def detect_format(filename: str) -> str:
             " pass the format explicitly"
         )
     known = format_for_name(name)
-    if known is not None:
-        return known.name
-    if suffix in _REFUSED:
-        raise UnsupportedFormat(_REFUSED[suffix], fmt=suffix)
-    raise UnsupportedFormat(
-        f"unsupported file extension '.{suffix}' ({name!r}): {supported_text()}", fmt=suffix
-    )
+    if known is None:
+        raise UnsupportedFormat(
+            f"unsupported file extension '.{suffix}' ({name!r}): {supported_text()}", fmt=suffix
+        )
+    return known.name
 
 
-def sniff_format(data: bytes) -> str | None:
-    """Guess the format from the content: ``"ply"``, ``"json"``, ``"obj"``, ``"xyz"`` or None."""
-    head = data[:4096].lstrip()
-    if head.startswith(b"ply"):
-        return "ply"
-    if head[:1] in (b"{", b"["):
-        return "json"
-    if head.startswith(b"<"):
-        return None
-    for line in head.split(b"\n")[:-1] or head.split(b"\n"):
-        words = line.replace(b",", b" ").split()
-        if not words or words[0].startswith(b"#"):
-            continue
-        if words[0] in (b"v", b"vn", b"vt", b"f", b"l", b"o", b"g", b"mtllib", b"usemtl", b"s"):
-            return "obj"
-        try:
-            [float(w) for w in words]
-        except ValueError:
-            continue
-        return "xyz"
-    return None
+def sniff_format(data: bytes, size: int | None = None) -> str | None:
+    """Guess the format from the content (the first bytes suffice), or ``None``."""
+    return sniff(bytes(data[:4096]), len(data) if size is None else size)
 
 
-def _load(
-    source: bytes | bytearray | memoryview | str | os.PathLike[str],
-) -> tuple[bytes, str | None]:
-    if isinstance(source, bytes | bytearray | memoryview):
-        return bytes(source), None
-    if isinstance(source, str | os.PathLike):
-        path = Path(source)
-        return path.read_bytes(), path.name
-    raise TypeError(f"source must be bytes or a path, got {type(source).__name__}")
+def _resolve(source: Source, fmt: str | None, filename: str | None) -> str:
+    name = str(filename or source.name or "")
+    if fmt is not None:
+        return get_format(fmt).name
+    if Path(name).suffix:
+        return detect_format(name)
+    head = source.head(4096)
+    sniffed = sniff(head, source.size)
+    if sniffed is None:
+        if not head.strip():
+            raise FormatError("the file is empty")
+        raise UnsupportedFormat(f"cannot tell the format of the data: {supported_text()}")
+    return sniffed
 
 
 def read_geometry(
-    source: bytes | str | os.PathLike[str],
+    source: SourceLike,
     fmt: str | None = None,
     *,
     filename: str | None = None,
-    weld: bool = False,
-    xyz_dims: int | None = None,
+    weld: bool | None = None,
+    **options: Any,
 ) -> GeometryDocument:
     """Read a geometry file.
 
     Parameters
     ----------
     source : bytes or str or path-like
-        File content (e.g. an upload) or a path to read.
+        File content (e.g. an upload) or a path (big files are then streamed where the format
+        allows it).
     fmt : str, optional
-        One of :data:`FORMATS`. Default: from the extension of ``filename`` (or the path's
-        name); without one, from the content (PLY magic, a JSON object, OBJ keywords, numbers).
+        A name of :data:`FORMATS`. Default: from the extension of ``filename`` (or the path's
+        name); without one, from the content.
     filename : str, optional
         Name used to detect the format of bytes.
-    weld : bool
-        Merge exactly coincident vertices (see :mod:`service.io.weld`); the document remembers
-        the map, and :func:`write_geometry` writes the original vertex count and order.
-    xyz_dims : int, optional
-        XYZ only: number of leading columns that are coordinates (see :mod:`service.io.xyz`).
-
-    Returns
-    -------
-    GeometryDocument
+    weld : bool, optional
+        Merge exactly coincident vertices (see :mod:`service.io.weld`); writers still write the
+        file's vertex count and order. Default: the format's (STL and GLB: yes, others: no).
+    **options
+        Reader options of the format (``xyz_dims`` for XYZ, ``geographic`` for GPX/GeoJSON);
+        options given as ``None`` are ignored.
 
     Raises
     ------
     UnsupportedFormat
-        A format geosmooth does not read (GPX, GeoJSON, DXF, unknown).
+        A format geosmooth does not read.
     FormatError
         A malformed file (one-line message; the line number for text formats).
     GeometryError
         Content with no meaning as smoothing input (e.g. non-finite coordinates).
+    ValueError
+        A reader option the format does not understand.
     """
-    data, path_name = _load(source)
-    name = str(filename or path_name or "")
-    if fmt is not None:
-        kind = _check_fmt(fmt)
-    elif Path(name).suffix:
-        kind = detect_format(name)
-    else:  # no name, or a name without an extension: look at the content
-        sniffed = sniff_format(data)
-        if sniffed is None:
-            if not data.strip():
-                raise FormatError("the file is empty")
-            raise UnsupportedFormat(f"cannot tell the format of the data: {supported_text()}")
-        kind = sniffed
-    if kind != "xyz" and xyz_dims is not None:
-        raise ValueError("xyz_dims applies to XYZ files only")
-    options = {"xyz_dims": xyz_dims} if xyz_dims is not None else {}
-    return FORMATS[kind].read(data, weld=weld, **options)
+    src = Source.of(source)
+    spec = FORMATS[_resolve(src, fmt, filename)]
+    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
+        raise FormatError("the file is empty", fmt=spec.name)
+    given = {k: v for k, v in options.items() if v is not None}
+    for key in given:
+        if key not in spec.options:
+            users = [f.title for f in FORMATS.values() if key in f.options] or ["no"]
+            raise ValueError(f"{key} applies to {' and '.join(users)} files only")
+    do_weld = spec.weld_default if weld is None else bool(weld)
+    doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+    return doc
+
+
+def _plain(
+    doc: GeometryDocument,
+    points: ArrayLike | None,
+    normals: NormalsMode,
+    precision: PrecisionMode,
+    ply_ascii: bool | None,
+) -> Any:
+    options = WriteOptions(normals=normals, precision=precision, ply_ascii=ply_ascii)
+    return plain_document(doc, points, options)
 
 
 def write_geometry(
@@ -173,7 +143,9 @@ def write_geometry(
     fmt: str,
     points: ArrayLike | None = None,
     *,
-    ply_ascii: bool = False,
+    ply_ascii: bool | None = None,
+    normals: NormalsMode = "recompute",
+    precision: PrecisionMode = "input",
 ) -> bytes:
     """Write a document (optionally with new points) in one of :data:`FORMATS`.
 
@@ -184,28 +156,51 @@ def write_geometry(
     fmt : str
         Output format.
     points : array_like, optional
-        The smoothed points: same shape as ``doc.geometry.points``. Default: the doc's own.
-        For a welded document, each original vertex is written with its welded vertex's point,
-        so the output keeps the input's vertex count, order and connectivity.
-    ply_ascii : bool
-        Write ASCII PLY instead of binary little-endian.
+        The smoothed points, shaped like ``doc.geometry.points`` (default: the doc's own). A
+        welded document is written with the input's vertex count, order and connectivity.
+    ply_ascii : bool, optional
+        PLY: ASCII (True), binary little-endian (False), the input's encoding (None).
+    normals : {"recompute", "drop"}
+        Input normals recomputed from the written geometry, or left out.
+    precision : {"input", "float32", "float64"}
+        Coordinates as the input stored them (dtype; digits for text formats) or forced.
 
     Raises
     ------
     FormatError
-        The format cannot hold the points (PLY and OBJ: 2 or 3 coordinates; XYZ: at least 2).
+        The format cannot hold the data (e.g. PLY and OBJ: 2 or 3 coordinates).
     UnsupportedFormat
         ``fmt`` is not one of :data:`FORMATS`.
     ValueError
-        ``points`` has the wrong shape.
+        ``points`` has the wrong shape, or a bad option.
     """
-    spec = FORMATS[_check_fmt(fmt)]
-    if spec.write is None:
-        raise UnsupportedFormat(f"{spec.title} can be read but not written", fmt=spec.name)
-    pts: Any = None if points is None else np.asarray(points, dtype=np.float64)
-    if pts is not None and pts.shape != doc.geometry.points.shape:
-        raise ValueError(
-            f"points must have the shape of the document's points {doc.geometry.points.shape},"
-            f" got {pts.shape}"
-        )
-    return spec.write(doc, pts, ascii=ply_ascii)
+    out = io.BytesIO()
+    save_geometry(doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision)
+    return out.getvalue()
+
+
+def save_geometry(
+    doc: GeometryDocument,
+    dest: str | os.PathLike[str] | BinaryIO,
+    fmt: str | None = None,
+    points: ArrayLike | None = None,
+    *,
+    ply_ascii: bool | None = None,
+    normals: NormalsMode = "recompute",
+    precision: PrecisionMode = "input",
+) -> None:
+    """Like :func:`write_geometry`, streamed to a path or binary file (no whole-file copy).
+
+    ``fmt`` defaults to the path's extension, else the document's source format. A path is
+    written in place (atomic replacement is the caller's business).
+    """
+    if fmt is None:
+        named = format_for_name(str(dest)) if isinstance(dest, str | os.PathLike) else None
+        fmt = named.name if named is not None else doc.source_format
+    spec = get_format(fmt)
+    plain = _plain(doc, points, normals, precision, ply_ascii)
+    if isinstance(dest, str | os.PathLike):
+        with open(dest, "wb") as fh:
+            spec.write_to(plain, fh)
+    else:
+        spec.write_to(plain, dest)

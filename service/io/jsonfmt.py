@@ -1,41 +1,48 @@
-"""geosmooth JSON: points with optional connectivity, weights and fixed points.
+"""geosmooth JSON: points with optional connectivity, weights, fixed points and attributes.
 
-The schema (also :data:`GEOMETRY_JSON_SCHEMA`, a JSON Schema the API reuses)::
+The schema (also :data:`~service.io.json_schema.GEOMETRY_JSON_SCHEMA`, which the API reuses)::
 
     {
-      "points":    [[x, y, ...], ...],            n rows of s >= 1 numbers (required)
-      "faces":     [[i, j, k], ...],              0-based; polygons are fan-triangulated
-      "edges":     [[i, j], ...],                 standalone edges
-      "polylines": [{"indices": [i, j, ...], "closed": false}, ...],
-      "weights":   [w_0, ..., w_{n-1}],           positive per-point weights
-      "fixed":     [i, ...],                      points kept exactly in place
-      "comments":  ["...", ...]                   free text, carried to written files
+      "points":     [[x, y, ...], ...],            n rows of s >= 1 numbers (required)
+      "faces":      [[i, j, k], ...],              0-based; polygons are fan-triangulated
+      "edges":      [[i, j], ...],                 standalone edges
+      "polylines":  [{"indices": [i, j, ...], "closed": false}, ...],
+      "weights":    [w_0, ..., w_{n-1}],           positive per-point weights
+      "fixed":      [i, ...],                      points kept exactly in place
+      "comments":   ["...", ...],                  free text, carried to written files
+      "attributes": {"red": [...], "uv": [[u, v], ...]},   per-point values, written back
+      "attribute_types": {"red": "uint8"},         dtype of an attribute (default float64/int64)
+      "normals":    [[nx, ny, nz], ...],           recomputed on output (or dropped)
+      "precision":  "float32"                      how the points were stored
     }
 
 Indices are 0-based. A polyline whose last index repeats its first is closed (stored once).
 Faces and edges that repeat a vertex are dropped and noted; indices outside the point list are a
 :class:`~service.io.errors.FormatError`; unknown keys are an error too (typos such as ``face``
-must not pass silently). The HTTP API accepts the same object inline in a request body
-(:func:`geometry_from_json_obj`).
+must not pass silently); booleans are not numbers. A GeoJSON object is read as GeoJSON. The
+HTTP API accepts the same object inline in a request body (:func:`geometry_from_json_obj`).
 
-Written files use the same schema; floats are written by Python's ``json`` (``repr``: shortest
-round-trip form), so points read back bit-identical. An infinite weight (a fixed point) is
-written as weight 1 plus an entry in ``fixed``, which means the same and keeps the file strict
-JSON.
+Written files use the same schema; points are written in shortest round-trip form (or the
+input's digits / float32 when ``precision`` says so), so they read back bit-identical. An
+infinite weight (a fixed point) is written as weight 1 plus an entry in ``fixed``, which means
+the same and keeps the file strict JSON.
 """
 
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
 
 from service.io.assemble import assemble
-from service.io.document import GeometryDocument
+from service.io.document import GeometryDocument, Precision
 from service.io.elements import as_indices, check_indices
-from service.io.errors import FormatError, UnsupportedFormat
+from service.io.errors import FormatError
+from service.io.json_schema import ATTRIBUTE_TYPES, GEOMETRY_JSON_SCHEMA
+from service.io.numfmt import format_column
+from service.io.source import Source
 
 __all__ = [
     "GEOMETRY_JSON_SCHEMA",
@@ -45,65 +52,8 @@ __all__ = [
     "write_json",
 ]
 
-_INDEX = {"type": "integer", "minimum": 0}
-
-GEOMETRY_JSON_SCHEMA: dict[str, Any] = {
-    "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "title": "geosmooth geometry",
-    "description": "Points (n x s, any s >= 1) with optional 0-based connectivity.",
-    "type": "object",
-    "required": ["points"],
-    "additionalProperties": False,
-    "properties": {
-        "points": {
-            "description": "n points, each a list of s >= 1 coordinates (the same s for all).",
-            "type": "array",
-            "minItems": 1,
-            "items": {"type": "array", "minItems": 1, "items": {"type": "number"}},
-        },
-        "faces": {
-            "description": "Faces as 0-based vertex indices; polygons are fan-triangulated.",
-            "type": "array",
-            "items": {"type": "array", "minItems": 3, "items": _INDEX},
-        },
-        "edges": {
-            "description": "Standalone edges (0-based vertex index pairs).",
-            "type": "array",
-            "items": {"type": "array", "minItems": 2, "maxItems": 2, "items": _INDEX},
-        },
-        "polylines": {
-            "description": "Open or closed polylines through 0-based vertex indices.",
-            "type": "array",
-            "items": {
-                "type": "object",
-                "required": ["indices"],
-                "additionalProperties": False,
-                "properties": {
-                    "indices": {"type": "array", "minItems": 2, "items": _INDEX},
-                    "closed": {"type": "boolean", "default": False},
-                },
-            },
-        },
-        "weights": {
-            "description": "One positive weight per point (omega_i of the report).",
-            "type": "array",
-            "items": {"type": "number", "exclusiveMinimum": 0},
-        },
-        "fixed": {
-            "description": "0-based indices of points kept exactly in place.",
-            "type": "array",
-            "items": _INDEX,
-        },
-        "comments": {
-            "description": "Free text carried to written files.",
-            "type": "array",
-            "items": {"type": "string"},
-        },
-    },
-}
-
 _KEYS = tuple(GEOMETRY_JSON_SCHEMA["properties"])
-_GEOJSON_TYPES = {
+GEOJSON_TYPES = {
     "FeatureCollection",
     "Feature",
     "Point",
@@ -120,14 +70,25 @@ def _fail(message: str) -> FormatError:
     return FormatError(f"JSON {message}", fmt="json")
 
 
+def _has_bool(value: Any, depth: int = 2) -> bool:
+    """Whether a (nested) list holds a boolean (numpy would take ``true`` as 1)."""
+    if isinstance(value, bool):
+        return True
+    if depth and isinstance(value, list):
+        return any(_has_bool(v, depth - 1) for v in value)
+    return False
+
+
 def _numeric(value: Any, key: str, shape: str) -> NDArray[Any]:
     """``value`` as a numeric array, or a FormatError saying what ``key`` must be."""
     try:
         arr = np.asarray(value)
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):
         raise _fail(f"{key!r} must be {shape}") from None
-    if arr.size and arr.dtype.kind not in "iuf":
-        raise _fail(f"{key!r} must be {shape}")
+    if arr.size and (arr.dtype.kind not in "iuf" or _has_bool(value)):
+        raise _fail(f"{key!r} must be {shape} (numbers only, not booleans or strings)")
+    if arr.dtype.kind in "iu" and arr.dtype.itemsize > 8:  # pragma: no cover - numpy object
+        raise _fail(f"{key!r} holds integers too large")
     return arr
 
 
@@ -152,13 +113,80 @@ def _faces(value: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     return flat, counts
 
 
+def _connectivity(obj: dict[str, Any], n: int) -> dict[str, Any]:
+    """Faces, edges, polylines, weights and fixed points of a JSON object."""
+    out: dict[str, Any] = {"polygons": None, "edges": None, "polylines": []}
+    if obj.get("faces"):
+        out["polygons"] = _faces(obj["faces"])
+        check_indices(out["polygons"][0], n, what="face", fmt="json", counts=out["polygons"][1])
+    if obj.get("edges"):
+        edges = _numeric(obj["edges"], "edges", "a list of [i, j] index pairs")
+        if edges.ndim != 2 or edges.shape[1] != 2:
+            raise _fail("'edges' must be a list of [i, j] index pairs")
+        edges = _index_list(edges, "edges").reshape(-1, 2)
+        check_indices(edges.reshape(-1), n, what="edge", fmt="json", counts=np.full(len(edges), 2))
+        out["edges"] = edges
+    for k, item in enumerate(obj.get("polylines") or []):
+        if not isinstance(item, dict) or "indices" not in item or set(item) - {"indices", "closed"}:
+            raise _fail(f"polyline {k} must be an object {{'indices': [...], 'closed': bool}}")
+        closed = item.get("closed", False)
+        if not isinstance(closed, bool):
+            raise _fail(f"polyline {k}: 'closed' must be true or false")
+        idx = _index_list(item["indices"], f"polylines[{k}].indices")
+        check_indices(idx, n, what="polyline", fmt="json", counts=np.array([idx.size]), start=k)
+        out["polylines"].append((idx, closed))
+    if obj.get("weights") is not None:
+        weights = _numeric(obj["weights"], "weights", "a list of n positive numbers")
+        out["weights"] = weights.astype(np.float64)
+    if obj.get("fixed"):
+        out["fixed"] = _index_list(obj["fixed"], "fixed")
+        check_indices(out["fixed"], n, what="fixed point", fmt="json")
+    return out
+
+
+def _attributes(obj: dict[str, Any], n: int) -> dict[str, NDArray[Any]]:
+    attrs = obj.get("attributes") or {}
+    types = obj.get("attribute_types") or {}
+    if not isinstance(attrs, dict) or not isinstance(types, dict):
+        raise _fail("'attributes' and 'attribute_types' must be objects")
+    out: dict[str, NDArray[Any]] = {}
+    for name, values in attrs.items():
+        arr = _numeric(values, f"attributes.{name}", "a list of n numbers or n lists of numbers")
+        if arr.ndim not in (1, 2) or arr.shape[0] != n:
+            raise _fail(f"'attributes.{name}' must hold one value (or list) per point ({n})")
+        dtype = types.get(name)
+        if dtype is not None:
+            if dtype not in ATTRIBUTE_TYPES:
+                raise _fail(f"'attribute_types.{name}' must be one of {', '.join(ATTRIBUTE_TYPES)}")
+            with np.errstate(over="ignore", invalid="ignore"):
+                cast = arr.astype(dtype)
+            if not np.array_equal(cast.astype(np.float64), arr.astype(np.float64)):
+                raise _fail(f"'attributes.{name}' does not fit its type {dtype}")
+            arr = cast
+        out[str(name)] = arr
+    unknown = sorted(set(types) - set(attrs))
+    if unknown:
+        raise _fail(f"'attribute_types' names {unknown[0]!r}, which is not an attribute")
+    return out
+
+
+def _normals(obj: dict[str, Any], n: int) -> NDArray[np.float64] | None:
+    if obj.get("normals") is None:
+        return None
+    arr = _numeric(obj["normals"], "normals", "an n x 3 array of numbers")
+    if arr.shape != (n, 3):
+        raise _fail(f"'normals' must be {n} rows of 3 numbers, got shape {arr.shape}")
+    return arr.astype(np.float64)
+
+
 def geometry_from_json_obj(obj: Any, *, weld: bool = False, fmt: str = "json") -> GeometryDocument:
     """Build a document from a parsed geosmooth JSON object (see the module docstring).
 
     Parameters
     ----------
     obj : dict
-        The decoded JSON object (e.g. part of an HTTP request body).
+        The decoded JSON object (e.g. part of an HTTP request body). GeoJSON objects are read
+        as GeoJSON (see :mod:`service.io.geojson`).
     weld : bool
         Merge exactly coincident points.
     fmt : str
@@ -168,8 +196,6 @@ def geometry_from_json_obj(obj: Any, *, weld: bool = False, fmt: str = "json") -
     ------
     FormatError
         The object does not follow the schema, or an index is out of range.
-    UnsupportedFormat
-        The object is GeoJSON.
     GeometryError
         From :class:`~service.core.geometry.Geometry` validation (non-finite coordinates,
         non-positive weights, ...).
@@ -177,12 +203,10 @@ def geometry_from_json_obj(obj: Any, *, weld: bool = False, fmt: str = "json") -
     if not isinstance(obj, dict):
         raise _fail(f"top level must be an object with a 'points' key, got {type(obj).__name__}")
     if "points" not in obj:
-        if obj.get("type") in _GEOJSON_TYPES:
-            raise UnsupportedFormat(
-                "GeoJSON is not supported: convert each LineString to a polyline, as geosmooth"
-                " JSON {'points', 'polylines'} or OBJ 'v' + 'l' lines",
-                fmt="geojson",
-            )
+        if obj.get("type") in GEOJSON_TYPES:
+            from service.io.geojson import geojson_document
+
+            return geojson_document(obj, weld=weld)
         raise _fail("object has no 'points' key")
     unknown = sorted(set(obj) - set(_KEYS))
     if unknown:
@@ -194,59 +218,28 @@ def geometry_from_json_obj(obj: Any, *, weld: bool = False, fmt: str = "json") -
             f" of the same length (got shape {points.shape})"
         )
     n = points.shape[0]
-    polygons = None
-    if obj.get("faces"):
-        polygons = _faces(obj["faces"])
-        check_indices(polygons[0], n, what="face", fmt="json", counts=polygons[1])
-    edges = None
-    if obj.get("edges"):
-        edges = _numeric(obj["edges"], "edges", "a list of [i, j] index pairs")
-        if edges.ndim != 2 or edges.shape[1] != 2:
-            raise _fail("'edges' must be a list of [i, j] index pairs")
-        edges = _index_list(edges, "edges").reshape(-1, 2)
-        check_indices(edges.reshape(-1), n, what="edge", fmt="json", counts=np.full(len(edges), 2))
-    polylines: list[tuple[NDArray[np.int64], bool]] = []
-    for k, item in enumerate(obj.get("polylines") or []):
-        if not isinstance(item, dict) or "indices" not in item or set(item) - {"indices", "closed"}:
-            raise _fail(f"polyline {k} must be an object {{'indices': [...], 'closed': bool}}")
-        closed = item.get("closed", False)
-        if not isinstance(closed, bool):
-            raise _fail(f"polyline {k}: 'closed' must be true or false")
-        idx = _index_list(item["indices"], f"polylines[{k}].indices")
-        check_indices(idx, n, what="polyline", fmt="json", counts=np.array([idx.size]), start=k)
-        polylines.append((idx, closed))
-    weights = None
-    if obj.get("weights") is not None:
-        weights = _numeric(obj["weights"], "weights", "a list of n positive numbers")
-        weights = weights.astype(np.float64)
-    fixed = None
-    if obj.get("fixed"):
-        fixed = _index_list(obj["fixed"], "fixed")
-        check_indices(fixed, n, what="fixed point", fmt="json")
     comments = obj.get("comments") or []
     if not isinstance(comments, list) or not all(isinstance(c, str) for c in comments):
         raise _fail("'comments' must be a list of strings")
-    return assemble(
-        points,
-        fmt=fmt,
-        polygons=polygons,
-        edges=edges,
-        polylines=polylines,
-        weights=weights,
-        fixed=fixed,
-        comments=comments,
-        weld=weld,
+    stored = obj.get("precision", "float64")
+    if stored not in ("float32", "float64"):
+        raise _fail("'precision' must be 'float32' or 'float64'")
+    parts = _connectivity(obj, n)
+    doc = assemble(points, fmt=fmt, comments=comments, weld=weld, **parts)
+    return doc.with_extras(
+        attributes=_attributes(obj, n), normals=_normals(obj, n), precision=Precision(stored)
     )
 
 
-def read_json(data: bytes, *, weld: bool = False) -> GeometryDocument:
-    """Read a geosmooth JSON file from bytes.
+def read_json(source: Source, *, weld: bool = False) -> GeometryDocument:
+    """Read a geosmooth JSON file.
 
     Raises
     ------
     FormatError
         Invalid JSON (with line and column) or an object that does not follow the schema.
     """
+    data = source.data()
     if not data.strip():
         raise FormatError("the file is empty", fmt="json")
     try:
@@ -261,33 +254,36 @@ def read_json(data: bytes, *, weld: bool = False) -> GeometryDocument:
         raise FormatError("the file is not UTF-8 text", fmt="json") from None
     except RecursionError:
         raise FormatError("the JSON is nested too deeply", fmt="json") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise FormatError(f"invalid JSON: {exc}", fmt="json") from None
     return geometry_from_json_obj(obj, weld=weld)
+
+
+def _rows_json(values: NDArray[Any], specs: tuple[str, ...]) -> str:
+    cols = [format_column(values[:, j], specs[j]) for j in range(values.shape[1])]
+    return "[" + ",".join("[" + ",".join(r) + "]" for r in zip(*cols, strict=True)) + "]"
 
 
 def document_to_json_obj(
     doc: GeometryDocument, points: NDArray[np.float64] | None = None
 ) -> dict[str, Any]:
-    """The document as a geosmooth JSON object (original vertex count and order if welded).
+    """The document as a geosmooth JSON object (original vertex count and order if welded)."""
+    from service.io.plain import plain_document
 
-    Parameters
-    ----------
-    doc : GeometryDocument
-        What to write.
-    points : ndarray, optional
-        Replacement (e.g. smoothed) points, shaped like ``doc.geometry.points``.
-    """
-    out: dict[str, Any] = {"points": doc.output_points(points).tolist()}
-    faces = doc.output_faces()
-    if faces is not None and len(faces):
-        out["faces"] = faces.tolist()
-    edges = doc.output_standalone_edges()
-    if edges is not None and len(edges):
-        out["edges"] = edges.tolist()
-    polylines = doc.output_polylines()
-    if polylines:
-        out["polylines"] = [{"indices": p.indices.tolist(), "closed": p.closed} for p in polylines]
-    weights = doc.output_weights()
-    fixed = doc.output_fixed()
+    return json.loads(_json_text(plain_document(doc, points)))
+
+
+def _json_text(plain: Any) -> str:
+    out: dict[str, Any] = {}
+    if plain.faces is not None and len(plain.faces):
+        out["faces"] = plain.faces.tolist()
+    if plain.standalone_edges is not None and len(plain.standalone_edges):
+        out["edges"] = plain.standalone_edges.tolist()
+    if plain.polylines:
+        out["polylines"] = [
+            {"indices": p.indices.tolist(), "closed": p.closed} for p in plain.polylines
+        ]
+    weights, fixed = plain.weights, plain.fixed
     if weights is not None:
         inf = ~np.isfinite(weights)
         if inf.any():
@@ -297,12 +293,29 @@ def document_to_json_obj(
         out["weights"] = weights.tolist()
     if fixed is not None and len(fixed):
         out["fixed"] = np.asarray(fixed).tolist()
-    if doc.comments:
-        out["comments"] = list(doc.comments)
-    return out
+    if plain.comments:
+        out["comments"] = list(plain.comments)
+    if plain.attributes:
+        out["attributes"] = {k: v.tolist() for k, v in plain.attributes.items()}
+        types = {
+            k: v.dtype.name
+            for k, v in plain.attributes.items()
+            if v.dtype.name not in ("float64", "int64") and v.dtype.name in ATTRIBUTE_TYPES
+        }
+        if types:
+            out["attribute_types"] = types
+    if plain.normals is not None:
+        out["normals"] = np.asarray(plain.normals, dtype=np.float64).tolist()
+    if plain.coordinate_dtype() == np.float32:
+        out["precision"] = "float32"
+    rest = json.dumps(out, allow_nan=False, separators=(",", ":"))
+    points = _rows_json(plain.points, plain.coordinate_specs())
+    return '{"points":' + points + ("," + rest[1:] if len(rest) > 2 else "}")
 
 
-def write_json(doc: GeometryDocument, points: NDArray[np.float64] | None = None) -> bytes:
-    """Write a document as geosmooth JSON (UTF-8 bytes)."""
-    obj = document_to_json_obj(doc, points)
-    return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode("utf-8")
+def write_json(plain: Any, out: BinaryIO) -> None:
+    """Write a plain document as geosmooth JSON (UTF-8)."""
+    try:
+        out.write(_json_text(plain).encode("utf-8"))
+    except ValueError as exc:  # a non-finite attribute value
+        raise FormatError(f"JSON cannot hold {exc}", fmt="json") from None

@@ -1,44 +1,61 @@
-"""ASCII PLY bodies: one element entry per line, parsed a block at a time with numpy.
+"""ASCII PLY bodies: one element entry per line, parsed in bounded blocks with numpy.
 
-Elements without list properties are one ``numeric_block``. Elements with lists take a fast path
-when every line has the layout of the first, otherwise a vectorized per-line path driven by the
-token count of each line. Elements nobody needs (e.g. ``range_grid``) are skipped by counting
-lines, without parsing. Values are returned as float64; callers cast to the declared types.
+Each element is read block by block (:func:`~service.io.text.line_blocks`). Elements without
+list properties are tables of fixed width: a line with another number of values is an error
+naming it (never shifted into the next entry). Elements with lists take a fast path when every
+line of a block has the layout of its first line, otherwise a vectorized per-line path driven by
+each line's token count. Values are stored in the declared types (an integer property must hold
+integers), so memory is the input plus the element arrays plus one block.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from service.io.errors import FormatError
+from service.io.numfmt import Digits
 from service.io.ply_header import PlyElement, PlyHeader
 from service.io.ply_types import ElementData
-from service.io.text import LineNumbers, numeric_block, tokens_per_line
+from service.io.text import (
+    LineBlock,
+    flat_numbers,
+    line_blocks,
+    line_number,
+    table_rows,
+    tokens_per_line,
+)
 
 __all__ = ["read_ascii_body"]
 
 
-def _ascii_element(lines: list[bytes], numbers: LineNumbers, el: PlyElement) -> ElementData:
-    """Parse the lines of one element (one entry per line)."""
-    props = el.properties
-    what = f"a {el.name} entry"
-    if el.count == 0:
-        return {}
-    if not any(p.is_list for p in props):
-        vals = numeric_block(lines, numbers, len(props), fmt="ply", what=what)
-        return {p.name: vals[:, i] for i, p in enumerate(props)}
-    flat = numeric_block(lines, numbers, None, fmt="ply", what=what)
-    out = _ascii_uniform_lists(flat, el)
-    if out is None:
-        out = _ascii_per_line(lines, numbers, flat, el)
-    return out
+def _typed(values: NDArray[np.float64], dtype: str, el: PlyElement, name: str) -> NDArray[Any]:
+    """Values in the declared type; integers must be integral and in range."""
+    dt = np.dtype(dtype)
+    if dt.kind in "iu":
+        info = np.iinfo(dt)
+        bad = (values != np.round(values)) | (values < info.min) | (values > info.max)
+        bad |= ~np.isfinite(values)
+        if bad.any():
+            v = float(values[np.flatnonzero(bad)[0]])
+            raise FormatError(
+                f"{el.name} property {name!r} is declared {dt.name} but holds {v!r}", fmt="ply"
+            )
+        return values.astype(dt)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return values.astype(dt)
 
 
-def _ascii_uniform_lists(flat: NDArray[np.float64], el: PlyElement) -> ElementData | None:
-    """Fast path: every line has the layout of the first one. ``None`` if not."""
+def _uniform(
+    flat: NDArray[np.float64], counts: NDArray[np.int64], el: PlyElement
+) -> list[tuple[int, int]] | None:
+    """Column and list length of each property if every line has the first line's layout."""
+    if counts.size == 0:
+        return None
     pos = 0
-    layout: list[tuple[int, int]] = []  # (column, list length or -1 for a scalar)
+    layout: list[tuple[int, int]] = []
     for p in el.properties:
         if pos >= flat.size:
             return None
@@ -51,120 +68,137 @@ def _ascii_uniform_lists(flat: NDArray[np.float64], el: PlyElement) -> ElementDa
         else:
             layout.append((pos, -1))
             pos += 1
-    width = pos
-    if flat.size != width * el.count:
+    if not np.all(counts == pos) or flat.size != pos * counts.size:
         return None
-    table = flat.reshape(el.count, width)
-    out: ElementData = {}
-    for p, (col, k) in zip(el.properties, layout, strict=True):
-        if k < 0:
-            out[p.name] = table[:, col]
-            continue
-        if not np.all(table[:, col] == k):
+    table = flat.reshape(counts.size, pos)
+    for col, k in layout:
+        if k >= 0 and not np.all(table[:, col] == k):
             return None
-        items = table[:, col + 1 : col + 1 + k].reshape(-1)
-        out[p.name] = (items, np.full(el.count, k, dtype=np.int64))
-    return out
+    return layout
 
 
-def _ascii_per_line(
-    lines: list[bytes], numbers: LineNumbers, flat: NDArray[np.float64], el: PlyElement
-) -> ElementData:
-    """General path: lists of varying length, one entry per line."""
-    widths = np.fromiter((len(line.split()) for line in lines), dtype=np.int64, count=len(lines))
+def _lists_block(
+    block: LineBlock, buf: bytes, el: PlyElement
+) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]] | NDArray[np.float64]]:
+    """One block of an element with list properties: values per property (float64)."""
+    flat, widths = flat_numbers(block, buf, fmt="ply", what=f"a {el.name} entry")
+    layout = _uniform(flat, widths, el)
+    out: dict[str, Any] = {}
+    if layout is not None:
+        width = int(widths[0])
+        table = flat.reshape(widths.size, width)
+        for p, (col, k) in zip(el.properties, layout, strict=True):
+            if k < 0:
+                out[p.name] = table[:, col]
+            else:
+                items = table[:, col + 1 : col + 1 + k].reshape(-1)
+                out[p.name] = (items, np.full(widths.size, k, dtype=np.int64))
+        return out
     line_start = np.concatenate([[0], np.cumsum(widths)[:-1]])
-    cols: dict[str, list[NDArray[np.float64]]] = {}
+    line_end = line_start + widths
     pos = line_start.copy()
+
+    def fail(mask: NDArray[np.bool_], message: str) -> FormatError:
+        row = int(np.flatnonzero(mask)[0])
+        lines = block.data.split(b"\n")
+        nonblank = [i for i, line in enumerate(lines) if line.strip()]
+        offset = block.offset + sum(len(x) + 1 for x in lines[: nonblank[row]])
+        n = line_number(buf, offset)
+        return FormatError(f"line {n}: {message}", fmt="ply", line=n)
+
     for p in el.properties:
-        if np.any(pos >= line_start + widths):
-            bad = int(np.flatnonzero(pos >= line_start + widths)[0])
-            raise FormatError(
-                f"line {numbers[bad]}: too few values for {el.name} property {p.name!r}",
-                fmt="ply",
-                line=numbers[bad],
-            )
+        if np.any(pos >= line_end):
+            raise fail(pos >= line_end, f"too few values for {el.name} property {p.name!r}")
         head = flat[pos]
         if not p.is_list:
-            cols[p.name] = [head]
+            out[p.name] = head
             pos = pos + 1
             continue
-        if np.any((head < 0) | (head != np.round(head))):
-            bad = int(np.flatnonzero((head < 0) | (head != np.round(head)))[0])
-            raise FormatError(
-                f"line {numbers[bad]}: bad list length {float(flat[pos[bad]])!r} for {el.name}",
-                fmt="ply",
-                line=numbers[bad],
-            )
+        bad = (head < 0) | (head != np.round(head))
+        if bad.any():
+            raise fail(bad, f"bad list length for {el.name} property {p.name!r}")
         k = head.astype(np.int64)
-        if np.any(pos + 1 + k > line_start + widths):
-            bad = int(np.flatnonzero(pos + 1 + k > line_start + widths)[0])
-            raise FormatError(
-                f"line {numbers[bad]}: the list {p.name!r} announces {int(k[bad])} values but"
-                f" the line is shorter",
-                fmt="ply",
-                line=numbers[bad],
-            )
-        items = _gather_values(flat, pos + 1, k)
-        cols[p.name] = [items, k]
+        if np.any(pos + 1 + k > line_end):
+            raise fail(pos + 1 + k > line_end, f"the list {p.name!r} is longer than the line")
+        total = int(k.sum())
+        offsets = np.concatenate([[0], np.cumsum(k)[:-1]])
+        idx = np.arange(total, dtype=np.int64) + np.repeat(pos + 1 - offsets, k)
+        out[p.name] = (flat[idx], k)
         pos = pos + 1 + k
-    extra = pos != line_start + widths
-    if np.any(extra):
-        bad = int(np.flatnonzero(extra)[0])
-        raise FormatError(
-            f"line {numbers[bad]}: too many values for a {el.name} entry",
-            fmt="ply",
-            line=numbers[bad],
-        )
-    out: ElementData = {}
-    for p in el.properties:
-        col = cols[p.name]
-        out[p.name] = (col[0], col[1].astype(np.int64)) if p.is_list else col[0]
+    if np.any(pos != line_end):
+        raise fail(pos != line_end, f"too many values for a {el.name} entry")
     return out
 
 
-def _gather_values(
-    flat: NDArray[np.float64], starts: NDArray[np.int64], counts: NDArray[np.int64]
-) -> NDArray[np.float64]:
-    total = int(counts.sum())
-    if total == 0:
-        return np.zeros(0)
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    return flat[np.arange(total, dtype=np.int64) + np.repeat(starts - offsets, counts)]
+def _ascii_element(
+    buf: bytes, pos: int, el: PlyElement, digits: Digits | None
+) -> tuple[ElementData, int]:
+    """Parse ``el.count`` non-blank lines from ``pos``; return the element and the new pos."""
+    props = el.properties
+    scalars = not any(p.is_list for p in props)
+    cols: dict[str, list[NDArray[Any]]] = {p.name: [] for p in props}
+    lens: dict[str, list[NDArray[Any]]] = {p.name: [] for p in props if p.is_list}
+    got = 0
+    for block in line_blocks(buf, pos, el.count):
+        got += block.rows
+        pos = block.offset + len(block.data)
+        if scalars:
+            table = table_rows(block, buf, len(props), fmt="ply", what=f"a {el.name} entry")
+            if digits is not None:
+                digits.update(block.data, table)
+            for i, p in enumerate(props):
+                cols[p.name].append(_typed(table[:, i], p.type, el, p.name))
+            continue
+        parsed = _lists_block(block, buf, el)
+        for p in props:
+            got_p = parsed[p.name]
+            if isinstance(got_p, tuple):
+                cols[p.name].append(_typed(got_p[0], p.type, el, p.name))
+                counts = got_p[1].astype(np.float64)
+                lens[p.name].append(_typed(counts, str(p.count_type), el, p.name))
+            else:
+                cols[p.name].append(_typed(got_p, p.type, el, p.name))
+    if got < el.count:
+        raise FormatError(
+            f"the header declares {el.count} {el.name} entries but the file ends after {got}"
+            " (element counts do not match the data)",
+            fmt="ply",
+        )
+    out: ElementData = {}
+    for p in props:
+        values = np.concatenate(cols[p.name]) if cols[p.name] else np.zeros(0, p.type)
+        if p.is_list:
+            counts = np.concatenate(lens[p.name]) if lens[p.name] else np.zeros(0, np.uint8)
+            out[p.name] = (values, counts)
+        else:
+            out[p.name] = values
+    return out, pos
 
 
 def read_ascii_body(
-    data: bytes, header: PlyHeader, notes: list[str], wanted: tuple[str, ...]
-) -> dict[str, ElementData]:
-    """Read the wanted elements of an ASCII body (one entry per line); note skipped ones."""
-    raw = data[header.body_offset :]
-    body = raw.split(b"\n")
-    keep = np.flatnonzero(tokens_per_line(raw, len(body)) > 0)
-    if keep.size == 0 or keep[-1] == keep.size - 1:  # no blank lines except at the end
-        lines = body[: keep.size]
-    else:
-        lines = [body[i] for i in keep.tolist()]
-    numbers = keep + (header.n_lines + 1)  # 1-based line numbers
-    out: dict[str, ElementData] = {}
-    row = 0
+    data: bytes, header: PlyHeader, vertex_digits: Digits | None = None
+) -> list[ElementData]:
+    """Read every element of an ASCII body, in header order.
+
+    ``vertex_digits`` (optional) measures the digits of the ``vertex`` element's columns.
+    """
+    pos = header.body_offset
+    out: list[ElementData] = []
+    measured = False
     for el in header.elements:
-        if row + el.count > len(lines):
-            raise FormatError(
-                f"the header declares {el.count} {el.name} entries but the file ends after"
-                f" {len(lines) - row} (element counts do not match the data)",
-                fmt="ply",
-            )
-        if el.name in wanted and el.name not in out:
-            out[el.name] = _ascii_element(
-                lines[row : row + el.count], numbers[row : row + el.count], el
-            )
-        elif el.count:
-            notes.append(f"skipped PLY element {el.name!r} ({el.count} entries)")
-        row += el.count
-    if row < len(lines):
+        digits = vertex_digits if el.name == "vertex" and not measured else None
+        measured = measured or digits is not None
+        element, pos = _ascii_element(data, pos, el, digits) if el.count else ({}, pos)
+        out.append(element)
+    rest = data[pos:]
+    if rest.strip():
+        offset = pos + (len(rest) - len(rest.lstrip()))
+        n = line_number(data, offset)
+        extra = int(np.count_nonzero(tokens_per_line(rest, rest.count(b"\n") + 1)))
         raise FormatError(
-            f"line {numbers[row]}: {len(lines) - row} more lines than the header declares"
-            " (element counts do not match the data)",
+            f"line {n}: {extra} more lines than the header declares (element counts do not"
+            " match the data)",
             fmt="ply",
-            line=numbers[row],
+            line=n,
         )
     return out

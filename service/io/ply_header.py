@@ -1,7 +1,7 @@
 """PLY header: ``ply``, ``format``, ``element``/``property`` declarations, ``end_header``.
 
-``comment`` and ``obj_info`` lines are ignored. Type names may be the classic (``uchar``,
-``int``, ``float``) or the sized spelling (``uint8``, ``int32``, ``float32``).
+``comment`` and ``obj_info`` lines are kept (and written back). Type names may be the classic
+(``uchar``, ``int``, ``float``) or the sized spelling (``uint8``, ``int32``, ``float32``).
 """
 
 from __future__ import annotations
@@ -84,6 +84,8 @@ class PlyHeader:
         Number of header lines, including ``end_header`` (for line numbers of ASCII bodies).
     comments : list of str
         Text of the ``comment`` lines.
+    obj_info : list of str
+        Text of the ``obj_info`` lines.
     """
 
     encoding: str
@@ -91,6 +93,7 @@ class PlyHeader:
     body_offset: int
     n_lines: int
     comments: list[str] = field(default_factory=list)
+    obj_info: list[str] = field(default_factory=list)
 
 
 def _fail(message: str, line: int | None = None) -> FormatError:
@@ -121,6 +124,7 @@ def parse_header(data: bytes) -> PlyHeader:
     encoding: str | None = None
     elements: list[PlyElement] = []
     comments: list[str] = []
+    obj_info: list[str] = []
     for number, raw in enumerate(lines, start=1):
         words = raw.split()
         if number == 1:
@@ -130,7 +134,10 @@ def parse_header(data: bytes) -> PlyHeader:
         if words and words[0] == "comment":
             comments.append(raw.strip()[len("comment") :].strip())
             continue
-        if not words or words[0] == "obj_info":
+        if words and words[0] == "obj_info":
+            obj_info.append(raw.strip()[len("obj_info") :].strip())
+            continue
+        if not words:
             continue
         key = words[0]
         if key == "format":
@@ -158,7 +165,7 @@ def parse_header(data: bytes) -> PlyHeader:
     for el in elements:
         if el.count and not el.properties:
             raise _fail(f"element {el.name!r} has no properties")
-    return PlyHeader(encoding, elements, end.end(), len(lines) + 1, comments)
+    return PlyHeader(encoding, elements, end.end(), len(lines) + 1, comments, obj_info)
 
 
 def _property(words: list[str], raw: str, number: int) -> PlyProperty:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
+
 from numpy.typing import NDArray
 
 __all__ = ["Column", "ElementData"]
 
-# what one element yields: scalar property -> 1-D array; list property -> (flat items, counts)
-Column = NDArray[np.generic] | tuple[NDArray[np.generic], NDArray[np.int64]]
+# what one element yields: scalar property -> 1-D array; list property -> (flat items, counts);
+# counts are non-negative integers in a compact dtype; items may be a (count, k) view when every
+# list has k items (binary files), else flat
+Column = NDArray[Any] | tuple[NDArray[Any], NDArray[Any]]
 ElementData = dict[str, Column]

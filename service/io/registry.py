@@ -1,30 +1,42 @@
 """The format registry: one table ``{name: Format}`` that every layer reads.
 
-The API's media types and enums, the CLI's ``--format`` choices and the jobs' format check all
-come from :data:`FORMATS`; a new format is one entry here plus its reader/writer module.
-Readers take the file's bytes and return a :class:`~service.io.document.GeometryDocument`;
-writers take a plain (un-welded) document and return bytes.
+The API's media types and enums, the CLI's ``--format`` choices, the jobs' format check, the
+extension and content detection all come from :data:`FORMATS`; a new format is one entry here
+plus its reader/writer module. Readers take a :class:`~service.io.source.Source` and return a
+:class:`~service.io.document.GeometryDocument`; writers take the plain (un-welded) document of
+:mod:`service.io.plain` and a binary stream. Modules are imported on first use, so the CLI does
+not pay for laspy, trimesh or ezdxf when it reads a PLY.
 """
 
 from __future__ import annotations
 
+import importlib
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, BinaryIO
 
-from service.io.document import GeometryDocument
 from service.io.errors import UnsupportedFormat
-from service.io.jsonfmt import read_json, write_json
-from service.io.obj import read_obj, write_obj
-from service.io.ply import read_ply, write_ply
-from service.io.xyz import read_xyz, write_xyz
 
-__all__ = ["FORMATS", "Format", "format_for_name", "get_format"]
+__all__ = ["FORMATS", "Format", "format_for_name", "get_format", "sniff", "supported_text"]
 
-Reader = Callable[..., GeometryDocument]
-Writer = Callable[..., bytes]
+Reader = Callable[..., Any]
+Writer = Callable[..., None]
+Sniffer = Callable[[bytes, int], bool]
+
+
+def _lazy(module: str, name: str) -> Callable[..., Any]:
+    """``service.io.<module>.<name>``, imported when first called."""
+
+    def call(*args: Any, **kwargs: Any) -> Any:
+        fn = getattr(importlib.import_module(f"service.io.{module}"), name)
+        return fn(*args, **kwargs)
+
+    call.__name__ = name
+    call.__qualname__ = name
+    return call
 
 
 @dataclass(frozen=True)
@@ -36,9 +48,9 @@ class Format:
     name : str
         Registry key, e.g. ``"ply"``.
     read : callable
-        ``read(data: bytes, *, weld: bool, **options) -> GeometryDocument``.
+        ``read(source: Source, *, weld: bool, **options) -> GeometryDocument``.
     write : callable or None
-        ``write(doc, points, **options) -> bytes``; ``None`` for read-only formats.
+        ``write(plain: PlainDocument, out: BinaryIO) -> None``; ``None`` for read-only formats.
     media_type : str
         HTTP ``Content-Type`` of a file of this format.
     extensions : tuple of str
@@ -46,7 +58,13 @@ class Format:
     title : str
         Human name for messages and documentation.
     options : tuple of str
-        Reader/writer keyword options the format understands (e.g. ``xyz_dims``).
+        Reader keyword options the format understands (e.g. ``xyz_dims``).
+    weld_default : bool
+        Whether reading welds coincident vertices unless told otherwise (triangle soups).
+    sniff : callable or None
+        ``sniff(head, size) -> bool``: whether the first bytes look like this format.
+    binary : bool
+        Whether files are binary (``False``: text).
     """
 
     name: str
@@ -56,44 +74,221 @@ class Format:
     extensions: tuple[str, ...]
     title: str
     options: tuple[str, ...] = field(default_factory=tuple)
+    weld_default: bool = False
+    sniff: Sniffer | None = None
+    binary: bool = False
 
     @property
     def extension(self) -> str:
         """The canonical extension (``"ply"``)."""
         return self.extensions[0]
 
-
-def _ply_write(doc: GeometryDocument, points: Any, *, ascii: bool = False, **_: Any) -> bytes:
-    return write_ply(doc, points, ascii=ascii)
-
-
-def _plain_write(writer: Callable[[GeometryDocument, Any], bytes]) -> Writer:
-    def write(doc: GeometryDocument, points: Any, **_: Any) -> bytes:
-        return writer(doc, points)
-
-    return write
+    def write_to(self, plain: Any, out: BinaryIO) -> None:
+        """Write ``plain`` to ``out``; :class:`UnsupportedFormat` for read-only formats."""
+        if self.write is None:
+            raise UnsupportedFormat(f"{self.title} can be read but not written", fmt=self.name)
+        self.write(plain, out)
 
 
+def _text_start(head: bytes) -> bytes:
+    return head.lstrip(b"\xef\xbb\xbf \t\r\n")
+
+
+_PCD = re.compile(rb"\A(?:[ \t]*#[^\n]*\n|\s*\n)*\s*(?:VERSION|FIELDS)\b")
+_OFF = re.compile(rb"\A(?:\s*#[^\n]*\n)*\s*(?:ST)?C?N?4?n?OFF\b")
+_DXF = re.compile(rb"\A\s*(?:999\s*\n[^\n]*\n\s*)*0\s*\n\s*SECTION\b")
+_GEOJSON = re.compile(
+    rb'"type"\s*:\s*"(?:FeatureCollection|Feature|LineString|MultiLineString|Polygon|'
+    rb'MultiPolygon|Point|MultiPoint|GeometryCollection)"'
+)
+_OBJ_KEYS = {b"v", b"vn", b"vt", b"f", b"l", b"o", b"g", b"mtllib", b"usemtl", b"s", b"vp"}
+
+
+def _stl_binary(head: bytes, size: int) -> bool:
+    if len(head) < 84:
+        return False
+    count = int.from_bytes(head[80:84], "little")
+    return 84 + 50 * count == size
+
+
+def _stl_ascii(head: bytes, size: int) -> bool:
+    text = _text_start(head)
+    return text[:5].lower() == b"solid" and b"facet" in text and not _stl_binary(head, size)
+
+
+def _laz(head: bytes, size: int) -> bool:
+    return head[:4] == b"LASF" and len(head) > 104 and bool(head[104] & 0xC0)
+
+
+def _las(head: bytes, size: int) -> bool:
+    return head[:4] == b"LASF" and not _laz(head, size)
+
+
+def _json(head: bytes, size: int) -> bool:
+    return _text_start(head)[:1] in (b"{", b"[") and not _GEOJSON.search(head)
+
+
+def _geojson(head: bytes, size: int) -> bool:
+    return _text_start(head)[:1] == b"{" and bool(_GEOJSON.search(head))
+
+
+def _gpx(head: bytes, size: int) -> bool:
+    return _text_start(head)[:1] == b"<" and b"<gpx" in head
+
+
+def _obj(head: bytes, size: int) -> bool:
+    for line in head.split(b"\n")[:-1] or head.split(b"\n"):
+        words = line.split()
+        if not words or words[0].startswith(b"#"):
+            continue
+        return words[0] in _OBJ_KEYS
+    return False
+
+
+def _xyz(head: bytes, size: int) -> bool:
+    for line in head.split(b"\n")[:-1] or head.split(b"\n"):
+        words = line.replace(b",", b" ").split()
+        if not words or words[0].startswith(b"#"):
+            continue
+        try:
+            [float(w) for w in words]
+        except ValueError:
+            continue
+        return True
+    return False
+
+
+def _f(name: str, module: str, media: str, exts: tuple[str, ...], title: str, **kw: Any) -> Format:
+    writer = kw.pop("writer", (module, f"write_{name}"))
+    return Format(
+        name,
+        _lazy(module, f"read_{name}"),
+        _lazy(*writer) if writer else None,
+        media,
+        exts,
+        title,
+        **kw,
+    )
+
+
+_OCTET = "application/octet-stream"
 _TABLE: dict[str, Format] = {
     f.name: f
     for f in (
-        Format("ply", read_ply, _ply_write, "application/octet-stream", ("ply",), "PLY"),
-        Format("obj", read_obj, _plain_write(write_obj), "model/obj", ("obj",), "OBJ"),
-        Format(
-            "xyz",
-            read_xyz,
-            _plain_write(write_xyz),
-            "text/plain; charset=utf-8",
-            ("xyz",),
-            "XYZ",
-            ("xyz_dims",),
+        _f(
+            "ply",
+            "ply",
+            _OCTET,
+            ("ply",),
+            "PLY",
+            writer=("ply_write", "write_ply"),
+            sniff=lambda h, s: h.startswith((b"ply\n", b"ply\r\n")),
+            binary=True,
         ),
-        Format("json", read_json, _plain_write(write_json), "application/json", ("json",), "JSON"),
+        _f(
+            "obj",
+            "obj",
+            "model/obj",
+            ("obj",),
+            "OBJ",
+            writer=("obj_write", "write_obj"),
+            sniff=_obj,
+        ),
+        _f(
+            "xyz",
+            "xyz",
+            "text/plain; charset=utf-8",
+            ("xyz", "txt", "csv", "pts"),
+            "XYZ",
+            options=("xyz_dims",),
+            sniff=_xyz,
+        ),
+        _f("json", "jsonfmt", "application/json", ("json",), "geosmooth JSON", sniff=_json),
+        _f(
+            "stl",
+            "stl",
+            "model/stl",
+            ("stl",),
+            "STL",
+            weld_default=True,
+            sniff=lambda h, s: _stl_binary(h, s) or _stl_ascii(h, s),
+            binary=True,
+        ),
+        _f(
+            "off",
+            "off",
+            "text/plain; charset=utf-8",
+            ("off",),
+            "OFF",
+            sniff=lambda h, s: bool(_OFF.match(h)),
+        ),
+        _f(
+            "glb",
+            "glb",
+            "model/gltf-binary",
+            ("glb",),
+            "glTF binary",
+            weld_default=True,
+            sniff=lambda h, s: h[:4] == b"glTF",
+            binary=True,
+        ),
+        _f("las", "las", "application/vnd.las", ("las",), "LAS", sniff=_las, binary=True),
+        _f("laz", "las", "application/vnd.laszip", ("laz",), "LAZ", sniff=_laz, binary=True),
+        _f(
+            "pcd",
+            "pcd",
+            _OCTET,
+            ("pcd",),
+            "PCD",
+            sniff=lambda h, s: bool(_PCD.match(h)),
+            binary=True,
+        ),
+        _f(
+            "e57",
+            "e57",
+            "model/e57",
+            ("e57",),
+            "E57",
+            sniff=lambda h, s: h[:8] == b"ASTM-E57",
+            binary=True,
+        ),
+        _f(
+            "gpx",
+            "gpx",
+            "application/gpx+xml",
+            ("gpx",),
+            "GPX",
+            options=("geographic",),
+            sniff=_gpx,
+        ),
+        _f(
+            "geojson",
+            "geojson",
+            "application/geo+json",
+            ("geojson",),
+            "GeoJSON",
+            options=("geographic",),
+            sniff=_geojson,
+        ),
+        _f(
+            "dxf",
+            "dxf",
+            "image/vnd.dxf",
+            ("dxf",),
+            "DXF",
+            sniff=lambda h, s: bool(_DXF.match(h)) or h.startswith(b"AutoCAD Binary DXF"),
+        ),
     )
 }
 
 #: name -> Format, in the order shown to users. Iterating gives the names.
 FORMATS: Mapping[str, Format] = MappingProxyType(_TABLE)
+
+# content detection order: magic numbers first, then the text formats from the most specific
+_SNIFF_ORDER = (
+    "glb", "las", "laz", "e57", "ply", "stl", "pcd", "off", "gpx", "dxf", "geojson", "json",
+    "obj", "xyz",
+)  # fmt: skip
 
 
 def supported_text() -> str:
@@ -111,7 +306,7 @@ def get_format(name: str) -> Format:
         For names not in the registry.
     """
     key = str(name).lower().lstrip(".")
-    fmt = FORMATS.get(key)
+    fmt = FORMATS.get(key) or format_for_name(f"x.{key}")
     if fmt is None:
         raise UnsupportedFormat(f"format {name!r} is not supported: {supported_text()}", fmt=key)
     return fmt
@@ -121,3 +316,12 @@ def format_for_name(filename: str) -> Format | None:
     """The format a file name's extension names, or ``None`` when no format claims it."""
     suffix = Path(str(filename)).suffix.lower().lstrip(".")
     return next((f for f in FORMATS.values() if suffix in f.extensions), None)
+
+
+def sniff(head: bytes, size: int) -> str | None:
+    """The format the first bytes of a file (and its size) show, or ``None``."""
+    for name in _SNIFF_ORDER:
+        test = FORMATS[name].sniff
+        if test is not None and test(head, size):
+            return name
+    return None

@@ -27,6 +27,34 @@ from service.io.elements import drop_repeating, normalize_polyline
 __all__ = ["weld_document", "weld_index"]
 
 
+_NEG_ZERO = np.uint64(1 << 63)
+_MIX = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9))
+
+
+def _hash_groups(
+    pts: NDArray[np.float64],
+) -> tuple[NDArray[np.int64] | None, NDArray[np.bool_]]:
+    """Order of the rows by a 64-bit hash of their bits (-0.0 as 0.0; a stable radix sort), and
+    where a new group starts; ``None`` if two different rows share a hash."""
+    n, s = pts.shape
+    bits = pts.view(np.uint64)
+    h = np.zeros(n, dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for j in range(s):
+            col = np.where(bits[:, j] == _NEG_ZERO, np.uint64(0), bits[:, j])
+            h = (h ^ col) * _MIX[j % 3]
+            h ^= h >> np.uint64(29)
+    order = np.argsort(h, kind="stable")
+    hs = h[order]
+    new = np.empty(n, dtype=bool)
+    new[:1] = True
+    np.not_equal(hs[1:], hs[:-1], out=new[1:])
+    dup = np.flatnonzero(~new[1:]) + 1
+    if dup.size and np.any(pts[order[dup]] != pts[order[dup - 1]]):
+        return None, new
+    return order.astype(np.int64), new
+
+
 def weld_index(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Group identical rows.
 
@@ -37,13 +65,24 @@ def weld_index(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[
     first : ndarray of int, shape (n_welded,)
         The first original point of each welded vertex.
     """
-    pts = np.ascontiguousarray(points, dtype=np.float64) + 0.0  # -0.0 -> 0.0
-    keys = pts.view(np.dtype((np.void, pts.dtype.itemsize * pts.shape[1]))).reshape(-1)
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    return rank[inverse.reshape(-1)].astype(np.int64), first[order].astype(np.int64)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    n = pts.shape[0]
+    order, new = _hash_groups(pts)
+    if order is None:  # a hash collision (never seen): sort the coordinates themselves
+        order = np.lexsort(pts.T[::-1])  # stable; -0.0 and 0.0 compare (and sort) equal
+        srt = pts[order]
+        new = np.empty(n, dtype=bool)
+        new[:1] = True
+        np.any(srt[1:] != srt[:-1], axis=1, out=new[1:])
+        del srt
+    group = np.cumsum(new) - 1  # group of each point, in sorted order
+    first = order[np.flatnonzero(new)]  # stable sort: the first occurrence leads its group
+    by_first = np.argsort(first, kind="stable")
+    rank = np.empty_like(by_first)
+    rank[by_first] = np.arange(by_first.size)
+    index = np.empty(n, dtype=np.int64)
+    index[order] = rank[group]
+    return index, first[by_first].astype(np.int64)
 
 
 def weld_document(doc: GeometryDocument) -> GeometryDocument:

@@ -174,10 +174,11 @@ def test_too_many_points_for_sync_smooth_is_413(client: httpx.Client) -> None:
 
 
 def test_unknown_format_is_415(client: httpx.Client) -> None:
-    _problem(_upload(client, "track.gpx", b"<gpx/>"), 415, "format")
-    _problem(_upload(client, "lines.geojson", b"{}"), 415, "format")
+    # GPX, GeoJSON and DXF are read since issue 11; SVG and KML are not
+    _problem(_upload(client, "shape.svg", b"<svg/>"), 415, "format")
+    _problem(_upload(client, "lines.kml", b"{}"), 415, "format")
     _problem(_upload(client, "noext", b"0 0 0\n"), 415, "format")
-    _problem(_upload(client, "a.xyz", b"0 0 0\n", format="dxf"), 415, "format")
+    _problem(_upload(client, "a.xyz", b"0 0 0\n", format="svg"), 415, "format")
     r = client.post("/v1/jobs", content=b"0 0 0", headers={"content-type": "text/plain"})
     _problem(r, 415, "content-type")
 
@@ -268,7 +269,7 @@ def test_query_validation_is_422_problem(client: httpx.Client) -> None:
     job = client.post(
         "/v1/jobs", json={"geometry": json_geometry(PTS, FACES), "params": {"tau": 0.05}}
     ).json()
-    _problem(client.get(f"/v1/jobs/{job['id']}/result", params={"format": "dxf"}), 422, "format")
+    _problem(client.get(f"/v1/jobs/{job['id']}/result", params={"format": "svg"}), 422, "format")
 
 
 def test_server_survives_all_of_the_above(client: httpx.Client) -> None:

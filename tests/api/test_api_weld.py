@@ -52,7 +52,9 @@ def test_weld_form_field_smooths_split_mesh_as_one(client: httpx.Client) -> None
         assert np.all(after[members] == after[members[0]])
     first = np.unique(groups, return_index=True)[1]
     dev = float(np.sum((after[first] - before[first]) ** 2))
-    assert dev == pytest.approx(report["phi"], rel=1e-9)
+    # the download keeps the input's float32 coordinates (issue 11: float32 in, float32 out),
+    # so phi from the file agrees with the report to float32 rounding (about 1e-7 of 1.9)
+    assert dev == pytest.approx(report["phi"], rel=1e-4)
     assert abs(report["phi"] - report["tau"]) / report["tau"] <= 1e-3
     # converting the welded result to another format keeps the file's vertices too
     as_json = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "json"})

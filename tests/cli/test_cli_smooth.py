@@ -104,7 +104,10 @@ def test_gps_polylines_rms_fix_boundary(cli: Run, data: Callable[[str], Path], t
     src = data("korita-zbevnica.obj")
     out, rep = tmp_path / "track.obj", tmp_path / "report.json"
     rms = 3.0
-    res = cli(["smooth", src, "-o", out, "--rms", rms, "--fix-boundary", "--report", rep])
+    # --precision float64: the file then holds the engine's points exactly (by default a text
+    # output keeps the input's digits, here 1 mm, issue 11), so phi can be recomputed from it
+    args = ["smooth", src, "-o", out, "--rms", rms, "--fix-boundary", "--report", rep]
+    res = cli([*args, "--precision", "float64"])
     assert res.returncode == 0, res.stderr
 
     before, after = read_geometry(src), read_geometry(out)
@@ -131,7 +134,9 @@ def test_gps_polylines_rms_fix_boundary(cli: Run, data: Callable[[str], Path], t
 def test_featuretype_weld(cli: Run, data: Callable[[str], Path], tmp_path: Path):
     src = data("featuretype.ply")
     out, rep = tmp_path / "feature.ply", tmp_path / "report.json"
-    res = cli(["smooth", src, "-o", out, "--tau", "1e-3", "--weld", "--report", rep])
+    # --precision float64: exact points in the file (by default float32 in, float32 out)
+    args = ["smooth", src, "-o", out, "--tau", "1e-3", "--weld", "--report", rep]
+    res = cli([*args, "--precision", "float64"])
     assert res.returncode == 0, res.stderr
     assert "welded from 5096 vertices" in res.stderr
 

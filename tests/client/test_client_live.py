@@ -98,7 +98,7 @@ def test_refusals_are_typed_and_name_the_field(live: LiveServer) -> None:
         assert invalid.value.field == "params.tau"
         assert [e.field for e in invalid.value.errors] == ["params.tau"]
         with pytest.raises(UnsupportedMediaType):
-            client.submit(b"<gpx/>", filename="track.gpx", tau=1)
+            client.submit(b"<svg/>", filename="shape.svg", tau=1)
         with pytest.raises(NotFound) as missing:
             client.get("0123456789abcdef")
         assert missing.value.status == 404

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from io_builders import ply_bytes
 
-from service.io import FORMATS, FormatError, UnsupportedFormat, read_geometry
+from service.io import FORMATS, FormatError, read_geometry
 
 XYZ3 = [("float", "x"), ("float", "y"), ("float", "z")]
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
@@ -232,10 +232,12 @@ def test_json_schema_errors(obj: bytes, message: str) -> None:
         read_geometry(obj, "json")
 
 
-def test_geojson_in_a_json_file_is_refused_helpfully() -> None:
+def test_geojson_in_a_json_file_is_read_as_geojson() -> None:
     data = b'{"type": "FeatureCollection", "features": []}'
-    with pytest.raises(UnsupportedFormat, match="GeoJSON is not supported"):
+    with pytest.raises(FormatError, match="GeoJSON has no LineString"):
         read_geometry(data, filename="coast.json")
+    line = b'{"type": "LineString", "coordinates": [[4.7, 50.9], [4.71, 50.91]]}'
+    assert read_geometry(line, filename="track.json").source_format == "geojson"
 
 
 def test_errors_are_one_line_and_serialisable() -> None:
@@ -290,3 +292,34 @@ def test_deeply_nested_json_is_a_format_error() -> None:
 
     with pytest.raises(FormatError, match="nested too deeply"):
         read_geometry(b"[" * 100_000 + b"]" * 100_000, "json")
+
+
+# issue 15 item 7: rows with the wrong number of columns are never shifted into the next one
+
+
+def test_xyz_rows_that_only_add_up_are_refused() -> None:
+    # 3 + 2 + 4 values = 3 rows of 3: the old reader took them as 3 shifted points
+    with pytest.raises(FormatError, match=r"^line 2: expected 3 values for a point, found 2$"):
+        read_geometry(b"1 2 3\n4 5\n6 7 8 9\n", "xyz")
+
+
+def test_ascii_ply_rows_that_only_add_up_are_refused() -> None:
+    data = ply_bytes("ascii", XYZ3, TRI, FACES)
+    data = data.replace(b"1.0 0.0 0.0\n0.0 1.0 0.0", b"1.0 0.0\n0.0 0.0 1.0 0.0")
+    # header of 9 lines, vertex 0 on line 10: vertex 1 (line 11) has 2 values, vertex 2 has 4
+    with pytest.raises(FormatError, match=r"line 11: expected 3 values for a vertex entry"):
+        read_geometry(data, "ply")
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        b'{"points": [[true, 0, 0], [1, 0, 0]]}',
+        b'{"points": [[0, 0, 0], [1, 0, 0]], "weights": [true, 1]}',
+        b'{"points": [[0, 0, 0], [1, 0, 0]], "edges": [[false, true]]}',
+        b'{"points": [[0, 0], [1, 0]], "attributes": {"a": [true, false]}}',
+    ],
+)
+def test_json_booleans_are_not_numbers(body: bytes) -> None:
+    with pytest.raises(FormatError, match="not booleans"):
+        read_geometry(body, "json")

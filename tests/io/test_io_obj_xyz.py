@@ -87,7 +87,8 @@ def test_xyz_two_columns_are_2d() -> None:
 def test_xyz_extra_columns_ignored_and_noted() -> None:
     doc = read_geometry(b"1 2 3 255 0 0\n4 5 6 0 255 0\n", "xyz")
     assert doc.geometry.points.tolist() == [[1, 2, 3], [4, 5, 6]]
-    assert doc.notes == ["ignored 3 extra columns per line (coordinates: first 3)"]
+    assert doc.notes == ["kept 3 extra columns per line: red, green, blue"]
+    assert doc.attributes["green"].tolist() == [0, 255]
 
 
 def test_xyz_dims_override() -> None:
@@ -99,7 +100,7 @@ def test_xyz_header_and_comments() -> None:
     doc = read_geometry(b"# scan 3\n\nx,y,z\n1,2,3\n# middle comment\n4,5,6\n", "xyz")
     assert doc.geometry.points.tolist() == [[1, 2, 3], [4, 5, 6]]
     assert doc.comments == ["scan 3"]
-    assert doc.notes == ["skipped header line 3: 'x y z'"]
+    assert doc.notes == ["read header line 3: 'x,y,z'"]
 
 
 def test_xyz_weld() -> None:

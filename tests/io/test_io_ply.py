@@ -76,7 +76,7 @@ def test_unknown_list_element_is_skipped(encoding: str) -> None:
     )
     doc = read_geometry(data, "ply")
     assert doc.geometry.faces.tolist() == [[0, 1, 2]]
-    assert doc.notes == ["skipped PLY element 'range_grid' (350 entries)"]
+    assert doc.notes == ["kept PLY element 'range_grid' (350 entries) as it is"]
 
 
 def test_unknown_element_with_scalars_and_lists_before_faces() -> None:
@@ -90,7 +90,7 @@ def test_unknown_element_with_scalars_and_lists_before_faces() -> None:
     doc = read_geometry(text, "ply")
     assert doc.geometry.faces.tolist() == [[0, 1, 2]]
     assert doc.comments == ["made by hand"]
-    assert doc.notes == ["skipped PLY element 'material' (2 entries)"]
+    assert doc.notes == ["kept PLY element 'material' (2 entries) as it is"]
 
 
 @pytest.mark.parametrize("encoding", ENCODINGS)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.io import read_geometry
+from service.io import read_geometry, write_geometry
 
 # file -> (vertices, faces) as the file declares them (MANIFEST.md)
 MANIFEST = {
@@ -116,3 +116,36 @@ def test_spot_ignores_texture_coordinates(data_dir: Path) -> None:
     doc = read_geometry(data_dir / "spot.obj")
     assert doc.geometry.n == 2930  # no UV-seam split, unlike trimesh's 3225
     assert doc.geometry.faces is not None and doc.geometry.faces.max() < 2930
+
+
+SHARED = [*sorted(MANIFEST), "korita-zbevnica.gpx", "ne_110m_coastline.geojson", "wrench.dxf"]
+
+
+def _moved(points: np.ndarray) -> np.ndarray:
+    """1e-4 of the extent in the coordinates that vary (as smoothing moves them)."""
+    spread = np.ptp(points, axis=0)
+    noise = np.random.default_rng(0).normal(size=points.shape)
+    return points + noise * 1e-4 * float(spread.max()) * (spread > 0)
+
+
+@pytest.mark.parametrize("name", SHARED)
+def test_shared_file_round_trip(data_dir: Path, name: str) -> None:
+    """Written back in its own format: everything read comes back, and the size stays."""
+    raw = (data_dir / name).read_bytes()
+    doc = read_geometry(raw, filename=name)
+    back = read_geometry(write_geometry(doc, doc.source_format), doc.source_format)
+    assert back.geometry.points.tobytes() == doc.geometry.points.tobytes()
+    assert list(back.attributes) == list(doc.attributes)
+    for key, values in doc.attributes.items():
+        assert back.attributes[key].dtype == values.dtype, key
+        assert back.attributes[key].tobytes() == values.tobytes(), key
+    for part in ("faces", "edges"):
+        a, b = getattr(doc.geometry, part), getattr(back.geometry, part)
+        assert (a is None and b is None) or np.array_equal(a, b), part
+    assert [(p.indices.tolist(), p.closed) for p in back.polylines] == [
+        (p.indices.tolist(), p.closed) for p in doc.polylines
+    ]
+    if doc.normals is not None:
+        assert np.array_equal(back.normals, doc.normals)
+    moved = write_geometry(doc, doc.source_format, _moved(doc.geometry.points))
+    assert len(moved) / len(raw) <= 1.05

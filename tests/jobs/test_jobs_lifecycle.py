@@ -248,7 +248,7 @@ def test_concurrent_submissions_all_complete(make_queue: MakeQueue) -> None:
 def test_submit_validates_format_and_params(make_queue: MakeQueue, tmp_path: Path) -> None:
     queue = make_queue(start=False)
     with pytest.raises(ValueError, match="unknown format"):
-        queue.submit(b"x", "gpx", PARAMS)
+        queue.submit(b"x", "svg", PARAMS)
     with pytest.raises(ValueError):
         queue.submit(b"x", "json", {"tau": 1.0, "lam": 1.0})
     rec = queue.submit(script("ok"), "JSON", {"rms": 0.1})

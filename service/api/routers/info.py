@@ -29,6 +29,7 @@ from service.api.schemas import GEOMETRY_EXAMPLE
 from service.api.uploads import SmoothInput, read_smooth_input
 from service.core.info import describe
 from service.io import GeometryDocument
+from service.io.plain import WriteOptions, plain_document
 
 __all__ = ["Info", "Preview", "preview_arrays", "router"]
 
@@ -148,13 +149,14 @@ def _b64(array: NDArray[Any]) -> str:
 
 def preview_arrays(document: GeometryDocument) -> Preview:
     """Display arrays of ``document`` in its file's vertex order (see the module docstring)."""
-    points = document.output_points()
+    plain = plain_document(document, options=WriteOptions(normals="drop"))
+    points = plain.points
     n, dim = points.shape
     xyz = np.zeros((n, 3), dtype=np.float64)
     xyz[:, : min(dim, 3)] = points[:, :3]
     origin = (xyz.min(axis=0) + xyz.max(axis=0)) / 2 if n else np.zeros(3)
-    faces = document.output_faces()
-    segments = document.output_edges()
+    faces = plain.faces
+    segments = plain.edges()
     return Preview(
         origin=origin.tolist(),
         n_points=n,

@@ -1,0 +1,87 @@
+"""What a reader reads: :class:`Source`, the bytes of an upload or a path on disk.
+
+Readers that parse bytes call :meth:`Source.data`; library-backed readers that stream (LAS/LAZ)
+or need a real file (E57) use :meth:`Source.open` / :meth:`Source.as_path`, so a big file on disk
+is never copied into memory whole.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+__all__ = ["Source"]
+
+
+class Source:
+    """The input of a reader: bytes, or a path read lazily."""
+
+    def __init__(
+        self, data: bytes | None = None, path: Path | None = None, name: str | None = None
+    ) -> None:
+        if (data is None) == (path is None):
+            raise ValueError("a Source is either bytes or a path")
+        self._data = data
+        self.path = path
+        self.name = name if name is not None else (path.name if path is not None else "")
+
+    @classmethod
+    def of(cls, source: bytes | bytearray | memoryview | str | os.PathLike[str] | Source) -> Source:
+        """Wrap bytes, a path, or an existing Source."""
+        if isinstance(source, Source):
+            return source
+        if isinstance(source, bytes | bytearray | memoryview):
+            return cls(data=bytes(source))
+        if isinstance(source, str | os.PathLike):
+            return cls(path=Path(source))
+        raise TypeError(f"source must be bytes or a path, got {type(source).__name__}")
+
+    @property
+    def size(self) -> int:
+        """Size in bytes."""
+        if self._data is not None:
+            return len(self._data)
+        assert self.path is not None
+        return self.path.stat().st_size
+
+    def data(self) -> bytes:
+        """The whole content (a path is read once and kept)."""
+        if self._data is None:
+            assert self.path is not None
+            self._data = self.path.read_bytes()
+        return self._data
+
+    def head(self, n: int = 4096) -> bytes:
+        """The first ``n`` bytes."""
+        if self._data is not None:
+            return self._data[:n]
+        assert self.path is not None
+        with open(self.path, "rb") as fh:
+            return fh.read(n)
+
+    def open(self) -> BinaryIO:
+        """A binary file object over the content."""
+        if self._data is not None:
+            return io.BytesIO(self._data)
+        assert self.path is not None
+        return open(self.path, "rb")
+
+    @contextlib.contextmanager
+    def as_path(self, suffix: str = "") -> Iterator[Path]:
+        """A path to the content (a temporary file for bytes, removed afterwards)."""
+        if self.path is not None:
+            yield self.path
+            return
+        fd, name = tempfile.mkstemp(suffix=suffix, prefix="geosmooth-")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(self.data())
+            yield Path(name)
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(name)
