@@ -44,14 +44,14 @@ def _bbox(P: NDArray[np.float64]) -> dict[str, list[float]]:
 def _phi0(
     geometry: Geometry, params: SmoothingParams
 ) -> tuple[float, float, int, NDArray[np.bool_], Any]:
-    """``phi(0)`` (eq. 14, per component, fixed points as boundary values), the weight sum
-    ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the fixed
-    points and the neighbourhood graph."""
+    """``phi(0)`` of the mode ``params`` selects (eq. 14 per component for free displacement,
+    fixed points as boundary values; the system's limit for normal displacement), the weight
+    sum ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the
+    fixed points and the neighbourhood graph."""
     import scipy.sparse as sp
 
-    from service.core.elimination import laplacian_system, phi_at_zero
     from service.core.operator import build_operator
-    from service.core.pipeline import free_set
+    from service.core.pipeline import free_set, phi_at_zero_of, smoothing_system
     from service.core.system import Deviation
 
     op = build_operator(geometry, params)
@@ -62,13 +62,11 @@ def _phi0(
     if fixed.all():
         return 0.0, 0.0, n_edges, fixed, adj
     frame = op.frame.weighted(omega[~fixed])
-    system = laplacian_system(
-        op.L, frame.points(geometry.points), omega / frame.weight_scale, fixed
-    )
+    system, _ = smoothing_system(geometry, op, fixed, frame, params)
     phi0 = system.phi0
     if phi0 is None:
         solver = "superlu" if params.solver == "superlu" else "cholmod"
-        phi0 = phi_at_zero(Deviation(system, solver=solver), op.L, fixed)
+        phi0 = phi_at_zero_of(Deviation(system, solver=solver), op, fixed, params)
     w2 = float(np.sum(omega[~fixed] ** 2))
     return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
 

@@ -283,7 +283,7 @@ def find_lambda(
     phi0 = system.phi0
     bound = system.phi0_bound if system.phi0_bound is not None else np.inf
     if params.search == "rational" or (phi0 is None and tau >= bound):
-        phi0 = _phi0(dev, op, fixed, params)
+        phi0 = phi_at_zero_of(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
     if params.search == "rational":
@@ -332,12 +332,12 @@ def _check_range(
 ) -> None:
     """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``)."""
     assert run.frame is not None and run.tau is not None
-    phi0 = _phi0(dev, op, fixed, params)
+    phi0 = phi_at_zero_of(dev, op, fixed, params)
     if run.tau / run.frame.phi_factor >= phi0:
         raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
 
 
-def _phi0(
+def phi_at_zero_of(
     dev: Deviation, op: SmoothingOperator, fixed: NDArray[np.bool_], params: SmoothingParams
 ) -> float:
     """``phi(0)``: eqs. (13-14) for free displacement, the system's limit otherwise."""
