@@ -8,7 +8,7 @@ upper end of the valid range of ``tau`` (section 6.1), and estimates the noise l
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,7 +65,9 @@ def _phi0(
     system, _ = smoothing_system(geometry, op, fixed, frame, params)
     phi0 = system.phi0
     if phi0 is None:
-        solver = "superlu" if params.solver == "superlu" else "cholmod"
+        solver: Literal["cholmod", "superlu"] = (
+            "superlu" if params.solver == "superlu" else "cholmod"
+        )
         phi0 = phi_at_zero_of(Deviation(system, solver=solver), op, fixed, params)
     w2 = float(np.sum(omega[~fixed] ** 2))
     return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
@@ -84,7 +86,7 @@ def _knee(
     op = build_operator(geometry, params)
     frame = op.frame.weighted(geometry.omega()[~fixed])
     system, _ = smoothing_system(geometry, op, fixed, frame, params)
-    solver = "superlu" if params.solver == "superlu" else "cholmod"
+    solver: Literal["cholmod", "superlu"] = "superlu" if params.solver == "superlu" else "cholmod"
     dev = Deviation(system, solver=solver, order=params.order)
     tau = knee_tau(dev, tau0 / frame.phi_factor)
     return tau0 if tau is None else tau * frame.phi_factor
