@@ -263,9 +263,23 @@ def tangential_ratio(
 
 
 def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> SmoothingParams:
-    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input
-    (free for ``method="windowed-sinc"``, Taubin's filter of the points themselves)."""
+    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input:
+    free for ``method="windowed-sinc"`` (Taubin's filter of the points themselves) and for
+    ``tau="gcv"`` (cross-validation assumes the data are the points: in normal displacement the
+    Laplacian of the clean curved shape is part of the data and its score falls towards the
+    collapsed shape).
+
+    Raises
+    ------
+    ParameterError
+        ``tau="gcv"`` with ``displacement="normal"``.
+    """
+    free_only = params.method == "windowed-sinc" or params.tau_rule == "gcv"
+    if params.displacement == "normal" and params.tau_rule == "gcv":
+        raise ParameterError(
+            "tau 'gcv' needs displacement 'free' (or 'auto')", field="params.displacement"
+        )
     if params.displacement != "auto":
         return params
-    mode = "free" if params.method == "windowed-sinc" else DEFAULT_DISPLACEMENT[geometry.kind]
+    mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
     return params.model_copy(update={"displacement": mode})

@@ -26,6 +26,7 @@ def test_cases_have_the_stated_noise_and_ground_truth() -> None:
 
 def test_table_renders_targets() -> None:
     case = {"key": "c", "n": 10, "kind": "mesh", "noise": "aniso", "sigma": 1.0,
+            "input": {"flipped": 0},
             "peers": {"p": {"vertex": {"vertex": 0.5}, "surface": {"surface": 0.4}}},
             "modes": {"default": {"vertex": {"vertex": 0.4}, "surface": {"surface": 0.3}}},
             "auto": {"vertex": 0.44, "surface": 0.33, "report": {"sigma_estimate": 1.05},

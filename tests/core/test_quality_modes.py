@@ -113,3 +113,13 @@ def test_report_preset_reproduces_the_report() -> None:
                                   solver="cholmod"))
     assert a.weights == "mean-value" and a.search == "rational"
     np.testing.assert_array_equal(a.points, b.points)
+
+
+def test_gcv_displaces_freely() -> None:
+    from service.core.errors import ParameterError
+
+    g = _mesh()
+    assert smooth(g, SmoothingParams(tau="gcv", order=1)).displacement == "free"
+    with pytest.raises(ParameterError) as info:
+        smooth(g, SmoothingParams(tau="gcv", displacement="normal"))
+    assert info.value.field == "params.displacement"
