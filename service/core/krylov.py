@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,19 +53,24 @@ class Quadrature:
     nodes: list[Array]
     weights: list[Array]
     order: int = 1
+    _flat_nodes: Array = field(init=False, repr=False)
+    _flat_weights: Array = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._flat_nodes = (
+            np.maximum(np.concatenate(self.nodes), 0.0) if self.nodes else np.zeros(0)
+        )
+        self._flat_weights = np.concatenate(self.weights) if self.weights else np.zeros(0)
 
     def phi(self, lam: float, order: int | None = None) -> float:
         """``phi_j(lambda)``: sum over columns of ``sum_i w_i f(theta_i)`` (order ``k``)."""
         k = self.order if order is None else order
-        total = 0.0
-        for th, w in zip(self.nodes, self.weights, strict=True):
-            th = np.maximum(th, 0.0)
-            total += float(np.sum(w * th ** (2 * k - 2) / (th + lam) ** (2 * k)))
-        return total
+        th, w = self._flat_nodes, self._flat_weights
+        return float(np.dot(w, th ** (2 * k - 2) / (th + lam) ** (2 * k)))
 
     def root(self, tau: float, lo: float, hi: float, order: int | None = None) -> float:
-        """``lambda`` in ``[lo, hi]`` with ``phi_j(lambda) = tau``."""
-        return log_bisect(lambda lam: self.phi(lam, order), tau, lo, hi)
+        """``lambda`` in ``[lo, hi]`` with ``phi_j(lambda) = tau`` (to 1e-6 relative)."""
+        return log_bisect(lambda lam: self.phi(lam, order), tau, lo, hi, rtol=1e-6)
 
 
 def log_bisect(
@@ -93,6 +98,7 @@ def lanczos(
     steps: int,
     stop: Callable[[Quadrature, Quadrature], bool] | None = None,
     order: int = 1,
+    every: int = 1,
 ) -> tuple[Quadrature, Quadrature, int]:
     """Lanczos on ``M_t`` from each column of ``c``; Gauss and Gauss-Radau models of ``phi``.
 
@@ -112,6 +118,8 @@ def lanczos(
         Called with the Gauss and Radau models after every step; ``True`` ends the recurrence.
     order : int
         Iterated Tikhonov order of the models.
+    every : int
+        After the fourth step, build the models (and call ``stop``) every ``every`` steps only.
 
     Returns
     -------
@@ -137,9 +145,11 @@ def lanczos(
         alphas.append(a)
         betas.append(b)
         done = j + 1
-        gauss, radau = _models(alphas, betas, beta0, order)
-        if (stop is not None and stop(gauss, radau)) or not np.all(b > 1e-14 * np.abs(a).max()):
-            break
+        broke = not np.all(b > 1e-14 * np.abs(a).max())
+        if done <= 4 or done % every == 0 or done == steps or broke:
+            gauss, radau = _models(alphas, betas, beta0, order)
+            if (stop is not None and stop(gauss, radau)) or broke:
+                break
         V_prev, V, b_prev = V, W / b, b
     return gauss, radau, done
 
@@ -254,11 +264,13 @@ class ShiftInvert:
     basis: list[Array]
 
     def phi(self, lam: float) -> float:
-        d, k, total = lam - self.lam0, self.order, 0.0
-        for nrm, th, Z in zip(self.norms, self.thetas, self.vectors, strict=True):
-            g = th**2 * (1 - self.lam0 * th) ** (2 * k - 2) / (1 + d * th) ** (2 * k)
-            total += float(nrm**2 * np.sum(Z[0] ** 2 * g))
-        return total
+        d, k = lam - self.lam0, self.order
+        th = np.concatenate(self.thetas)
+        w = np.concatenate(
+            [nrm**2 * Z[0] ** 2 for nrm, Z in zip(self.norms, self.vectors, strict=True)]
+        )
+        g = th**2 * (1 - self.lam0 * th) ** (2 * k - 2) / (1 + d * th) ** (2 * k)
+        return float(np.dot(w, g))
 
     def vector(self, lam: float, h: Callable[[Array, float], Array]) -> Array:
         """``h(S) c`` from the Krylov basis (Galerkin), shape (m, s); ``h(theta, delta)``.

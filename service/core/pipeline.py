@@ -22,7 +22,7 @@ from service.core import cache
 from service.core.autotau import auto_tau, gcv_lambda, knee_tau
 from service.core.displacement import normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
-from service.core.errors import ParameterError, TauOutOfRange
+from service.core.errors import ParameterError, SolverError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.guards import guard_warnings, noise_ratio, shape_checks
@@ -34,7 +34,7 @@ from service.core.operator import (
     operator_key,
 )
 from service.core.params import SmoothingParams
-from service.core.polyfilter import DEGREE, SincFilter, sinc_deviation, windowed_sinc
+from service.core.polyfilter import filter_system
 from service.core.progress import ProgressCallback, ProgressEvent
 from service.core.resources import choose_solver, prefer_matrix_free
 from service.core.result import SmoothResult, Spectrum
@@ -90,40 +90,26 @@ def smooth(
 ) -> SmoothResult:
     """Smooth points, curves or meshes (report KU Leuven TW 451).
 
-    Solves ``X* = argmin ||L X||_F^2 + lambda ||D (X - P)||_F^2`` (eq. 4) with ``L`` the chosen
-    Laplacian variant (section 4), ``D`` the per-point weights, fixed points eliminated
-    (infinite weights, section 8), and ``lambda`` either given or found such that
-    ``phi(lambda) = ||D(X - P)||_F^2 = tau`` (eqs. 3, 15; section 6).
+    Solves ``X* = argmin ||L X||_F^2 + lambda ||D (X - P)||_F^2`` (eq. 4): ``L`` the chosen
+    Laplacian (section 4), ``D`` the per-point weights, fixed points eliminated (section 8),
+    ``lambda`` given or found so that ``phi(lambda) = ||D(X - P)||_F^2 = tau`` (eqs. 3, 15).
+    Steps: neighbourhoods and L -> free points -> system -> lambda -> X -> diagnostics.
 
     Parameters
     ----------
     geometry : Geometry
-        Validated input.
     params : SmoothingParams
-        Exactly one of ``lam``, ``tau``, ``rms``; see the model for the other fields.
     progress : callable, optional
-        ``progress(event)`` with a :class:`~service.core.progress.ProgressEvent`: once per
-        stage, and once per lambda tried (stage ``search``). From the ``analysis`` stage on,
-        ``event.tau`` is the resolved target (the one ``rms`` implies, over the free points).
+        Called with a :class:`~service.core.progress.ProgressEvent` per stage and per lambda
+        tried; from the ``analysis`` stage on ``event.tau`` is the resolved target.
     operator : SmoothingOperator, optional
-        From :func:`build_operator` for this geometry and the same build parameters: smooth
-        the same input at several tau without rebuilding.
+        From :func:`build_operator` for this geometry and build parameters (reuse across tau).
     memory_limit : int, optional
-        Bytes the run may use; with ``solver="auto"`` a factorization that would not fit
-        selects the matrix-free path.
-
-    Returns
-    -------
-    SmoothResult
+        Bytes for the run: with ``solver="auto"`` a factor that would not fit selects CG.
 
     Raises
     ------
-    ParameterError
-        Parameters that do not fit the geometry (e.g. triangle weights on a curve).
-    TauOutOfRange
-        ``tau`` (or the ``tau`` implied by ``rms``) outside ``(0, phi(0))``.
-    SolverError
-        The factorization failed.
+    ParameterError, TauOutOfRange, SolverError
     """
     run = Run(progress)
     params = resolve_displacement(params, geometry)
@@ -138,22 +124,13 @@ def smooth(
         return _unchanged(geometry, params, op, run, n_fixed)
     if params.method == "windowed-sinc":
         return _filtered(geometry, params, op, run, system, to_points, fixed, n_fixed)
-    dev = Deviation(
-        system,
-        solver=choose_solver(system, params, memory_limit, run.notes),
-        order=params.order,
-        reuse=params.search != "rational",
-        symbolic=cache.analysis_of,
-    )
-    dev.listener = run.evaluated
-    t_search = time.perf_counter()
+    dev = _deviation(system, params, memory_limit, run)
     if params.tau_rule == "auto" and run.tau:
         _knee(dev, run)
     if params.tau_rule == "gcv":
         search = _gcv(dev, geometry, params, fixed, run)
     else:
         search = find_lambda(dev, op, fixed, params, run)
-    run.search_seconds = time.perf_counter() - t_search
     run.emit("postprocess", iteration=len(dev.history))
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
@@ -164,6 +141,21 @@ def smooth(
     if params.max_deviation is not None:
         X, _ = clip_points(geometry.points, X, params.max_deviation)
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
+
+
+def _deviation(
+    system: SmoothingSystem, params: SmoothingParams, memory_limit: int | None, run: Run
+) -> Deviation:
+    """phi(lambda) of ``system`` on the path :func:`choose_solver` picks, reporting to ``run``."""
+    dev = Deviation(
+        system,
+        solver=choose_solver(system, params, memory_limit, run.notes),
+        order=params.order,
+        reuse=params.search != "rational",
+        symbolic=cache.analysis_of,
+    )
+    dev.listener = run.evaluated
+    return dev
 
 
 def _operator(
@@ -270,13 +262,24 @@ def find_lambda(
     run: Run,
 ) -> LambdaSearch:
     """lambda (internal frame): given, or the root of ``phi(lambda) = tau`` (section 6)."""
+    t0 = time.perf_counter()
+    try:
+        return _find_lambda(dev, op, fixed, params, run)
+    finally:
+        run.search_seconds = time.perf_counter() - t0
+
+
+def _find_lambda(
+    dev: Deviation,
+    op: SmoothingOperator,
+    fixed: NDArray[np.bool_],
+    params: SmoothingParams,
+    run: Run,
+) -> LambdaSearch:
     assert run.frame is not None
     frame = run.frame
     if params.lam is not None:
         lam = frame.lam_in(params.lam)
-        return LambdaSearch(lam, dev(lam), True, list(dev.history))
-    if run.tau is not None and run.tau <= 0:  # automatic tau on noise-free input
-        lam = dev.system.lambda_ceiling(1e-300)
         return LambdaSearch(lam, dev(lam), True, list(dev.history))
     assert run.tau is not None
     tau, system = run.tau / frame.phi_factor, dev.system
@@ -419,46 +422,21 @@ def _filtered(
     fixed: NDArray[np.bool_],
     n_fixed: int,
 ) -> SmoothResult:
-    """``method="windowed-sinc"``: the pass band meeting tau from Chebyshev moments
-    (:mod:`service.core.polyfilter`), no factorization. ``lam`` given: the pass band's edge."""
+    """``method="windowed-sinc"`` (:func:`~service.core.polyfilter.filter_system`)."""
     assert run.frame is not None
     frame = run.frame
-    if params.laplacian != "normalized":
-        raise ParameterError(
-            "method 'windowed-sinc' needs laplacian 'normalized': the row scales of L(kappa) "
-            "and L(f) spread the spectrum beyond what a polynomial filter resolves",
-            field="params.method",
-        )
     dev = Deviation(system, solver="cg")  # products with M (counted), no solve
-    d = np.sqrt(system.d2)[:, None]
-
-    def apply_op(V: Array) -> Array:
-        return dev.solver.matvec(V / d) / d
-
-    mu_max = 1.01 * system.mu_bound()
-    c = system.r / d
-    if params.lam is not None:
-        mu_pb = min(frame.lam_in(params.lam), mu_max)
-        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, DEGREE)
-    else:
-        assert run.tau is not None
-        tau = run.tau / frame.phi_factor
-        bound = system.phi0 if system.phi0 is not None else system.phi0_bound
-        if bound is not None and tau >= bound:
-            _check_range(dev, op, fixed, params, run)
-        flt, _, _ = windowed_sinc(apply_op, c, tau, mu_max, tolerance=params.tolerance)
-    U = system.U0 + sinc_deviation(apply_op, c, flt) / d
-    phi = float(np.sum(system.d2[:, None] * (U - system.U0) ** 2))
-    lam = (flt.x_pb + 1) * mu_max / 2
-    converged = (
-        run.tau is None or abs(phi * frame.phi_factor - run.tau) <= params.tolerance * run.tau
-    )
-    if not converged:
+    tau = None if run.tau is None else run.tau / frame.phi_factor
+    lam = None if params.lam is None else frame.lam_in(params.lam)
+    bound = system.phi0 if system.phi0 is not None else system.phi0_bound
+    if tau is not None and bound is not None and tau >= bound:
+        _check_range(dev, op, fixed, params, run)
+    U, search = filter_system(dev, params.laplacian, tau, lam, params.tolerance)
+    if not search.converged:
         run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
-    run.evaluated(lam, phi, 1)
+    run.evaluated(search.lam, search.phi, 1)
     X = geometry.points.copy()
     X[~fixed] = frame.back(to_points(U))
-    search = LambdaSearch(lam, phi, converged, [(lam, phi)])
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed)
 
 
@@ -500,6 +478,11 @@ def diagnostics(
     dev_pt = np.linalg.norm(moved, axis=1)
     # phi of the solution (before any volume rescaling), as recorded in the history
     phi = search.phi * frame.phi_factor if dev is not None else 0.0
+    if not (np.isfinite(phi) and np.isfinite(search.lam) and np.isfinite(X).all()):
+        raise SolverError(  # never report a non-finite number (issue 15)
+            "the solution is not finite at this scale (lambda, phi or the points overflowed)",
+            field="params",
+        )
     stats = dev.stats if dev is not None else None
     timings = dict(op.timings)
     if stats is not None:
@@ -520,7 +503,7 @@ def diagnostics(
         spectrum = _spectrum(op, geometry, frame, search.lam, n_fixed, run.notes)
     return SmoothResult(
         points=X,
-        lam=frame.lam_out(search.lam) if search.lam > 0 else 0.0,
+        lam=params.lam if params.lam is not None else frame.lam_out(search.lam),
         phi=phi,
         tau=tau,
         relative_error=None if tau is None else abs(phi - tau) / tau,

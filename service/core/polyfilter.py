@@ -32,7 +32,18 @@ import numpy as np
 from numpy.polynomial import chebyshev as cheb
 from numpy.typing import NDArray
 
-__all__ = ["DEGREE", "SincFilter", "chebyshev_moments", "sinc_deviation", "windowed_sinc"]
+from service.core.errors import ParameterError
+from service.core.system import Deviation
+from service.core.tau import LambdaSearch
+
+__all__ = [
+    "DEGREE",
+    "SincFilter",
+    "chebyshev_moments",
+    "filter_system",
+    "sinc_deviation",
+    "windowed_sinc",
+]
 
 Array = NDArray[np.float64]
 #: Starting degree of the filter in ``M_t`` (``2 N`` in the Laplacian): ~2N products in all;
@@ -181,3 +192,50 @@ def _band(
             break
         a, b = (mid, b) if phi >= tau else (a, mid)
     return SincFilter(math.cos(0.5 * (a + b)), mu_max, degree), phi, history
+
+
+def filter_system(
+    dev: Deviation, laplacian: str, tau: float | None, lam: float | None, tolerance: float
+) -> tuple[Array, LambdaSearch]:
+    """The windowed-sinc solution ``U`` of ``dev.system`` (internal frame) and its search record.
+
+    Parameters
+    ----------
+    dev : Deviation
+        The system; its solver's products with ``M`` are counted (no solve is made).
+    laplacian : str
+        Must be ``"normalized"``.
+    tau : float, optional
+        Target deviation; or ``lam``, the pass band's edge on lambda's scale.
+    tolerance : float
+
+    Raises
+    ------
+    ParameterError
+        For ``L(kappa)`` and ``L(f)``: their row scales spread the spectrum beyond what a
+        polynomial filter resolves.
+    """
+    if laplacian != "normalized":
+        raise ParameterError(
+            "method 'windowed-sinc' needs laplacian 'normalized': the row scales of L(kappa) "
+            "and L(f) spread the spectrum beyond what a polynomial filter resolves",
+            field="params.method",
+        )
+    system = dev.system
+    d = np.sqrt(system.d2)[:, None]
+
+    def apply_op(V: Array) -> Array:
+        return dev.solver.matvec(V / d) / d
+
+    mu_max = 1.01 * system.mu_bound()
+    c = system.r / d
+    if tau is None:
+        mu_pb = min(lam if lam is not None else mu_max, mu_max)
+        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, DEGREE)
+    else:
+        flt, _, _ = windowed_sinc(apply_op, c, tau, mu_max, tolerance=tolerance)
+    U = system.U0 + sinc_deviation(apply_op, c, flt) / d
+    phi = float(np.sum(system.d2[:, None] * (U - system.U0) ** 2))
+    edge = (flt.x_pb + 1) * mu_max / 2
+    converged = tau is None or abs(phi - tau) <= tolerance * tau
+    return U, LambdaSearch(edge, phi, converged, [(edge, phi)])

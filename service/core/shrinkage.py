@@ -77,8 +77,7 @@ def enclosed_measure(
         a, b = points[edges[:, 0]], points[edges[:, 1]]
         signed = (a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]) / 2.0
         labels = _component_labels(edges, n)[edges[:, 0]]
-    per = np.zeros(int(labels.max()) + 1 if labels.size else 0)
-    np.add.at(per, labels, signed)
+    per = np.bincount(labels, weights=signed).astype(np.float64) if labels.size else np.zeros(0)
     return float(np.abs(per).sum())
 
 

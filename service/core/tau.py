@@ -218,7 +218,8 @@ def estimate_lambda(
             bounds[2] = gauss.root(tau, lo, hi)
         return lo < bounds[0] and bounds[1] <= ratio * bounds[0]
 
-    _, _, steps = lanczos(apply_mt, c, max_steps, stop, order)
+    # the models cost more than a step at small n: look at them every third step after four
+    _, _, steps = lanczos(apply_mt, c, max_steps, stop, order, every=3)
     lower, upper, root_k = bounds
     if order > 1:
         cap = upper / order
