@@ -9,8 +9,9 @@ from __future__ import annotations
 import os
 from functools import lru_cache
 from pathlib import Path
+from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 __all__ = ["Settings", "get_settings"]
@@ -62,6 +63,85 @@ class Settings(BaseSettings):
         default=20_000,
         ge=1,
         description="Largest input accepted by the synchronous POST /v1/smooth (points).",
+    )
+
+    # -- job queue backends, storage, limits, webhooks (service.jobs) -----------------------
+    queue: Literal["local", "rq"] = Field(
+        default="local",
+        description="Job queue backend: the embedded SQLite queue, or Redis + RQ workers.",
+    )
+    redis_url: str = Field(
+        default="redis://127.0.0.1:6379/0", description="Redis of the RQ backend."
+    )
+    rq_queue_name: str = Field(
+        default="geosmooth", description="RQ queue (and Redis key prefix) of the jobs."
+    )
+    storage_url: str | None = Field(
+        default=None,
+        description="Blob store of the RQ backend: unset = the directory GEOSMOOTH_DATA_DIR "
+        "(a volume shared by API and workers), or s3://bucket/prefix (endpoint and credentials "
+        "from the AWS_* environment, e.g. AWS_ENDPOINT_URL_S3 for MinIO).",
+    )
+    presign_seconds: int = Field(
+        default=0,
+        ge=0,
+        le=7 * 24 * 3600,
+        description="S3: redirect result downloads to presigned URLs valid this long "
+        "(0: the API streams results).",
+    )
+    max_attempts: int = Field(
+        default=3,
+        ge=1,
+        le=20,
+        description="Runs of a job whose runs are interrupted (server or worker killed).",
+    )
+    retry_backoff: float = Field(
+        default=5.0,
+        ge=0,
+        description="Seconds before an interrupted job runs again (doubled per attempt).",
+    )
+    worker_lease: float = Field(
+        default=15.0,
+        gt=0,
+        description="Seconds without a heartbeat after which a running job's worker is "
+        "presumed dead and the job requeued.",
+    )
+    job_memory_limit: int | None = Field(
+        default=None,
+        ge=0,
+        description="Per-job memory limit in bytes (refused at submit above it, enforced "
+        "with RLIMIT_AS while running); unset: 80 % of RAM / workers; 0: no limit.",
+    )
+    threads_per_job: int | None = Field(
+        default=None,
+        ge=1,
+        le=256,
+        description="BLAS/OpenMP threads of each job process; unset: cores / workers.",
+    )
+    min_free_bytes: int = Field(
+        default=64 * 1024 * 1024,
+        ge=0,
+        description="Submits are refused (507) when the job store has less free space.",
+    )
+    reserve_bytes: int = Field(
+        default=8 * 1024 * 1024,
+        ge=0,
+        description="Space the embedded queue reserves (a file next to its database) to record "
+        "job outcomes when the disk fills up.",
+    )
+    webhook_secret: SecretStr | None = Field(
+        default=None, description="HMAC-SHA256 key of the Geosmooth-Signature webhook header."
+    )
+    webhook_allow_private: bool = Field(
+        default=False,
+        description="Allow webhooks to loopback, private and link-local addresses.",
+    )
+    webhook_timeout: float = Field(default=10.0, gt=0, description="Seconds per webhook POST.")
+    webhook_max_attempts: int = Field(
+        default=6, ge=1, le=20, description="Tries of a webhook delivery."
+    )
+    webhook_backoff: float = Field(
+        default=1.0, ge=0, description="Seconds before the 2nd try (doubled per try, max 60)."
     )
 
     # --- web page and job events (service/api/routers/events.py) ---

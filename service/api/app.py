@@ -43,14 +43,9 @@ Every error is RFC 9457 ``application/problem+json`` with ``field`` naming the i
 
 
 def _make_queue(settings: Settings) -> JobQueue:
-    from service.jobs.local import LocalQueue  # imported here: export of the spec needs no queue
+    from service.jobs import make_queue  # imported here: export of the spec needs no queue
 
-    return LocalQueue(
-        data_dir=settings.data_dir,
-        workers=settings.workers,
-        job_timeout=settings.job_timeout,
-        result_ttl=settings.result_ttl,
-    )
+    return make_queue(settings)
 
 
 @asynccontextmanager

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
 from typing import Any
 
 from fastapi import Response
@@ -11,6 +10,7 @@ from starlette.concurrency import run_in_threadpool
 
 from service.api.docs import MEDIA_TYPES
 from service.io import GeometryDocument, write_geometry
+from service.jobs.files import result_name
 
 __all__ = [
     "REPORT_HEADER",
@@ -23,14 +23,6 @@ __all__ = [
 REPORT_HEADER = "X-Geosmooth-Report"
 REPORT_HEADER_MAX = 8192
 _KEEP_HISTORY = 20
-_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
-
-
-def result_name(filename: str | None, default: str) -> str:
-    """``<stem>.smoothed`` for a download, from the uploaded name (only safe characters kept)."""
-    base = (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
-    stem = _UNSAFE.sub("_", base.rsplit(".", 1)[0]).strip("._")[:100]
-    return f"{stem or default}.smoothed"
 
 
 async def render_geometry(

@@ -258,24 +258,46 @@ COMPONENT_REFS: dict[tuple[str, str], str] = {
 
 
 class JobProgress(BaseModel):
-    """Progress of a running job: the latest lambda iteration of the tau search."""
+    """Progress of a queued or running job, from the first stage on."""
 
     model_config = ConfigDict(
         populate_by_name=True,
         json_schema_extra={
             "examples": [
-                {"iteration": 3, "lambda": 0.011, "phi": 0.47, "tau": 0.5, "relative_error": 0.06}
+                {
+                    "stage": "search",
+                    "iteration": 3,
+                    "lambda": 0.011,
+                    "phi": 0.47,
+                    "tau": 0.5,
+                    "relative_error": 0.06,
+                    "percent": 71.5,
+                    "eta_seconds": 2.4,
+                    "elapsed_seconds": 6.1,
+                }
             ]
         },
     )
 
-    iteration: int = Field(description="lambda iterations done so far.")
-    lam: float = Field(alias="lambda", description="Latest lambda tried.")
-    phi: float = Field(description="phi(lambda) of the latest lambda.")
+    stage: str = Field(
+        default="queued",
+        description="queued, reading, neighborhoods, laplacian, analysis, search, postprocess, "
+        "writing or done.",
+    )
+    iteration: int = Field(default=0, description="lambda iterations done so far.")
+    lam: float | None = Field(default=None, alias="lambda", description="Latest lambda tried.")
+    phi: float | None = Field(default=None, description="phi(lambda) of the latest lambda.")
     tau: float | None = Field(default=None, description="Target smoothing factor, when known.")
     relative_error: float | None = Field(
         default=None, description="|phi - tau| / tau (null when tau is not known)."
     )
+    percent: float | None = Field(
+        default=None, description="Estimated share of the run done (stage-weighted), 0-100."
+    )
+    eta_seconds: float | None = Field(
+        default=None, description="Estimated seconds left (null until 5 % are done)."
+    )
+    elapsed_seconds: float | None = Field(default=None, description="Seconds the run took so far.")
 
 
 class JobLinks(BaseModel):
@@ -332,12 +354,17 @@ class Job(BaseModel):
     started_at: datetime | None = Field(default=None, description="When a worker picked it up.")
     finished_at: datetime | None = Field(default=None, description="When it ended.")
     params: dict[str, Any] | None = Field(default=None, description="Smoothing parameters.")
+    weld: bool = Field(default=False, description="Coincident vertices merged on reading.")
+    webhook_url: str | None = Field(
+        default=None, description="Where the finished job is POSTed (signed), if given."
+    )
     progress: JobProgress | None = Field(
-        default=None, description="Latest lambda iteration (while running)."
+        default=None, description="Stage, latest lambda iteration, percent, ETA (while active)."
     )
     report: ReportDict | None = Field(default=None, description="Diagnostics (when succeeded).")
     error: JobProblem | None = Field(default=None, description="Problem details (when failed).")
     attempts: int = Field(default=0, description="Runs started (interrupted runs are retried).")
+    max_attempts: int = Field(default=3, description="Runs allowed for interrupted runs.")
     run_seconds: float | None = Field(default=None, description="Wall time of the successful run.")
     expires_at: datetime | None = Field(
         default=None, description="When a finished job and its files are purged."
@@ -380,7 +407,7 @@ class JobList(BaseModel):
                                 "status": "/v1/jobs/3f2a9c",
                                 "result": "/v1/jobs/3f2a9c/result",
                                 "report": "/v1/jobs/3f2a9c/report",
-                            },
+                                    },
                         }
                     ],
                     "total": 1,

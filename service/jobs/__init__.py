@@ -1,10 +1,35 @@
-"""The job queue: a small protocol and the embedded, restart-safe local backend.
+"""The job queue: a small protocol, the embedded local backend and the Redis/RQ backend.
 
-See ``docs/CONTRACTS.md``. Only job ids travel through the queue; inputs and results live in the
-job store under ``data_dir``.
+See ``/work/notes/CONTRACTS.md`` (Jobs) and ``service/jobs/README.md``. Only job ids and small
+metadata travel through a queue; inputs and results live in the blob store.
 """
 
-from service.jobs.local import LocalQueue
-from service.jobs.queue import FINISHED, JobQueue, JobRecord, JobStatus
+from __future__ import annotations
 
-__all__ = ["FINISHED", "JobQueue", "JobRecord", "JobStatus", "LocalQueue"]
+from typing import TYPE_CHECKING
+
+from service.jobs.local import LocalQueue
+from service.jobs.queue import FINISHED, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
+
+if TYPE_CHECKING:
+    from service.settings import Settings
+
+__all__ = [
+    "FINISHED",
+    "JobQueue",
+    "JobRecord",
+    "JobSize",
+    "JobStatus",
+    "LocalQueue",
+    "QueueHealth",
+    "make_queue",
+]
+
+
+def make_queue(settings: Settings) -> JobQueue:
+    """The backend named by ``settings.queue``: ``local`` (default) or ``rq``."""
+    if settings.queue == "rq":
+        from service.jobs.rq_queue import RQQueue
+
+        return RQQueue.from_settings(settings)
+    return LocalQueue.from_settings(settings)

@@ -39,6 +39,8 @@ from typing import Any
 
 from service.jobs import problems
 from service.jobs.files import JobFiles
+from service.jobs.limits import limit_memory
+from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
 from service.jobs.store import JobStore
 
@@ -60,6 +62,7 @@ class RunSpec:
     runner: str
     server_pid: int
     progress_interval: float = 0.2
+    memory_limit: int | None = None
 
 
 def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
@@ -105,13 +108,13 @@ def _release_forkserver() -> None:
         from multiprocessing import forkserver
 
         server = forkserver._forkserver  # type: ignore[attr-defined]
-        fd = server._forkserver_alive_fd
+        fd = server._forkserver_alive_fd  # type: ignore[attr-defined]
     except AttributeError:  # pragma: no cover - other Python versions
         return
     if fd is not None:  # only set in children of a forkserver
         with contextlib.suppress(OSError):
             os.close(fd)
-        server._forkserver_alive_fd = None
+        server._forkserver_alive_fd = None  # type: ignore[attr-defined]
 
 
 def _watch_parent() -> None:
@@ -151,18 +154,17 @@ def _run(spec: RunSpec, store: JobStore) -> None:
         return
     files = JobFiles(Path(spec.data_dir))
 
-    def report_progress(
-        iteration: int, lam: float, phi: float, tau: float | None, rel: float | None
-    ) -> bool:
-        return store.progress(spec.job_id, spec.owner, spec.attempt, iteration, lam, phi, tau, rel)
+    def report_progress(progress: dict[str, Any]) -> bool:
+        return store.progress(spec.job_id, spec.owner, spec.attempt, progress)
 
     started = time.perf_counter()
     try:
         from service.core.params import SmoothingParams
 
-        rec = store.get(spec.job_id, with_report=False)
+        rec = store.get(spec.job_id)
         if rec is None:
             return
+        limit_memory(spec.memory_limit)  # threads: set in the forkserver's environment
         ctx = JobContext(
             job_id=spec.job_id,
             job_dir=files.dir(spec.job_id),
@@ -171,14 +173,17 @@ def _run(spec: RunSpec, store: JobStore) -> None:
             params=SmoothingParams.model_validate(rec.params),
             report_progress=report_progress,
             progress_interval=spec.progress_interval,
-            options=files.read_options(spec.job_id),
+            weld=rec.weld,
+            memory_limit=spec.memory_limit,
         )
         report = load_runner(spec.runner)(ctx)
+        ctx.flush_progress()
         elapsed = time.perf_counter() - started
         if not store.owns(spec.job_id, spec.owner, spec.attempt):
             return
-        ctx.write("report.json", json.dumps(report, indent=1).encode())
-        store.succeed(spec.job_id, spec.owner, spec.attempt, report, elapsed)
+        ctx.write("report.json", json.dumps(report, indent=1, allow_nan=False).encode())
+        store.succeed(spec.job_id, spec.owner, spec.attempt, final_progress(report, elapsed),
+                      elapsed)  # fmt: skip
     except RunLost:
         return
     except BaseException as exc:

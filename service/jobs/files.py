@@ -7,23 +7,33 @@
       jobs/<id>/input.<fmt>   the uploaded file, fsynced before submit returns
       jobs/<id>/result.npy    smoothed points, shape (n, s), same order as the input geometry
       jobs/<id>/result.<fmt>  the smoothed document written back in the input's format
-      jobs/<id>/report.json   SmoothResult.report()
+      jobs/<id>/report.json   SmoothResult.report() (read by ``get``: not kept in the row)
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
 import shutil
 import time
 from pathlib import Path
-from typing import Any
 
-__all__ = ["JobFiles", "is_job_id", "write_durable"]
+__all__ = ["JobFiles", "is_job_id", "move_durable", "result_name", "write_durable"]
 
 _JOB_ID = re.compile(r"^[0-9a-f]{32}$")
 _FMT = re.compile(r"^[a-z0-9]{1,16}$")
+
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+def result_name(filename: str | None, default: str) -> str:
+    """``<stem>.smoothed`` for a download, from the uploaded name (only safe characters kept)."""
+    base = (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
+    stem = _UNSAFE.sub("_", base.rsplit(".", 1)[0]).strip("._")[:100]
+    return f"{stem or default}.smoothed"
 
 
 def is_job_id(job_id: object) -> bool:
@@ -50,11 +60,40 @@ def write_durable(path: Path, data: bytes) -> None:
         Content.
     """
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)  # e.g. ENOSPC half way: no stray temp file
+        raise
+    _fsync_dir(path.parent)
+
+
+def move_durable(source: Path, path: Path) -> None:
+    """Move ``source`` to ``path`` durably: a rename on the same file system, else a copy to a
+    temp file next to ``path`` (fsync, rename, fsync the directory) and the source removed."""
+    try:
+        os.replace(source, path)
+    except OSError as exc:
+        if exc.errno != errno.EXDEV:
+            raise
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            with open(source, "rb") as src, open(tmp, "wb") as dst:
+                shutil.copyfileobj(src, dst, 1024 * 1024)
+                dst.flush()
+                os.fsync(dst.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        source.unlink(missing_ok=True)
+    else:
+        with open(path, "rb") as fh:
+            os.fsync(fh.fileno())
     _fsync_dir(path.parent)
 
 
@@ -97,27 +136,45 @@ class JobFiles:
         """``SmoothResult.report()`` as JSON."""
         return self.dir(job_id) / "report.json"
 
-    def create(
-        self, job_id: str, fmt: str, data: bytes, options: dict[str, Any] | None = None
-    ) -> Path:
-        """Create the job directory and store its input durably; returns the input path.
+    def create(self, job_id: str, fmt: str, data: bytes | Path) -> int:
+        """Create the job directory and store its input durably; returns its size in bytes.
 
-        ``options`` (how to read the input, e.g. ``{"weld": true}``) go to ``options.json``.
+        ``data`` is the content, or a spooled file that is moved (or copied, across file
+        systems) into the store.
         """
         path = self.input(job_id, fmt)
         path.parent.mkdir()
         _fsync_dir(self.root)
-        if options:
-            write_durable(path.parent / "options.json", json.dumps(options).encode())
-        write_durable(path, data)
-        return path
+        if isinstance(data, Path):
+            move_durable(data, path)
+        else:
+            write_durable(path, data)
+        return path.stat().st_size
 
-    def read_options(self, job_id: str) -> dict[str, Any]:
-        """The job's input options (``{}`` when none were stored)."""
+    def legacy_weld(self, job_id: str) -> bool:
+        """Whether a job of a version-0 data dir had ``weld`` in its ``options.json``.
+
+        The file is removed (the flag lives in the job's row from version 1 on).
+        """
+        path = self.dir(job_id) / "options.json"
         try:
-            return dict(json.loads((self.dir(job_id) / "options.json").read_text()))
-        except FileNotFoundError:
-            return {}
+            weld = bool(json.loads(path.read_text()).get("weld", False))
+        except (OSError, ValueError, AttributeError):
+            return False
+        path.unlink(missing_ok=True)
+        return weld
+
+    def stray_temporaries(self, min_age: float) -> list[Path]:
+        """Temporary files of interrupted durable writes (``.<name>.<pid>.tmp``), older than
+        ``min_age`` seconds."""
+        now, out = time.time(), []
+        for tmp in self.root.glob("*/.*.tmp"):
+            try:
+                if now - tmp.stat().st_mtime >= min_age:
+                    out.append(tmp)
+            except FileNotFoundError:
+                continue
+        return out
 
     def remove(self, job_id: str) -> None:
         """Delete a job's directory (no error if it is gone)."""

@@ -14,82 +14,46 @@ Guarantees
   :mod:`service.jobs.child`); independently of that, every write of a run is conditional on the
   run still holding the job, so a stale process can neither record an outcome nor progress.
 
-A run's owner is presumed dead when its lease expired (the owner renews it every third of
-``lease`` seconds), or at once when the owner ran on this host and its process is gone (or is this
-very process, e.g. a container restarted with the same pid, but not a live queue of it).
+Recovery and housekeeping (the sweep): :mod:`service.jobs.local_maintenance`.
 """
 
 from __future__ import annotations
 
 import builtins
 import dataclasses
+import json
 import logging
 import os
-import socket
 import threading
-import time
 import uuid
-from collections import deque
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from service.jobs import problems
+from service.core.threads import threads_per_worker
+from service.jobs import admit
+from service.jobs.errors import IdempotencyConflict
 from service.jobs.files import JobFiles, is_job_id
+from service.jobs.limits import default_job_memory
+from service.jobs.local_maintenance import HOST, LIVE_OWNERS, Maintenance
+from service.jobs.metrics import DurationHistogram
+from service.jobs.notify import Notifier
 from service.jobs.pool import WorkerPool, default_start_method
-from service.jobs.queue import JobRecord, JobStatus
+from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
 from service.jobs.runner import DEFAULT_RUNNER
-from service.jobs.store import JobStore, RunningRow
+from service.jobs.storage_health import StorageProbe
+from service.jobs.store import JobStore, NewJob
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
     from service.io import GeometryDocument
+    from service.settings import Settings
 
-__all__ = ["DURATION_BUCKETS", "LocalQueue"]
+__all__ = ["LocalQueue"]
 
 log = logging.getLogger("geosmooth.jobs")
 
-DURATION_BUCKETS: tuple[float, ...] = (
-    0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0,
-)  # fmt: skip
-_HOST = socket.gethostname()
-_LIVE_OWNERS: set[str] = set()  # owners of the queues started in this process
-_ORPHAN_AGE = 600.0
-
-
-def _pid_alive(pid: int) -> bool:
-    """Whether a process runs (a zombie nobody reaped, e.g. under a container's PID 1, does not)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:  # gone meanwhile, or no procfs (macOS)
-        return Path("/proc/self/stat").exists() is False
-    except OSError:
-        return True
-    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
-
-
-def _owner_dead(owner: str | None) -> bool:
-    """Whether an owner is certainly gone (same host only; other hosts: lease expiry)."""
-    if not owner:
-        return True
-    host, _, rest = owner.rpartition("@")
-    pid_text = rest.partition(":")[0]
-    if host != _HOST or not pid_text.isdigit():
-        return False
-    pid = int(pid_text)
-    if pid == os.getpid():
-        return owner not in _LIVE_OWNERS
-    return not _pid_alive(pid)
-
-
-class LocalQueue:
+class LocalQueue(Maintenance):
     """Embedded job queue (the default backend of the service).
 
     Parameters
@@ -113,12 +77,26 @@ class LocalQueue:
     kill_grace : float
         Seconds between SIGTERM and SIGKILL when killing a job.
     sweep_interval : float, optional
-        Seconds between sweeps (expired results, runs of dead servers); default: a quarter of
-        ``result_ttl``, between 1 and 60 s.
+        Seconds between sweeps (expired results, runs of dead servers, webhooks, temp files);
+        default: a quarter of ``result_ttl``, between 1 and 60 s.
     poll_interval : float
         Seconds between looks at the store when idle (jobs submitted by other processes).
     progress_interval : float
-        Minimum seconds between two progress writes of a job.
+        Minimum seconds between two progress writes of a job within one stage.
+    retry_backoff : float
+        Seconds before an interrupted job may run again (doubled per attempt), so a burst of
+        server crashes does not use up the attempts of the jobs at the head of the queue.
+    memory_limit : int or None
+        Per-job memory limit (bytes): refused at submit above it, ``RLIMIT_AS`` while running.
+    threads_per_job : int or None
+        BLAS/OpenMP threads per job process (``None``: cores / workers).
+    min_free_bytes : int
+        Free space a submit must leave in the store (else 507).
+    reserve_bytes : int
+        Size of the reserve file kept next to the database and released when the disk is full,
+        so that running jobs can still be recorded as failed (0: none).
+    settings : Settings, optional
+        For webhook delivery (secret, SSRF policy, retries); default: from the environment.
     """
 
     def __init__(
@@ -136,6 +114,12 @@ class LocalQueue:
         sweep_interval: float | None = None,
         poll_interval: float = 0.5,
         progress_interval: float = 0.2,
+        retry_backoff: float = 5.0,
+        memory_limit: int | None = None,
+        threads_per_job: int | None = None,
+        min_free_bytes: int = 0,
+        reserve_bytes: int = 8 * 1024 * 1024,
+        settings: Settings | None = None,
     ) -> None:
         if max_attempts < 1:
             raise ValueError("max_attempts must be >= 1")
@@ -146,50 +130,75 @@ class LocalQueue:
         self.result_ttl = result_ttl or None
         self.runner = runner
         self.max_attempts = max_attempts
+        self.retry_backoff = retry_backoff
+        self.memory_limit = memory_limit
+        self.min_free_bytes = min_free_bytes
+        self.reserve_bytes = reserve_bytes
         self.start_method = start_method or default_start_method()
         if sweep_interval is None:
             sweep_interval = min(60.0, max(1.0, (self.result_ttl or 240.0) / 4))
         self.sweep_interval = sweep_interval
         self.files = JobFiles(self.data_dir)
         self.store = JobStore(self.data_dir / "jobs.sqlite3", self.result_ttl)
-        self.owner = f"{_HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
+        self.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
         self.pool = WorkerPool(
-            self.store,
-            self.data_dir,
-            self.workers,
-            self.owner,
-            runner,
-            self.job_timeout,
-            lease=lease,
-            kill_grace=kill_grace,
-            poll_interval=poll_interval,
-            start_method=self.start_method,
-            progress_interval=progress_interval,
-            on_settled=self._on_settled,
-        )
-        self._metrics_lock = threading.Lock()
-        self._durations: deque[float] = deque(maxlen=1000)
-        self._bucket_counts = [0] * (len(DURATION_BUCKETS) + 1)
-        self._duration_sum = 0.0
+            self.store, self.data_dir, self.workers, self.owner, runner, self.job_timeout,
+            lease=lease, kill_grace=kill_grace, poll_interval=poll_interval,
+            start_method=self.start_method, progress_interval=progress_interval,
+            on_settled=self._finished, retry_backoff=retry_backoff, memory_limit=memory_limit,
+            threads=threads_per_job or threads_per_worker(self.workers),
+        )  # fmt: skip
+        self.probe = StorageProbe(self.data_dir, min_free_bytes, self.store.check)
+        self.notifier = Notifier(settings, self._webhook_payload, self.store.claim_webhook,
+                                 self.store.webhook_state)  # fmt: skip
+        self._histogram = DurationHistogram()
+        self._last_strays = 0.0
+        self._lock = threading.Lock()
         self._outcomes = {s.value: 0 for s in (JobStatus.SUCCEEDED, JobStatus.FAILED,
                                                 JobStatus.CANCELLED)}  # fmt: skip
         self._sweeper: threading.Thread | None = None
         self._stop_sweeper = threading.Event()
         self._started = False
+        if self.store.migrated_v0:
+            self._migrate_v0_files()
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> LocalQueue:
+        """The queue the service runs with these settings."""
+        limit = settings.job_memory_limit
+        if limit is None:
+            limit = default_job_memory(settings.workers)
+        return cls(
+            settings.data_dir,
+            workers=settings.workers,
+            job_timeout=settings.job_timeout,
+            result_ttl=settings.result_ttl,
+            max_attempts=settings.max_attempts,
+            lease=settings.worker_lease,
+            retry_backoff=settings.retry_backoff,
+            memory_limit=limit or None,
+            threads_per_job=settings.threads_per_job,
+            min_free_bytes=settings.min_free_bytes,
+            reserve_bytes=settings.reserve_bytes,
+            settings=settings,
+        )
 
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
-        """Recover interrupted runs, then start the worker slots and the sweeper."""
+        """Recover interrupted runs, then start the worker slots and the sweeper.
+
+        Maintenance that fails because the store cannot be written (a full disk) is logged and
+        retried by the sweeper: the queue starts and keeps answering reads.
+        """
         if self._started:
             return
         # a fresh identity per start (and per process, should the object cross a fork)
-        self.owner = self.pool.owner = f"{_HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
-        _LIVE_OWNERS.add(self.owner)
+        self.owner = self.pool.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
+        LIVE_OWNERS.add(self.owner)
         self._started = True
-        self.recover()
-        self.expire()
-        self._remove_orphans()
+        self._maintain(initial=True)
         self.pool.start()
+        self.notifier.start()
         self._stop_sweeper.clear()
         self._sweeper = threading.Thread(target=self._sweep_loop, name="geosmooth-sweep",
                                          daemon=True)  # fmt: skip
@@ -201,9 +210,10 @@ class LocalQueue:
             return
         self._stop_sweeper.set()
         self.pool.stop()
+        self.notifier.stop()
         if self._sweeper is not None:
             self._sweeper.join(10.0)
-        _LIVE_OWNERS.discard(self.owner)
+        LIVE_OWNERS.discard(self.owner)
         self._started = False
         self.store.close()
 
@@ -217,77 +227,111 @@ class LocalQueue:
     # -- the JobQueue protocol -----------------------------------------------------------
     def submit(
         self,
-        input_bytes: bytes,
+        input: JobInput,
         fmt: str,
-        params: SmoothingParams | dict[str, Any],
+        params: SmoothingParams | Mapping[str, Any],
         filename: str | None = None,
         *,
         weld: bool = False,
+        tenant: str | None = None,
+        webhook_url: str | None = None,
+        idempotency_key: str | None = None,
+        size: JobSize | None = None,
     ) -> JobRecord:
         """Store the input durably, enqueue the job and return its ``queued`` record.
 
-        Raises
-        ------
-        ValueError
-            For a format name geosmooth does not know.
-        pydantic.ValidationError
-            For ``params`` given as a dict that is not valid :class:`SmoothingParams`.
+        See :meth:`service.jobs.queue.JobQueue.submit`. Also raises ``ValueError`` for an
+        unknown format and ``pydantic.ValidationError`` for invalid ``params``.
         """
-        from service.core.params import SmoothingParams
-
-        fmt = str(fmt).lower()
-        self._check_format(fmt)
-        if not isinstance(params, SmoothingParams):
-            params = SmoothingParams.model_validate(params)
-        job_id = uuid.uuid4().hex
-        data = bytes(input_bytes)
-        self.files.create(job_id, fmt, data, {"weld": True} if weld else None)
-        try:
-            rec = self.store.insert(
-                job_id,
-                fmt,
-                filename,
-                params.model_dump(mode="json", exclude_none=True),
-                len(data),
-                self.max_attempts,
-            )
-        except BaseException:
-            self.files.remove(job_id)
-            raise
+        fmt = admit.check_format(fmt)
+        smoothing = admit.validate_params(params)
+        stored = smoothing.model_dump(mode="json", exclude_none=True)
+        digest = None
+        if idempotency_key is not None:
+            digest = admit.request_hash(input, fmt, stored, filename=filename, weld=weld,
+                                        webhook_url=webhook_url)  # fmt: skip
+            with admit.storage_errors():
+                earlier = self.store.find_idempotent(tenant, idempotency_key)
+            if earlier is not None:
+                IdempotencyConflict.check(earlier[1], digest, idempotency_key)
+                if isinstance(input, Path):
+                    input.unlink(missing_ok=True)  # moved into the store: nothing to keep
+                return self._with_report(earlier[0])
+        admit.admit_size(input, fmt, smoothing, weld=weld, size=size, limit=self.memory_limit)
+        job = NewJob(
+            uuid.uuid4().hex, fmt, filename, stored, admit.input_size(input), self.max_attempts,
+            weld, tenant, webhook_url, idempotency_key, digest,
+        )  # fmt: skip
+        with admit.storage_errors():
+            admit.check_space(self.data_dir, job.input_bytes, self.min_free_bytes)
+            try:
+                self.files.create(job.job_id, fmt, input)
+                rec, created = self.store.insert(job)
+            except BaseException:
+                self.files.remove(job.job_id)
+                raise
+        if not created:  # the same request won a race with this one
+            self.files.remove(job.job_id)
+            return self._with_report(rec)
         self.pool.notify()
         return rec
 
-    def get(self, job_id: str) -> JobRecord | None:
+    def get(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
         """The job's record (with its report once succeeded), ``None`` if unknown."""
         if not is_job_id(job_id):
             return None
-        return self.store.get(job_id)
+        with admit.storage_errors():
+            rec = self.store.get(job_id)
+        if rec is None or (tenant is not None and rec.tenant != tenant):
+            return None
+        return self._with_report(rec)
+
+    def _with_report(self, rec: JobRecord) -> JobRecord:
+        if rec.status is not JobStatus.SUCCEEDED:
+            return rec
+        try:
+            report = json.loads(self.files.report(rec.id).read_text())
+        except FileNotFoundError:  # deleted or expired meanwhile
+            return rec
+        return dataclasses.replace(rec, report=report)
 
     def list(
-        self, offset: int = 0, limit: int = 50, status: JobStatus | str | None = None
+        self,
+        offset: int = 0,
+        limit: int = 50,
+        status: JobStatus | str | None = None,
+        *,
+        tenant: str | None = None,
     ) -> tuple[builtins.list[JobRecord], int]:
         """A page of jobs, newest first (records without reports), and the total count."""
-        return self.store.list(offset, limit, JobStatus(status) if status else None)
+        with admit.storage_errors():
+            return self.store.list(offset, limit, JobStatus(status) if status else None, tenant)
 
-    def cancel(self, job_id: str) -> JobRecord | None:
+    def cancel(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
         """Cancel a queued or running job; a running job's process is killed before returning.
 
         A finished job is returned unchanged; ``None`` if unknown. A job running in another
         server process on the same data directory is killed by that server within
         ``poll_interval``.
         """
-        if not is_job_id(job_id):
+        if self.get(job_id, tenant=tenant) is None:
             return None
-        rec, previous = self.store.cancel(job_id)
+        with admit.storage_errors():
+            rec, previous = self.store.cancel(job_id)
         if previous is JobStatus.RUNNING:
             self.pool.kill(job_id, "cancelled")
             rec = self.store.get(job_id)
+        elif previous is JobStatus.QUEUED:
+            self._finished(job_id)
         return rec
 
-    def delete(self, job_id: str) -> bool:
+    def delete(self, job_id: str, *, tenant: str | None = None) -> bool:
         """Delete a finished job's record and files; ``False`` if unknown or not finished."""
-        if not is_job_id(job_id) or not self.store.delete_finished(job_id):
+        if self.get(job_id, tenant=tenant) is None:
             return False
+        with admit.storage_errors():
+            if not self.store.delete_finished(job_id):
+                return False
         self.files.remove(job_id)
         return True
 
@@ -296,26 +340,25 @@ class LocalQueue:
         rec = self.get(job_id)
         if rec is None or rec.status is not JobStatus.SUCCEEDED:
             return None
-        from service.io import read_geometry
+        from service.jobs.results import load_result
 
         try:
-            points = np.load(self.files.result_points(job_id), allow_pickle=False)
-            weld = bool(self.files.read_options(job_id).get("weld", False))
-            doc = read_geometry(self.files.input(job_id, rec.fmt), rec.fmt, weld=weld)
+            return load_result(self.files.input(job_id, rec.fmt),
+                               self.files.result_points(job_id), rec.fmt, rec.weld)  # fmt: skip
         except FileNotFoundError:  # deleted or expired meanwhile
             return None
-        return _with_points(doc, points)
 
-    def result_file(self, job_id: str) -> Path | None:
-        """Path of the smoothed file in the input's format (``None`` unless succeeded).
-
-        Not part of the :class:`~service.jobs.queue.JobQueue` protocol (local backend only).
-        """
+    def result_file(self, job_id: str, fmt: str) -> Path | None:
+        """The smoothed file the worker wrote, if ``fmt`` is the input's format."""
         rec = self.get(job_id)
-        if rec is None or rec.status is not JobStatus.SUCCEEDED:
+        if rec is None or rec.status is not JobStatus.SUCCEEDED or fmt != rec.fmt:
             return None
         path = self.files.result_file(job_id, rec.fmt)
         return path if path.exists() else None
+
+    def result_url(self, job_id: str, fmt: str) -> str | None:
+        """Always ``None``: the embedded queue's results are served by the API."""
+        return None
 
     def stats(self) -> dict[str, Any]:
         """Numbers for Prometheus.
@@ -325,115 +368,49 @@ class LocalQueue:
         dict
             ``counts`` (jobs in the store per status), ``queue_depth`` (queued jobs),
             ``running``, ``workers``, ``busy_workers`` (slots of this server running a job),
-            ``finished_total`` (runs this server saw end, per outcome, monotonic since start),
-            ``durations`` (run seconds of the last 1000 succeeded jobs of this server) and a
-            cumulative histogram of all of them: ``duration_buckets`` (list of ``[le, count]``,
-            ``le`` ending with ``inf``), ``duration_sum``, ``duration_count``.
+            ``finished_total`` (runs this server saw end, per outcome, monotonic since start)
+            and the run-time histogram of :class:`~service.jobs.metrics.DurationHistogram`.
         """
-        counts = self.store.counts()
-        with self._metrics_lock:
-            cumulative, total = [], 0
-            for le, n in zip((*DURATION_BUCKETS, float("inf")), self._bucket_counts,
-                             strict=True):  # fmt: skip
-                total += n
-                cumulative.append([le, total])
-            return {
-                "counts": counts,
-                "queue_depth": counts[JobStatus.QUEUED.value],
-                "running": counts[JobStatus.RUNNING.value],
-                "workers": self.workers,
-                "busy_workers": self.pool.busy(),
-                "finished_total": dict(self._outcomes),
-                "durations": list(self._durations),
-                "duration_buckets": cumulative,
-                "duration_sum": self._duration_sum,
-                "duration_count": total,
-            }
+        with admit.storage_errors():
+            counts = self.store.counts()
+        return {
+            "counts": counts,
+            "queue_depth": counts[JobStatus.QUEUED.value],
+            "running": counts[JobStatus.RUNNING.value],
+            "workers": self.workers,
+            "busy_workers": self.pool.busy(),
+            "finished_total": self._finished_total(),
+            **self._histogram.stats(),
+        }
 
-    # -- maintenance ---------------------------------------------------------------------
-    def recover(self) -> tuple[builtins.list[str], builtins.list[str]]:
-        """Requeue the runs of dead servers (or fail them after ``max_attempts`` runs).
+    def _finished_total(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._outcomes)
 
-        Returns
-        -------
-        requeued, failed : list of str
-            Job ids.
-        """
-        now = time.time()
-        requeued, failed = [], []
-        for row in self.store.running():
-            if row.owner == self.owner or not self._stale(row, now):
-                continue
-            if row.attempts >= row.max_attempts:
-                problem = problems.attempts_exhausted(row.attempts)
-                if self.store.fail(row.job_id, row.owner or "", row.attempts, problem):
-                    failed.append(row.job_id)
-            elif self.store.requeue(row.job_id, row.owner or "", row.attempts, count_attempt=True):
-                requeued.append(row.job_id)
-        if requeued:
-            log.warning("requeued %d interrupted job(s): %s", len(requeued), ", ".join(requeued))
-            self.pool.notify()
-        if failed:
-            log.warning("gave up %d job(s) interrupted too often: %s", len(failed),
-                        ", ".join(failed))  # fmt: skip
-        return requeued, failed
+    def health(self) -> QueueHealth:
+        """Storage (free space, writable), database (integrity) and whether the queue runs."""
+        health = self.probe.health()
+        if self._started:
+            return health
+        return QueueHealth(False, {**health.checks, "queue": "stopped"}, "job queue not started")
 
-    @staticmethod
-    def _stale(row: RunningRow, now: float) -> bool:
-        return row.lease_until is None or row.lease_until < now or _owner_dead(row.owner)
-
-    def expire(self, now: float | None = None) -> builtins.list[str]:
-        """Delete finished jobs older than ``result_ttl``; returns their ids."""
-        gone = []
-        for job_id in self.store.expired(now):
-            if self.delete(job_id):
-                gone.append(job_id)
-        return gone
-
-    def sweep(self) -> None:
-        """One maintenance pass: recover runs of dead servers, purge expired results."""
-        self.recover()
-        self.expire()
-
-    def _sweep_loop(self) -> None:
-        while not self._stop_sweeper.wait(self.sweep_interval):
-            try:
-                self.sweep()
-            except Exception:
-                log.exception("job store sweep failed")
-
-    def _remove_orphans(self) -> None:
-        for job_id in self.files.orphans(self.store.ids(), _ORPHAN_AGE):
-            self.files.remove(job_id)
-
-    def _on_settled(self, job_id: str) -> None:
-        rec = self.store.get(job_id, with_report=False)
+    def _finished(self, job_id: str) -> None:
+        """A job reached a final state in this process: metrics, then its webhook."""
+        rec = self.store.get(job_id)
         if rec is None or not rec.finished:
             return
-        with self._metrics_lock:
+        with self._lock:
             self._outcomes[rec.status.value] += 1
-            if rec.status is JobStatus.SUCCEEDED and rec.run_seconds is not None:
-                seconds = float(rec.run_seconds)
-                self._durations.append(seconds)
-                self._duration_sum += seconds
-                index = next(
-                    (i for i, le in enumerate(DURATION_BUCKETS) if seconds <= le),
-                    len(DURATION_BUCKETS),
-                )
-                self._bucket_counts[index] += 1
+        if rec.status is JobStatus.SUCCEEDED and rec.run_seconds is not None:
+            self._histogram.observe(float(rec.run_seconds))
+        if rec.webhook_url:
+            self.notifier.enqueue(job_id)
 
-    @staticmethod
-    def _check_format(fmt: str) -> None:
-        from service.io import FORMATS
-
-        if fmt not in FORMATS:
-            raise ValueError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+    def _webhook_payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:
+        rec = self.get(job_id)
+        if rec is None or not rec.webhook_url:
+            return None
+        return rec.webhook_url, rec.public_dict()
 
 
-def _with_points(doc: GeometryDocument, points: np.ndarray) -> GeometryDocument:
-    """A copy of ``doc`` whose geometry has ``points`` (same count and order)."""
-    with_points = getattr(doc, "with_points", None)
-    if callable(with_points):
-        return with_points(points)  # type: ignore[no-any-return]
-    geometry = dataclasses.replace(doc.geometry, points=points)  # pragma: no cover
-    return dataclasses.replace(doc, geometry=geometry)  # type: ignore[type-var]  # pragma: no cover
+_: type[JobQueue] = LocalQueue  # the protocol is implemented (checked by mypy)

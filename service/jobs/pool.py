@@ -38,8 +38,15 @@ __all__ = ["WorkerPool", "default_start_method"]
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.core.pipeline", "service.io")
-_INTERRUPTS = (-signal.SIGTERM, -signal.SIGINT, -signal.SIGHUP)
+_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.jobs.preload")
+#: Signals by which a job process kills itself (its own bug or bad input): the job fails. Any
+#: other signal came from outside (the OOM killer's SIGKILL, a stop of the whole service): the
+#: run was interrupted and is retried like a server death.
+_CRASH_SIGNALS = frozenset(
+    -int(s) for s in (signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal.SIGILL, signal.SIGABRT,
+                      signal.SIGSYS, signal.SIGTRAP)
+)  # fmt: skip
+_MAX_BACKOFF = 300.0
 
 
 def main_module_imports() -> list[str]:
@@ -110,7 +117,14 @@ class WorkerPool:
     progress_interval : float
         Minimum seconds between progress writes of a job.
     on_settled : callable, optional
-        Called with the job id after each run ends (for metrics).
+        Called with the job id after each run ends (for metrics and webhooks).
+    retry_backoff : float
+        Seconds before an interrupted job may run again (doubled per attempt, at most 300 s).
+    memory_limit : int or None
+        Address space (bytes) a job process may add once started (``RLIMIT_AS``).
+    threads : int
+        BLAS/OpenMP threads per job process (set in the environment the job processes start
+        with).
     """
 
     def __init__(
@@ -127,6 +141,9 @@ class WorkerPool:
         start_method: str | None = None,
         progress_interval: float = 0.2,
         on_settled: Callable[[str], None] | None = None,
+        retry_backoff: float = 0.0,
+        memory_limit: int | None = None,
+        threads: int = 1,
     ) -> None:
         if workers < 1:
             raise ValueError("workers must be >= 1")
@@ -142,6 +159,9 @@ class WorkerPool:
         self.start_method = start_method or default_start_method()
         self.progress_interval = progress_interval
         self.on_settled = on_settled
+        self.retry_backoff = retry_backoff
+        self.memory_limit = memory_limit
+        self.threads = threads
         self._ctx: multiprocessing.context.BaseContext | None = None
         self._threads: list[threading.Thread] = []
         self._runs: dict[str, _Run] = {}
@@ -154,6 +174,8 @@ class WorkerPool:
     def start(self) -> None:
         """Prepare the process context (start the forkserver) and start the slot threads."""
         self._ctx = multiprocessing.get_context(self.start_method)
+        # read by service.jobs.preload in the forkserver: the limit every job process inherits
+        os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.threads)
         if self.start_method == "forkserver":
             preload = []
             names = (*_PRELOAD, self.runner.partition(":")[0], *main_module_imports())
@@ -194,11 +216,9 @@ class WorkerPool:
         with self._lock:
             return len(self._runs)
 
-    def pid_of(self, job_id: str) -> int | None:
-        """Worker process of a job running in this pool."""
-        with self._lock:
-            run = self._runs.get(job_id)
-        return None if run is None else run.process.pid
+    def backoff(self, attempts: int) -> float:
+        """Seconds an interrupted job waits before its next run, after ``attempts`` runs."""
+        return min(_MAX_BACKOFF, self.retry_backoff * 2 ** max(0, attempts - 1))
 
     def kill(self, job_id: str, reason: str = "cancelled", wait: float | None = None) -> bool:
         """Ask the slot running ``job_id`` to kill its process; wait until it has settled.
@@ -246,8 +266,9 @@ class WorkerPool:
             runner=self.runner,
             server_pid=os.getpid(),
             progress_interval=self.progress_interval,
+            memory_limit=self.memory_limit,
         )
-        process = self._ctx.Process(
+        process = self._ctx.Process(  # type: ignore[attr-defined]
             target=child.main, args=(spec,), name=f"geosmooth-job-{claim.job_id[:8]}", daemon=True
         )
         deadline = None if not self.job_timeout else time.monotonic() + self.job_timeout
@@ -256,13 +277,14 @@ class WorkerPool:
             process.start()
         except Exception as exc:  # e.g. out of processes or file descriptors: retry later
             log.exception("could not start a worker process for job %s", claim.job_id)
-            rec = self.store.get(claim.job_id, with_report=False)
+            rec = self.store.get(claim.job_id)
             if rec is not None and rec.attempts >= rec.max_attempts:
                 self.store.fail(
                     claim.job_id, self.owner, claim.attempt, problems.from_exception(exc)
                 )
             else:
-                self.store.requeue(claim.job_id, self.owner, claim.attempt, count_attempt=True)
+                self.store.requeue(claim.job_id, self.owner, claim.attempt, True,
+                                   time.time() + self.backoff(claim.attempt))  # fmt: skip
                 self._stopping.wait(1.0)
             return
         with self._lock:
@@ -285,6 +307,7 @@ class WorkerPool:
 
     def _watch(self, run: _Run) -> None:
         claim, process = run.claim, run.process
+        run_of = (claim.job_id, self.owner, claim.attempt)
         now = time.monotonic()
         next_check = now + self.poll_interval
         next_renew = now + self.lease / 3
@@ -300,17 +323,27 @@ class WorkerPool:
                 reason = "timeout"
             if reason is None and now >= next_renew:
                 next_renew = now + self.lease / 3
-                if not self.store.renew(claim.job_id, self.owner, claim.attempt, self.lease):
+                if self._lost(lambda: self.store.renew(*run_of, self.lease), claim.job_id):
                     reason = "lost"
             elif reason is None and now >= next_check:
                 next_check = now + self.poll_interval
-                if not self.store.owns(claim.job_id, self.owner, claim.attempt):
+                if self._lost(lambda: self.store.owns(*run_of), claim.job_id):
                     reason = "lost"
             if reason is not None:
                 with self._lock:
                     run.reason = run.reason or reason
                 self._terminate(process)
                 return
+
+    @staticmethod
+    def _lost(holds: Callable[[], bool], job_id: str) -> bool:
+        """Whether the store says the run lost its job (a store that cannot be read or written
+        now, e.g. a full disk, says nothing: the run goes on)."""
+        try:
+            return not holds()
+        except Exception as exc:
+            log.warning("job %s: lease not renewed: %s", job_id, exc)
+            return False
 
     def _terminate(self, process: multiprocessing.process.BaseProcess) -> None:
         pid = process.pid
@@ -336,12 +369,19 @@ class WorkerPool:
         elif run.reason is None and store.owns(job_id, owner, attempt):
             # the process ended without recording an outcome
             code = run.process.exitcode
-            if code in _INTERRUPTS:  # killed from outside (e.g. the whole service stopping)
-                rec = store.get(job_id, with_report=False)
-                if rec is not None and rec.attempts >= rec.max_attempts:
-                    store.fail(job_id, owner, attempt, problems.attempts_exhausted(rec.attempts))
-                else:
-                    store.requeue(job_id, owner, attempt, count_attempt=True)
+            if code is not None and code < 0 and code not in _CRASH_SIGNALS:
+                self._interrupted(job_id, attempt, code)  # e.g. the OOM killer's SIGKILL
             else:
                 store.fail(job_id, owner, attempt, problems.crashed(code))
         # "cancelled" and "lost": the row was already changed by whoever took the job away
+
+    def _interrupted(self, job_id: str, attempt: int, code: int) -> None:
+        """A run killed from outside: requeued (after the backoff) or, out of attempts, failed."""
+        rec = self.store.get(job_id)
+        if rec is not None and rec.attempts >= rec.max_attempts:
+            problem = problems.attempts_exhausted(rec.attempts, problems.crashed(code)["detail"])
+            self.store.fail(job_id, self.owner, attempt, problem)
+        else:
+            log.warning("job %s: worker killed (exit %s), requeued", job_id, code)
+            self.store.requeue(job_id, self.owner, attempt, True,
+                               time.time() + self.backoff(attempt))  # fmt: skip

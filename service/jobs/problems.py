@@ -3,13 +3,17 @@
 A problem is a JSON-ready dict with the members of the API's problem details, minus the HTTP
 status: ``code``, ``title``, ``detail`` and, when they apply, ``field``, ``indices`` and the
 error's own extras (e.g. ``valid_range`` of ``tau-out-of-range``). No traceback ever gets in:
-an unexpected exception is reduced to its class name and the first line of its message.
+an unexpected exception is reduced to its class name and its message on one line, with absolute
+paths replaced by ``<path>`` (an ``OSError`` keeps only its ``strerror``).
 """
 
 from __future__ import annotations
 
+import re
 import signal
 from typing import Any
+
+from service.jobs.errors import JobsError, storage_error
 
 __all__ = [
     "attempts_exhausted",
@@ -19,8 +23,12 @@ __all__ = [
 ]
 
 
+_PATH = re.compile(r"(?<![\w.:/])(?:[A-Za-z]:)?(?:[/\\][^\s'\"/\\:,;)]+){2,}[/\\]?")
+
+
 def _one_line(text: str, limit: int = 300) -> str:
-    line = " ".join(str(text).split())
+    """One line, at most ``limit`` characters, absolute paths replaced by ``<path>``."""
+    line = _PATH.sub("<path>", " ".join(str(text).split()))
     return line if len(line) <= limit else line[: limit - 1] + "…"
 
 
@@ -44,15 +52,18 @@ def from_exception(exc: BaseException) -> dict[str, Any]:
     from service.core.errors import GeosmoothError
     from service.io.errors import FormatError
 
-    if isinstance(exc, GeosmoothError | FormatError):
+    if isinstance(exc, GeosmoothError | FormatError | JobsError):
         return _from_typed(exc, exc.title)
+    storage = storage_error(exc)  # a full or read-only disk, an unreachable store
+    if storage is not None:
+        return _from_typed(storage, storage.title)
     if isinstance(exc, MemoryError):
         return {
             "code": "out-of-memory",
             "title": "Out of memory",
             "detail": "The job ran out of memory.",
         }
-    message = _one_line(str(exc))
+    message = _one_line(exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc))
     return {
         "code": "internal-error",
         "title": "Internal error",
@@ -85,14 +96,18 @@ def timed_out(seconds: float) -> dict[str, Any]:
     }
 
 
-def attempts_exhausted(attempts: int) -> dict[str, Any]:
-    """The problem for a job whose runs were interrupted too often (a poison job)."""
+def attempts_exhausted(attempts: int, last: str | None = None) -> dict[str, Any]:
+    """The problem for a job whose runs were interrupted too often (a poison job).
+
+    ``last``: how the last run ended, when known (e.g. the signal that killed the worker).
+    """
+    detail = (
+        f"The job was interrupted {attempts} times (its server or worker stopped while it"
+        " ran) and was given up."
+    )
     return {
         "code": "attempts-exhausted",
         "title": "Job interrupted too often",
-        "detail": (
-            f"The job was interrupted {attempts} times (its server or worker stopped while it"
-            " ran) and was given up."
-        ),
+        "detail": f"{detail} Last run: {last}" if last else detail,
         "attempts": attempts,
     }

@@ -1,30 +1,48 @@
 """The job queue contract: job states, the job record and the :class:`JobQueue` protocol.
 
 The HTTP layer only talks to a :class:`JobQueue`; the embedded default is
-:class:`service.jobs.local.LocalQueue` (SQLite + worker processes). Another backend (e.g. Redis/RQ)
-implements the same protocol. Arrays never travel through a queue: only job ids do, inputs and
-results live in the job store.
+:class:`service.jobs.local.LocalQueue` (SQLite + worker processes), the distributed one
+:class:`service.jobs.rq_queue.RQQueue` (Redis + RQ workers + a shared blob store). Arrays never
+travel through a queue: only job ids and small metadata do; inputs and results live in the blob
+store.
 """
 
 from __future__ import annotations
 
 import builtins
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from enum import StrEnum
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
+    from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
     from service.io import GeometryDocument
 
-__all__ = ["FINISHED", "JobQueue", "JobRecord", "JobStatus"]
+__all__ = [
+    "FINISHED",
+    "JobInput",
+    "JobQueue",
+    "JobRecord",
+    "JobSize",
+    "JobStatus",
+    "QueueHealth",
+    "job_location",
+]
+
+#: What ``submit`` stores: the bytes of the file, or a spooled file that is moved into the store.
+JobInput = bytes | Path
+
+_PROBLEM_TYPE = "urn:geosmooth:problem:"
 
 
 class JobStatus(StrEnum):
     """Life cycle of a job: ``queued -> running -> succeeded | failed | cancelled``.
 
-    A ``running`` job whose server went away is put back to ``queued`` on the next start.
+    A ``running`` job whose server or worker went away is put back to ``queued``.
     """
 
     QUEUED = "queued"
@@ -50,6 +68,44 @@ def _iso(ts: float | None) -> str | None:
     return datetime.fromtimestamp(ts, tz=UTC).isoformat().replace("+00:00", "Z")
 
 
+def job_location(job_id: str) -> str:
+    """Path of the job's status resource (relative to the API root)."""
+    return f"/v1/jobs/{job_id}"
+
+
+@dataclass(frozen=True)
+class JobSize:
+    """What the resource estimate of a job needs (known to the API once it parsed the input).
+
+    Attributes
+    ----------
+    n : int
+        Points.
+    dim : int
+        Coordinates per point.
+    kind : str
+        ``"mesh"``, ``"polyline"`` or ``"cloud"``.
+    n_faces : int or None
+        Faces of a mesh.
+    """
+
+    n: int
+    dim: int
+    kind: str
+    n_faces: int | None = None
+
+    @classmethod
+    def of(cls, geometry: Geometry) -> JobSize:
+        """The size of a parsed geometry."""
+        faces = geometry.faces
+        return cls(
+            n=int(geometry.n),
+            dim=int(geometry.dim),
+            kind=str(geometry.kind),
+            n_faces=None if faces is None else len(faces),
+        )
+
+
 @dataclass(frozen=True)
 class JobRecord:
     """Everything known about one job (metadata only, never arrays).
@@ -61,38 +117,35 @@ class JobRecord:
     status : JobStatus
         Current state.
     fmt : str
-        Input format (``"ply"``, ``"obj"``, ``"xyz"``, ``"json"``).
+        Input format (a name of ``service.io.FORMATS``).
     filename : str or None
         Name of the uploaded file, if given.
     params : dict
-        The :class:`~service.core.params.SmoothingParams` as JSON (``model_dump(mode="json")``).
+        The :class:`~service.core.params.SmoothingParams` as JSON (``exclude_none``).
     input_bytes : int
         Size of the stored input file.
-    created_at, started_at, finished_at, updated_at : float or None
-        Unix timestamps (seconds). ``started_at`` is the start of the latest attempt.
-    expires_at : float or None
-        When a finished job and its files are purged (``finished_at + result_ttl``).
-    attempts : int
-        Runs started so far (a run interrupted by a server stop or crash is retried).
-    max_attempts : int
-        Runs allowed before the job is failed as poison.
-    iteration : int or None
-        Latest lambda iteration reported by the running solve.
-    lam, phi : float or None
-        lambda and ``phi(lambda)`` of the latest iteration (the final ones once succeeded).
-    tau : float or None
-        Target smoothing factor when known (``tau`` or derived from ``rms``).
-    relative_error : float or None
-        ``|phi - tau| / tau`` when ``tau`` is known.
+    created_at, updated_at, started_at, finished_at, expires_at : float or None
+        Unix timestamps (seconds). ``started_at`` is the start of the latest attempt;
+        ``expires_at`` is when a finished job and its files are purged.
+    weld : bool
+        Exactly coincident vertices are merged when the input is read.
+    tenant : str or None
+        Owner of the job (``None``: no authentication).
+    webhook_url : str or None
+        Where the finished job is POSTed.
+    attempts, max_attempts : int
+        Runs started so far; runs allowed before an interrupted job is given up.
+    progress : dict or None
+        ``{stage, iteration, lambda, phi, tau, relative_error, percent, eta_seconds,
+        elapsed_seconds}`` of the latest run (the final values once succeeded).
     problem : dict or None
-        Why a job failed: ``{"code", "title", "detail", "field"?, "indices"?, ...}``, the same
-        members as the API's problem details (without the HTTP status).
+        Why a job failed: ``{"code", "title", "detail", "field"?, ...}`` (no HTTP status).
     report : dict or None
-        ``SmoothResult.report()`` of a succeeded job (only filled by ``get``, not by ``list``).
+        ``SmoothResult.report()`` of a succeeded job (read by ``get``, not by ``list``).
     run_seconds : float or None
-        Wall time of the successful run (read, smooth, write) in the worker process.
+        Wall time of the successful run (read, smooth, write) in the worker.
     pid : int or None
-        Worker process of the current run (internal; not part of :meth:`to_dict`).
+        Worker process of the current run (internal; not public).
     """
 
     id: str
@@ -106,13 +159,12 @@ class JobRecord:
     started_at: float | None = None
     finished_at: float | None = None
     expires_at: float | None = None
+    weld: bool = False
+    tenant: str | None = None
+    webhook_url: str | None = None
     attempts: int = 0
     max_attempts: int = 3
-    iteration: int | None = None
-    lam: float | None = None
-    phi: float | None = None
-    tau: float | None = None
-    relative_error: float | None = None
+    progress: dict[str, Any] | None = None
     problem: dict[str, Any] | None = None
     report: dict[str, Any] | None = None
     run_seconds: float | None = None
@@ -123,41 +175,124 @@ class JobRecord:
         """Whether the job is in a final state."""
         return self.status.finished
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (ISO 8601 UTC timestamps; ``pid`` left out)."""
-        progress = None
-        if self.iteration is not None:
-            progress = {
-                "iteration": self.iteration,
-                "lambda": self.lam,
-                "phi": self.phi,
-                "tau": self.tau,
-                "relative_error": self.relative_error,
-            }
+    def _progress(self, key: str) -> Any:
+        return None if self.progress is None else self.progress.get(key)
+
+    @property
+    def iteration(self) -> int | None:
+        """Latest lambda iteration (``None`` before the first)."""
+        return self._progress("iteration") or None
+
+    @property
+    def lam(self) -> float | None:
+        """Latest lambda."""
+        return self._progress("lambda")  # type: ignore[no-any-return]
+
+    @property
+    def phi(self) -> float | None:
+        """``phi(lambda)`` of the latest lambda."""
+        return self._progress("phi")  # type: ignore[no-any-return]
+
+    @property
+    def tau(self) -> float | None:
+        """The engine's resolved target tau, once known."""
+        return self._progress("tau")  # type: ignore[no-any-return]
+
+    @property
+    def relative_error(self) -> float | None:
+        """``|phi - tau| / tau``, once both are known."""
+        return self._progress("relative_error")  # type: ignore[no-any-return]
+
+    def public_dict(self, *, with_report: bool = True) -> dict[str, Any]:
+        """Exactly the JSON of ``GET /v1/jobs/{id}`` (ISO 8601 UTC times, relative links).
+
+        Parameters
+        ----------
+        with_report : bool
+            Include the diagnostics of a succeeded job (left out of list pages).
+        """
+        base = job_location(self.id)
+        active = self.status in (JobStatus.QUEUED, JobStatus.RUNNING)
         return {
             "id": self.id,
             "status": self.status.value,
             "format": self.fmt,
             "filename": self.filename,
             "params": dict(self.params),
-            "input_bytes": self.input_bytes,
+            "weld": self.weld,
+            "webhook_url": self.webhook_url,
             "created_at": _iso(self.created_at),
-            "updated_at": _iso(self.updated_at),
             "started_at": _iso(self.started_at),
             "finished_at": _iso(self.finished_at),
             "expires_at": _iso(self.expires_at),
             "attempts": self.attempts,
             "max_attempts": self.max_attempts,
-            "progress": progress,
-            "problem": dict(self.problem) if self.problem else None,
-            "report": self.report,
             "run_seconds": self.run_seconds,
+            "progress": dict(self.progress) if active and self.progress else None,
+            "report": self.report if with_report else None,
+            "error": _public_problem(self.problem),
+            "links": {
+                "status": base,
+                "result": f"{base}/result",
+                "report": f"{base}/report",
+            },
         }
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form of the record (internal view: ``input_bytes``, ``updated_at``, ...)."""
+        return {
+            **self.public_dict(),
+            "input_bytes": self.input_bytes,
+            "updated_at": _iso(self.updated_at),
+            "tenant": self.tenant,
+            "progress": dict(self.progress) if self.progress else None,
+            "problem": dict(self.problem) if self.problem else None,
+        }
+
+
+def _public_problem(problem: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    if not problem:
+        return None
+    out = dict(problem)
+    code = out.get("code")
+    out.setdefault("type", f"{_PROBLEM_TYPE}{code}" if code else "about:blank")
+    out.setdefault("title", "Job failed")
+    out.setdefault("detail", out["title"])
+    return out
+
+
+@dataclass(frozen=True)
+class QueueHealth:
+    """Readiness of a queue backend (``/readyz``).
+
+    Attributes
+    ----------
+    ok : bool
+        The queue accepts jobs.
+    checks : dict
+        One entry per component, ``"ok"`` or the condition: ``storage`` (``"full"``,
+        ``"read-only"``, ``"unavailable"``), ``database`` (``"corrupt"``, ``"unavailable"``),
+        ``broker`` (RQ: ``"unreachable"``), ``workers`` (RQ: ``"none"``, a warning only).
+    detail : str or None
+        One line saying what is wrong (no paths).
+    """
+
+    ok: bool
+    checks: dict[str, str]
+    detail: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {"ok": self.ok, "checks": dict(self.checks), "detail": self.detail}
 
 
 @runtime_checkable
 class JobQueue(Protocol):
-    """What the HTTP layer needs from a job queue (the backend is interchangeable)."""
+    """What the HTTP layer needs from a job queue (the backend is interchangeable).
+
+    ``tenant`` scopes every call that names a job: a job of another tenant is unknown
+    (``None`` / ``False`` / not listed). ``tenant=None`` means no authentication (every job).
+    """
 
     def start(self) -> None:
         """Start executing jobs (app startup). Interrupted jobs of a previous run are requeued."""
@@ -169,38 +304,58 @@ class JobQueue(Protocol):
 
     def submit(
         self,
-        input_bytes: bytes,
+        input: JobInput,
         fmt: str,
-        params: SmoothingParams,
+        params: SmoothingParams | Mapping[str, Any],
         filename: str | None = None,
         *,
         weld: bool = False,
+        tenant: str | None = None,
+        webhook_url: str | None = None,
+        idempotency_key: str | None = None,
+        size: JobSize | None = None,
     ) -> JobRecord:
         """Store the input durably and enqueue a job; returns the ``queued`` record.
 
-        ``weld`` merges exactly coincident vertices when the input is read (the result keeps the
-        input's vertex count and order).
+        ``input`` is the file's bytes or a path to a spooled file (moved into the store).
+        ``size`` (from the parsed input) feeds the resource estimate; without it the queue
+        reads the input itself.
+
+        Raises
+        ------
+        IdempotencyConflict
+            Same tenant and key as an earlier job, different request (same request: the
+            earlier job is returned).
+        JobTooLarge
+            The estimated memory is above the per-job limit.
+        StorageFull, StorageUnavailable
+            The store is out of space (507), or read-only / unreachable (503).
         """
         ...
 
-    def get(self, job_id: str) -> JobRecord | None:
+    def get(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
         """The job's record (with its report once succeeded), ``None`` if unknown."""
         ...
 
     def list(
-        self, offset: int = 0, limit: int = 50, status: JobStatus | str | None = None
+        self,
+        offset: int = 0,
+        limit: int = 50,
+        status: JobStatus | str | None = None,
+        *,
+        tenant: str | None = None,
     ) -> tuple[builtins.list[JobRecord], int]:
-        """A page of jobs, newest first, and the total count matching ``status``."""
+        """A page of jobs, newest first (without reports), and the total count matching."""
         ...
 
-    def cancel(self, job_id: str) -> JobRecord | None:
-        """Cancel a queued or running job (its process is killed); ``None`` if unknown.
+    def cancel(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
+        """Cancel a queued or running job (its process is gone on return); ``None`` if unknown.
 
         A finished job is returned unchanged.
         """
         ...
 
-    def delete(self, job_id: str) -> bool:
+    def delete(self, job_id: str, *, tenant: str | None = None) -> bool:
         """Delete a finished job's record and files; ``False`` if unknown or not finished."""
         ...
 
@@ -208,6 +363,18 @@ class JobQueue(Protocol):
         """The input document with the smoothed points, ``None`` unless the job succeeded."""
         ...
 
+    def result_file(self, job_id: str, fmt: str) -> Path | None:
+        """A local file holding the result in ``fmt`` (stored formats only), else ``None``."""
+        ...
+
+    def result_url(self, job_id: str, fmt: str) -> str | None:
+        """A time-limited download URL of the stored result (S3 presigned), else ``None``."""
+        ...
+
     def stats(self) -> dict[str, Any]:
-        """Counts by status, queue depth and solve durations (for Prometheus metrics)."""
+        """Counts by status, queue depth, workers and run durations (for Prometheus)."""
+        ...
+
+    def health(self) -> QueueHealth:
+        """Whether the queue can accept jobs now, and why not (for ``/readyz``)."""
         ...

@@ -7,6 +7,7 @@ A *job function* takes a :class:`JobContext` and returns the report dict; the wo
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import time
 from collections.abc import Callable
@@ -16,11 +17,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from service.core.progress import ProgressEvent
 from service.jobs.files import write_durable
+from service.jobs.progress import ProgressTracker
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
-    from service.core.progress import ProgressEvent
 
 __all__ = ["DEFAULT_RUNNER", "JobContext", "RunLost", "smooth_job"]
 
@@ -43,7 +45,7 @@ class JobContext:
     job_id : str
         The job.
     job_dir : Path
-        Its directory (input and outputs).
+        Its working directory (the input; outputs written with :meth:`write` are stored).
     input_path : Path
         The stored input file.
     fmt : str
@@ -51,12 +53,16 @@ class JobContext:
     params : SmoothingParams
         Smoothing parameters.
     report_progress : callable
-        ``(iteration, lam, phi, tau, relative_error) -> bool`` writing to the job's row;
-        ``False`` when the run lost its job.
+        ``(progress dict) -> bool`` writing to the job's record; ``False`` when the run lost
+        its job.
     progress_interval : float
-        Minimum seconds between two progress writes (the first and last always go through).
-    options : dict
-        How to read the input (``{"weld": True}``), from the job's ``options.json``.
+        Minimum seconds between two progress writes inside one stage (a new stage is always
+        written at once, and so is the last event held back, by :meth:`flush_progress`).
+    weld : bool
+        Merge exactly coincident vertices when reading the input.
+    memory_limit : int or None
+        The per-job memory limit (bytes): the engine takes its matrix-free path when the direct
+        one would not fit (the process runs under a cap of that size).
     """
 
     job_id: str
@@ -64,47 +70,57 @@ class JobContext:
     input_path: Path
     fmt: str
     params: SmoothingParams
-    report_progress: Callable[[int, float, float, float | None, float | None], bool]
+    report_progress: Callable[[dict[str, Any]], bool]
     progress_interval: float = 0.2
-    options: dict[str, Any] = field(default_factory=dict)
+    weld: bool = False
+    memory_limit: int | None = None
+    _tracker: ProgressTracker = field(default_factory=ProgressTracker, repr=False)
+    _started: float = field(default_factory=time.monotonic, repr=False)
     _last_write: float = field(default=float("-inf"), repr=False)
-    _pending: ProgressEvent | None = field(default=None, repr=False)
+    _last_stage: str | None = field(default=None, repr=False)
+    _pending: dict[str, Any] | None = field(default=None, repr=False)
+    written: list[str] = field(default_factory=list, repr=False)
+
+    def __post_init__(self) -> None:
+        self._tracker.tolerance = float(self.params.tolerance)
 
     def progress(self, event: ProgressEvent) -> None:
-        """Progress callback for :func:`service.core.smooth` (throttled).
-
-        The engine's events carry the resolved ``tau``; events before the first lambda carry
-        no ``lam``/``phi`` and are not recorded.
+        """Progress callback for :func:`service.core.smooth` (throttled within a stage).
 
         Raises
         ------
         RunLost
             When the job was cancelled or taken away from this run.
         """
-        if event.lam is None or event.phi is None:
-            return
+        elapsed = time.monotonic() - self._started  # of the whole run, reading included
+        data = self._tracker.update(dataclasses.replace(event, elapsed=elapsed))
         now = time.monotonic()
-        if now - self._last_write < self.progress_interval:
-            self._pending = event
+        if event.stage == self._last_stage and now - self._last_write < self.progress_interval:
+            self._pending = data
             return
-        self._last_write = now
-        self._pending = None
-        ok = self.report_progress(
-            event.iteration, event.lam, event.phi, event.tau, event.relative_error
-        )
-        if not ok:
+        self._write_progress(data, now)
+
+    def stage(self, name: str) -> None:
+        """Report a stage of the job function itself (``reading``, ``writing``)."""
+        self.flush_progress()
+        self.progress(ProgressEvent(name))
+
+    def _write_progress(self, data: dict[str, Any], now: float) -> None:
+        self._last_write, self._last_stage, self._pending = now, data["stage"], None
+        if not self.report_progress(data):
             raise RunLost(self.job_id)
 
     def flush_progress(self) -> None:
         """Write a progress update held back by throttling."""
         if self._pending is not None:
-            self._last_write = float("-inf")
-            self.progress(self._pending)
+            self._write_progress(self._pending, time.monotonic())
 
     def write(self, name: str, data: bytes) -> Path:
         """Write an output file into the job directory durably and atomically."""
         path = self.job_dir / name
         write_durable(path, data)
+        if name not in self.written:
+            self.written.append(name)
         return path
 
 
@@ -124,10 +140,11 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     from service.core.pipeline import smooth
     from service.io import read_geometry, write_geometry
 
-    weld = bool(ctx.options.get("weld", False))
-    doc = read_geometry(ctx.input_path, ctx.fmt, weld=weld)
-    result = smooth(doc.geometry, ctx.params, progress=ctx.progress)
-    ctx.flush_progress()
+    ctx.stage("reading")
+    doc = read_geometry(ctx.input_path, ctx.fmt, weld=ctx.weld)
+    result = smooth(doc.geometry, ctx.params, progress=ctx.progress,
+                    memory_limit=ctx.memory_limit)  # fmt: skip
+    ctx.stage("writing")
     buf = io.BytesIO()
     np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))
     ctx.write("result.npy", buf.getvalue())

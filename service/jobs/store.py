@@ -1,4 +1,4 @@
-"""SQLite job metadata, safe across threads and processes.
+"""SQLite job metadata, safe across threads and processes (plumbing: :mod:`service.jobs.sqlite_db`).
 
 One connection per (process, thread), WAL journal, ``synchronous=FULL`` (a committed row
 survives a crash of the process and of the machine). Every state change made by a worker is
@@ -9,57 +9,27 @@ away (cancelled, timed out, requeued after its server died) can no longer write 
 from __future__ import annotations
 
 import builtins
-import contextlib
 import json
-import os
 import sqlite3
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from service.jobs.errors import IdempotencyConflict
+from service.jobs.progress import queued_progress
 from service.jobs.queue import FINISHED, JobRecord, JobStatus
+from service.jobs.sqlite_db import Database, with_reserve
 
-__all__ = ["Claim", "JobStore", "RunningRow"]
+__all__ = ["Claim", "JobStore", "NewJob", "RunningRow"]
 
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS jobs (
-    seq            INTEGER PRIMARY KEY AUTOINCREMENT,
-    id             TEXT NOT NULL UNIQUE,
-    status         TEXT NOT NULL,
-    fmt            TEXT NOT NULL,
-    filename       TEXT,
-    params         TEXT NOT NULL,
-    input_bytes    INTEGER NOT NULL,
-    created_at     REAL NOT NULL,
-    updated_at     REAL NOT NULL,
-    started_at     REAL,
-    finished_at    REAL,
-    attempts       INTEGER NOT NULL DEFAULT 0,
-    max_attempts   INTEGER NOT NULL,
-    owner          TEXT,
-    lease_until    REAL,
-    pid            INTEGER,
-    iteration      INTEGER,
-    lam            REAL,
-    phi            REAL,
-    tau            REAL,
-    relative_error REAL,
-    problem        TEXT,
-    report         TEXT,
-    run_seconds    REAL
-);
-CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, seq);
-"""
+_MAX_OFFSET = 2**62
 
 _FINISHED = tuple(s.value for s in FINISHED)
 _LIST_COLUMNS = (
     "id, status, fmt, filename, params, input_bytes, created_at, updated_at, started_at,"
-    " finished_at, attempts, max_attempts, pid, iteration, lam, phi, tau, relative_error,"
-    " problem, run_seconds"
+    " finished_at, attempts, max_attempts, pid, progress, problem, run_seconds, weld, tenant,"
+    " webhook_url"
 )
 
 
@@ -83,77 +53,54 @@ class RunningRow:
     max_attempts: int
 
 
-class JobStore:
+@dataclass(frozen=True)
+class NewJob:
+    """What ``insert`` stores for a submitted job."""
+
+    job_id: str
+    fmt: str
+    filename: str | None
+    params: dict[str, Any]
+    input_bytes: int
+    max_attempts: int
+    weld: bool = False
+    tenant: str | None = None
+    webhook_url: str | None = None
+    idempotency_key: str | None = None
+    request_hash: str | None = None
+
+
+class JobStore(Database):
     """Job metadata in one SQLite file.
 
     Parameters
     ----------
     path : Path
-        The database file (created with its schema if missing).
+        The database file (created with its schema, or migrated, if needed).
     result_ttl : float or None
         Seconds finished jobs are kept (used for ``expires_at``); ``None``: forever.
     create : bool
-        Create the schema and switch to WAL (worker processes open an existing store).
+        Create or migrate the schema and switch to WAL (worker processes open an existing store).
     """
 
     def __init__(self, path: Path, result_ttl: float | None = None, *, create: bool = True) -> None:
-        self.path = Path(path)
         self.result_ttl = result_ttl
-        self._local = threading.local()
-        self._lock = threading.Lock()
-        self._all: builtins.list[sqlite3.Connection] = []
-        if create:
-            conn = self._conn()
-            conn.execute("PRAGMA journal_mode=WAL")
-            conn.executescript(_SCHEMA)
+        super().__init__(path, create=create)
 
-    # -- connections ---------------------------------------------------------------------
-    def _conn(self) -> sqlite3.Connection:
-        conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
-        if conn is None or getattr(self._local, "pid", None) != os.getpid():
-            conn = sqlite3.connect(
-                self.path, timeout=30.0, isolation_level=None, check_same_thread=False
-            )
-            conn.row_factory = sqlite3.Row
-            conn.execute("PRAGMA synchronous=FULL")
-            conn.execute("PRAGMA busy_timeout=30000")
-            self._local.conn = conn
-            self._local.pid = os.getpid()
-            with self._lock:
-                self._all.append(conn)
-        return conn
-
-    @contextmanager
-    def _write(self) -> Iterator[sqlite3.Connection]:
-        """A write transaction that takes the database lock up front (no upgrade deadlocks)."""
-        conn = self._conn()
-        conn.execute("BEGIN IMMEDIATE")
+    def check(self) -> str:
+        """``"ok"``, or ``"corrupt"`` when SQLite's quick check finds damage."""
         try:
-            yield conn
-        except BaseException:
-            conn.execute("ROLLBACK")
-            raise
-        conn.execute("COMMIT")
-
-    def close(self) -> None:
-        """Close every connection this object opened in this process."""
-        with self._lock:
-            conns, self._all = self._all, []
-        for conn in conns:
-            with contextlib.suppress(sqlite3.Error):  # closing is best effort
-                conn.close()
-        self._local = threading.local()
+            rows = self._conn().execute("PRAGMA quick_check").fetchall()
+        except sqlite3.DatabaseError as exc:
+            return "unavailable" if isinstance(exc, sqlite3.OperationalError) else "corrupt"
+        return "ok" if [r[0] for r in rows] == ["ok"] else "corrupt"
 
     # -- records -------------------------------------------------------------------------
-    def _record(self, row: sqlite3.Row, with_report: bool) -> JobRecord:
-        keys = row.keys()
+    def _record(self, row: sqlite3.Row) -> JobRecord:
         finished_at = row["finished_at"]
         expires = None
         if finished_at is not None and self.result_ttl is not None:
             expires = finished_at + self.result_ttl
-        report = None
-        if with_report and "report" in keys and row["report"]:
-            report = json.loads(row["report"])
         return JobRecord(
             id=row["id"],
             status=JobStatus(row["status"]),
@@ -166,67 +113,96 @@ class JobStore:
             started_at=row["started_at"],
             finished_at=finished_at,
             expires_at=expires,
+            weld=bool(row["weld"]),
+            tenant=row["tenant"],
+            webhook_url=row["webhook_url"],
             attempts=row["attempts"],
             max_attempts=row["max_attempts"],
-            iteration=row["iteration"],
-            lam=row["lam"],
-            phi=row["phi"],
-            tau=row["tau"],
-            relative_error=row["relative_error"],
+            progress=json.loads(row["progress"]) if row["progress"] else None,
             problem=json.loads(row["problem"]) if row["problem"] else None,
-            report=report,
             run_seconds=row["run_seconds"],
             pid=row["pid"],
         )
 
-    def insert(
-        self,
-        job_id: str,
-        fmt: str,
-        filename: str | None,
-        params: dict[str, Any],
-        input_bytes: int,
-        max_attempts: int,
-    ) -> JobRecord:
-        """Add a ``queued`` job (committed, and synced to disk, when this returns)."""
+    def find_idempotent(
+        self, tenant: str | None, key: str
+    ) -> tuple[JobRecord, str | None] | None:
+        """The job submitted earlier with this tenant and key, and its request hash."""
+        row = (
+            self._conn()
+            .execute(
+                "SELECT * FROM jobs WHERE COALESCE(tenant, '') = ? AND idempotency_key = ?",
+                (tenant or "", key),
+            )
+            .fetchone()
+        )
+        return None if row is None else (self._record(row), row["request_hash"])
+
+    def insert(self, job: NewJob) -> tuple[JobRecord, bool]:
+        """Add a ``queued`` job (committed, and synced to disk, when this returns).
+
+        Returns
+        -------
+        record : JobRecord
+            The new job, or the earlier job with the same tenant, idempotency key and request.
+        created : bool
+            Whether ``record`` is new.
+
+        Raises
+        ------
+        IdempotencyConflict
+            The key was used for a different request.
+        """
         with self._write() as conn:
+            if job.idempotency_key is not None:
+                earlier = self.find_idempotent(job.tenant, job.idempotency_key)
+                if earlier is not None:
+                    IdempotencyConflict.check(earlier[1], job.request_hash, job.idempotency_key)
+                    return earlier[0], False
             now = time.time()  # inside the lock: creation times follow the queue order
             conn.execute(
                 "INSERT INTO jobs (id, status, fmt, filename, params, input_bytes, created_at,"
-                " updated_at, max_attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                " updated_at, max_attempts, weld, tenant, webhook_url, idempotency_key,"
+                " request_hash, progress) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
-                    job_id,
-                    JobStatus.QUEUED.value,
-                    fmt,
-                    filename,
-                    json.dumps(params),
-                    input_bytes,
-                    now,
-                    now,
-                    max_attempts,
+                    job.job_id, JobStatus.QUEUED.value, job.fmt, job.filename,
+                    json.dumps(job.params), job.input_bytes, now, now, job.max_attempts,
+                    int(job.weld), job.tenant, job.webhook_url, job.idempotency_key,
+                    job.request_hash, json.dumps(queued_progress()),
                 ),
-            )
-        rec = self.get(job_id)
+            )  # fmt: skip
+        rec = self.get(job.job_id)
         assert rec is not None
-        return rec
+        return rec, True
 
-    def get(self, job_id: str, with_report: bool = True) -> JobRecord | None:
-        """One job, or ``None``."""
+    def get(self, job_id: str) -> JobRecord | None:
+        """One job (without its report, which lives in the job's files), or ``None``."""
         row = self._conn().execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
-        return None if row is None else self._record(row, with_report)
+        return None if row is None else self._record(row)
 
     def list(
-        self, offset: int = 0, limit: int = 50, status: JobStatus | None = None
+        self,
+        offset: int = 0,
+        limit: int = 50,
+        status: JobStatus | None = None,
+        tenant: str | None = None,
     ) -> tuple[builtins.list[JobRecord], int]:
-        """A page of jobs, newest first (without reports), and the total count."""
-        where, args = ("WHERE status = ?", [status.value]) if status else ("", [])
+        """A page of jobs, newest first, and the total count (``tenant=None``: every tenant)."""
+        clauses, args = [], []
+        if status is not None:
+            clauses.append("status = ?")
+            args.append(status.value)
+        if tenant is not None:
+            clauses.append("tenant = ?")
+            args.append(tenant)
+        where = f"WHERE {' AND '.join(clauses)}" if clauses else ""
         conn = self._conn()
         total = conn.execute(f"SELECT COUNT(*) FROM jobs {where}", args).fetchone()[0]
         rows = conn.execute(
             f"SELECT {_LIST_COLUMNS} FROM jobs {where} ORDER BY seq DESC LIMIT ? OFFSET ?",
-            [*args, max(0, limit), max(0, offset)],
+            [*args, min(max(0, limit), _MAX_OFFSET), min(max(0, offset), _MAX_OFFSET)],
         ).fetchall()
-        return [self._record(r, with_report=False) for r in rows], int(total)
+        return [self._record(r) for r in rows], int(total)
 
     def ids(self) -> set[str]:
         """Every job id in the store."""
@@ -239,24 +215,31 @@ class JobStore:
             out[status] = int(n)
         return out
 
+    def set_weld(self, job_id: str) -> None:
+        """Mark a job's input as read with ``weld`` (migration of version-0 data dirs)."""
+        with self._write() as conn:
+            conn.execute("UPDATE jobs SET weld = 1 WHERE id = ?", (job_id,))
+
     # -- runs ----------------------------------------------------------------------------
     def claim(self, owner: str, lease: float) -> Claim | None:
-        """Take the oldest queued job for a run of ``owner`` (atomic across processes)."""
+        """Take the oldest queued job that is due, for a run of ``owner`` (atomic)."""
         now = time.time()
         with self._write() as conn:
             row = conn.execute(
-                "SELECT id, fmt, attempts FROM jobs WHERE status = ? ORDER BY seq LIMIT 1",
-                (JobStatus.QUEUED.value,),
+                "SELECT id, fmt, attempts FROM jobs WHERE status = ?"
+                " AND (not_before IS NULL OR not_before <= ?) ORDER BY seq LIMIT 1",
+                (JobStatus.QUEUED.value, now),
             ).fetchone()
             if row is None:
                 return None
             attempt = row["attempts"] + 1
             conn.execute(
                 "UPDATE jobs SET status = ?, attempts = ?, owner = ?, lease_until = ?,"
-                " started_at = ?, updated_at = ?, pid = NULL, iteration = NULL, lam = NULL,"
-                " phi = NULL, relative_error = NULL WHERE id = ?",
-                (JobStatus.RUNNING.value, attempt, owner, now + lease, now, now, row["id"]),
-            )
+                " started_at = ?, updated_at = ?, pid = NULL, not_before = NULL, progress = ?"
+                " WHERE id = ?",
+                (JobStatus.RUNNING.value, attempt, owner, now + lease, now, now,
+                 json.dumps(queued_progress("reading")), row["id"]),
+            )  # fmt: skip
         return Claim(row["id"], row["fmt"], attempt)
 
     def _update_run(self, job_id: str, owner: str, attempt: int, sets: str, args: tuple) -> bool:
@@ -288,55 +271,24 @@ class JobStore:
         """Extend the lease of a run; ``False`` if the run lost the job (cancelled, taken over)."""
         return self._update_run(job_id, owner, attempt, "lease_until = ?", (time.time() + lease,))
 
-    def progress(
-        self,
-        job_id: str,
-        owner: str,
-        attempt: int,
-        iteration: int,
-        lam: float,
-        phi: float,
-        tau: float | None,
-        relative_error: float | None,
-    ) -> bool:
-        """Record the latest iteration of a run; ``False`` if the run lost the job."""
-        return self._update_run(
-            job_id,
-            owner,
-            attempt,
-            "iteration = ?, lam = ?, phi = ?, tau = ?, relative_error = ?",
-            (iteration, lam, phi, tau, relative_error),
-        )
+    def progress(self, job_id: str, owner: str, attempt: int, progress: dict[str, Any]) -> bool:
+        """Record the progress of a run; ``False`` if the run lost the job."""
+        return self._update_run(job_id, owner, attempt, "progress = ?", (json.dumps(progress),))
 
+    @with_reserve
     def succeed(
-        self, job_id: str, owner: str, attempt: int, report: dict[str, Any], run_seconds: float
+        self, job_id: str, owner: str, attempt: int, progress: dict[str, Any], run_seconds: float
     ) -> bool:
-        """Mark a run succeeded with its report; ``False`` if the run lost the job."""
-        now = time.time()
-
-        def num(key: str) -> Any:
-            value = report.get(key)
-            return value if isinstance(value, int | float) else None
-
+        """Mark a run succeeded (its final progress); ``False`` if the run lost the job."""
         return self._update_run(
             job_id,
             owner,
             attempt,
-            "status = ?, finished_at = ?, report = ?, run_seconds = ?, lam = ?, phi = ?,"
-            " tau = ?, relative_error = ?, iteration = ?, lease_until = NULL",
-            (
-                JobStatus.SUCCEEDED.value,
-                now,
-                json.dumps(report),
-                run_seconds,
-                num("lambda"),
-                num("phi"),
-                num("tau"),
-                num("relative_error"),
-                num("iterations"),
-            ),
+            "status = ?, finished_at = ?, run_seconds = ?, progress = ?, lease_until = NULL",
+            (JobStatus.SUCCEEDED.value, time.time(), run_seconds, json.dumps(progress)),
         )
 
+    @with_reserve
     def fail(self, job_id: str, owner: str, attempt: int, problem: dict[str, Any]) -> bool:
         """Mark a run failed with a problem; ``False`` if the run lost the job."""
         return self._update_run(
@@ -347,16 +299,30 @@ class JobStore:
             (JobStatus.FAILED.value, time.time(), json.dumps(problem)),
         )
 
-    def requeue(self, job_id: str, owner: str, attempt: int, count_attempt: bool) -> bool:
-        """Put an interrupted run's job back in the queue (``count_attempt=False``: not a try)."""
+    @with_reserve
+    def requeue(
+        self,
+        job_id: str,
+        owner: str,
+        attempt: int,
+        count_attempt: bool,
+        not_before: float | None = None,
+    ) -> bool:
+        """Put an interrupted run's job back in the queue (``count_attempt=False``: not a try).
+
+        ``not_before``: the job is not claimed before this time (retry backoff).
+        """
         return self._update_run(
             job_id,
             owner,
             attempt,
-            "status = ?, attempts = ?, owner = NULL, lease_until = NULL, pid = NULL",
-            (JobStatus.QUEUED.value, attempt if count_attempt else attempt - 1),
-        )
+            "status = ?, attempts = ?, owner = NULL, lease_until = NULL, pid = NULL,"
+            " not_before = ?, progress = ?",
+            (JobStatus.QUEUED.value, attempt if count_attempt else attempt - 1, not_before,
+             json.dumps(queued_progress())),
+        )  # fmt: skip
 
+    @with_reserve
     def cancel(self, job_id: str) -> tuple[JobRecord | None, JobStatus | None]:
         """Cancel a queued or running job.
 
@@ -388,7 +354,43 @@ class JobStore:
         )
         return [RunningRow(r[0], r[1], r[2], r[3], r[4]) for r in rows]
 
+    # -- webhooks ------------------------------------------------------------------------
+    def claim_webhook(self, job_id: str, stale_after: float) -> bool:
+        """Take the delivery of a finished job's webhook (one deliverer at a time).
+
+        A delivery claimed more than ``stale_after`` seconds ago (its deliverer died) can be
+        taken again.
+        """
+        now = time.time()
+        with self._write() as conn:
+            cur = conn.execute(
+                f"UPDATE jobs SET webhook_state = ? WHERE id = ? AND webhook_url IS NOT NULL"
+                f" AND status IN ({','.join('?' * len(_FINISHED))}) AND (webhook_state IS NULL"
+                " OR (webhook_state LIKE 'sending:%'"
+                " AND CAST(substr(webhook_state, 9) AS REAL) < ?))",
+                (f"sending:{now}", job_id, *_FINISHED, now - stale_after),
+            )
+            return cur.rowcount == 1
+
+    @with_reserve
+    def webhook_state(self, job_id: str, state: str) -> None:
+        """Record the outcome of a delivery: ``delivered`` or ``failed``."""
+        with self._write() as conn:
+            conn.execute("UPDATE jobs SET webhook_state = ? WHERE id = ?", (state, job_id))
+
+    def webhooks_due(self) -> builtins.list[str]:
+        """Finished jobs whose webhook was never delivered nor given up (e.g. the process
+        that finished them died before delivering)."""
+        rows = self._conn().execute(
+            f"SELECT id FROM jobs WHERE webhook_url IS NOT NULL AND status IN"
+            f" ({','.join('?' * len(_FINISHED))}) AND (webhook_state IS NULL"
+            " OR webhook_state LIKE 'sending:%') ORDER BY seq",
+            _FINISHED,
+        )
+        return [r[0] for r in rows]
+
     # -- deletion ------------------------------------------------------------------------
+    @with_reserve
     def delete_finished(self, job_id: str) -> bool:
         """Delete a finished job's row; ``False`` if unknown or not finished."""
         with self._write() as conn:
@@ -410,14 +412,3 @@ class JobStore:
         )
         return [r[0] for r in rows]
 
-    def run_seconds(self, job_id: str) -> float | None:
-        """Run time recorded for a succeeded job."""
-        row = (
-            self._conn()
-            .execute(
-                "SELECT run_seconds FROM jobs WHERE id = ? AND status = ?",
-                (job_id, JobStatus.SUCCEEDED.value),
-            )
-            .fetchone()
-        )
-        return None if row is None else row[0]

@@ -27,6 +27,7 @@ def make_queue(tmp_path: Path) -> Iterator[Callable[..., LocalQueue]]:
             "kill_grace": 1.0,
             "lease": 5.0,
             "progress_interval": 0.05,
+            "retry_backoff": 0.2,
         }
         kw.update(options)
         queue = LocalQueue(kw.pop("data_dir", tmp_path / "data"), **kw)

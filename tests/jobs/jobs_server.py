@@ -21,6 +21,7 @@ def main() -> None:
     ap.add_argument("--runner", default="jobs_fakes:scripted")
     ap.add_argument("--max-attempts", type=int, default=3)
     ap.add_argument("--poll-interval", type=float, default=0.1)
+    ap.add_argument("--retry-backoff", type=float, default=0.2)
     ns = ap.parse_args()
     ns.data_dir.mkdir(parents=True, exist_ok=True)
     (ns.data_dir / "server.pid").write_text(str(os.getpid()))
@@ -33,6 +34,7 @@ def main() -> None:
         max_attempts=ns.max_attempts,
         poll_interval=ns.poll_interval,
         progress_interval=0.05,
+        retry_backoff=ns.retry_backoff,
     )
     queue.start()
     (ns.data_dir / "server.ready").write_text(str(os.getpid()))

@@ -77,7 +77,7 @@ def test_polyline_job_meets_tau(real_queue: LocalQueue) -> None:
         np.linalg.norm(ring.points[:, :2], axis=1)
     )
     # the result also exists in the input's format
-    path = real_queue.result_file(rec.id)
+    path = real_queue.result_file(rec.id, "obj")
     assert path is not None and path.suffix == ".obj"
     np.testing.assert_allclose(read_geometry(path).geometry.points, smoothed, atol=1e-12)
 

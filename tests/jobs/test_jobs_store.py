@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 from jobs_fakes import script
 from jobs_helpers import PARAMS, pid_gone, wait_for
@@ -20,9 +21,10 @@ from service.core.progress import ProgressEvent
 from service.io.errors import FormatError, UnsupportedFormat
 from service.jobs import JobStatus, LocalQueue, problems
 from service.jobs.files import JobFiles, is_job_id, write_durable
-from service.jobs.local import _owner_dead
+from service.jobs.local_maintenance import owner_dead as _owner_dead
+from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
-from service.jobs.store import JobStore
+from service.jobs.store import JobStore, NewJob
 
 MakeQueue = Callable[..., LocalQueue]
 
@@ -35,8 +37,13 @@ def store(tmp_path: Path) -> JobStore:
 
 
 def _add(store: JobStore, job_id: str = "a" * 32, max_attempts: int = 3) -> str:
-    store.insert(job_id, "json", None, {"tau": 1.0}, 10, max_attempts)
+    store.insert(NewJob(job_id, "json", None, {"tau": 1.0}, 10, max_attempts))
     return job_id
+
+
+def _progress(iteration: int, phi: float = 2.0) -> dict[str, object]:
+    return {"stage": "search", "iteration": iteration, "lambda": 0.5, "phi": phi, "tau": 1.0,
+            "relative_error": 1.0}  # fmt: skip
 
 
 def test_store_uses_wal_and_claims_in_fifo_order(store: JobStore) -> None:
@@ -54,12 +61,12 @@ def test_a_run_that_lost_its_job_cannot_write(store: JobStore) -> None:
     job_id = _add(store)
     claim = store.claim("me", 5.0)
     assert claim is not None
-    assert store.progress(job_id, "me", 1, 1, 0.5, 2.0, 1.0, 1.0)
-    assert not store.progress(job_id, "someone-else", 1, 2, 0.5, 2.0, 1.0, 1.0)
+    assert store.progress(job_id, "me", 1, _progress(1))
+    assert not store.progress(job_id, "someone-else", 1, _progress(2))
     rec, previous = store.cancel(job_id)
     assert previous is JobStatus.RUNNING and rec.status is JobStatus.CANCELLED  # type: ignore[union-attr]
-    assert not store.progress(job_id, "me", 1, 3, 0.5, 2.0, 1.0, 1.0)
-    assert not store.succeed(job_id, "me", 1, {"phi": 1.0}, 0.1)
+    assert not store.progress(job_id, "me", 1, _progress(3))
+    assert not store.succeed(job_id, "me", 1, final_progress({"phi": 1.0}, 0.1), 0.1)
     assert not store.fail(job_id, "me", 1, {"code": "x"})
     assert not store.renew(job_id, "me", 1, 5.0)
     rec = store.get(job_id)
@@ -72,11 +79,13 @@ def test_stale_attempt_cannot_overwrite_a_newer_run(store: JobStore) -> None:
     store.claim("old", 5.0)
     assert store.requeue(job_id, "old", 1, count_attempt=True)
     store.claim("new", 5.0)
-    assert not store.succeed(job_id, "old", 1, {"phi": 0.0}, 0.1)
-    assert store.succeed(job_id, "new", 2, {"phi": 1.0, "iterations": 4}, 0.1)
+    assert not store.succeed(job_id, "old", 1, final_progress({"phi": 0.0}, 0.1), 0.1)
+    assert store.succeed(job_id, "new", 2, final_progress({"phi": 1.0, "iterations": 4}, 0.1), 0.1)
     rec = store.get(job_id)
     assert rec.status is JobStatus.SUCCEEDED and rec.attempts == 2  # type: ignore[union-attr]
-    assert rec.report == {"phi": 1.0, "iterations": 4} and rec.iteration == 4  # type: ignore[union-attr]
+    # the report itself lives in the job's report.json (read by LocalQueue.get); the row keeps
+    # the final progress taken from it
+    assert rec.phi == 1.0 and rec.iteration == 4  # type: ignore[union-attr]
 
 
 def test_recovery_requeues_only_runs_of_dead_owners(make_queue: MakeQueue) -> None:
@@ -178,24 +187,54 @@ def test_problems_keep_typed_errors_and_hide_internals() -> None:
 
 
 def test_progress_is_throttled_and_stops_a_run_that_lost_its_job(tmp_path: Path) -> None:
-    writes: list[tuple[int, float | None]] = []
+    writes: list[tuple[str, int, float | None]] = []
     holds = [True]
 
-    def report(it: int, lam: float, phi: float, tau: float | None, rel: float | None) -> bool:
-        writes.append((it, rel))
+    def report(progress: dict[str, object]) -> bool:
+        writes.append((progress["stage"], progress["iteration"], progress["relative_error"]))  # type: ignore[arg-type]
         return holds[0]
 
     ctx = JobContext("a" * 32, tmp_path, tmp_path / "input.json", "json", PARAMS, report, 10.0)
     ev = [ProgressEvent("search", tau=2.0, iteration=i, lam=0.1 * i, phi=p) for i, p in
           ((1, 3.0), (2, 2.5), (3, 2.0))]  # fmt: skip
-    ctx.progress(ProgressEvent("neighborhoods"))  # no lambda yet: not recorded
-    ctx.progress(ev[0])
-    ctx.progress(ev[1])  # within the interval: held back
-    assert writes == [(1, 0.5)]
+    ctx.progress(ProgressEvent("neighborhoods"))  # a new stage: written at once
+    ctx.progress(ev[0])  # a new stage again
+    ctx.progress(ev[1])  # same stage, within the interval: held back
+    assert writes == [("neighborhoods", 0, None), ("search", 1, 0.5)]
     ctx.flush_progress()
-    assert writes == [(1, 0.5), (2, 0.25)]
+    assert writes[-1] == ("search", 2, 0.25)
     holds[0] = False
     ctx.flush_progress()  # nothing pending: no write
+    assert len(writes) == 3
     with pytest.raises(RunLost):
         ctx._last_write = float("-inf")
         ctx.progress(ev[2])
+
+
+def test_progress_dict_has_stage_percent_and_eta(tmp_path: Path) -> None:
+    seen: list[dict[str, object]] = []
+    ctx = JobContext("a" * 32, tmp_path, tmp_path / "in.json", "json", PARAMS,
+                     lambda p: seen.append(p) or True, 0.0)  # fmt: skip
+    ctx.stage("reading")
+    for stage in ("neighborhoods", "laplacian", "analysis"):
+        ctx.progress(ProgressEvent(stage, tau=1.0))
+    tol = PARAMS.tolerance
+    for i, rel in enumerate((1.0, 0.1, tol), start=1):  # geometric convergence to the tolerance
+        ctx.progress(ProgressEvent("search", tau=1.0, iteration=i, lam=1.0, phi=1.0 + rel))
+    ctx.stage("writing")
+    stages = [p["stage"] for p in seen]
+    assert stages == ["reading", "neighborhoods", "laplacian", "analysis", "search", "search",
+                      "search", "writing"]  # fmt: skip
+    percents = [float(p["percent"]) for p in seen]  # type: ignore[arg-type]
+    assert percents == sorted(percents) and percents[0] == 0.0 and percents[-1] == 95.0
+    search = percents[4:7]  # the search slice 40..90, filled on a log scale of the error
+    assert search[0] == 40.0 and search[2] == 90.0
+    expected_mid = 40.0 + 50.0 * np.log(1.0 / 0.1) / np.log(1.0 / tol)
+    assert search[1] == pytest.approx(expected_mid, abs=0.01)
+    assert all(p["tau"] == 1.0 for p in seen[2:7])
+    late = seen[-1]
+    assert late["iteration"] == 3 and late["lambda"] == 1.0  # the search's, carried over
+    assert late["tau"] == 1.0 and [p["iteration"] for p in seen] == [0, 0, 0, 0, 1, 2, 3, 3]
+    assert late["eta_seconds"] is not None and late["elapsed_seconds"] is not None
+    eta, elapsed = float(late["eta_seconds"]), float(late["elapsed_seconds"])  # type: ignore[arg-type]
+    assert eta == pytest.approx(elapsed * 5.0 / 95.0, abs=2e-3)

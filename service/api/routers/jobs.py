@@ -151,12 +151,10 @@ async def get_result(
 ) -> Response:
     _require_succeeded(job)
     fmt = format or job.fmt
-    stored = getattr(queue, "result_file", None)  # local backend: the file the worker wrote
-    if fmt == job.fmt and callable(stored):
-        path = await run_in_threadpool(stored, job.id)
-        if path is not None:
-            name = f"{_stem(job)}.{fmt}"
-            return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=name)
+    path = await run_in_threadpool(queue.result_file, job.id, fmt)
+    if path is not None:  # the file the worker wrote
+        name = f"{_stem(job)}.{fmt}"
+        return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=name)
     document = await run_in_threadpool(queue.result, job.id)
     if document is None:  # purged or deleted meanwhile
         raise ApiProblem(404, f"the result of job {job.id} is gone", code="result-not-found")

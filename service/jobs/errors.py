@@ -1,0 +1,148 @@
+"""Typed errors of the job queue (raised by ``submit`` and the storage layer).
+
+Like the core and io errors, each class carries its presentation as class attributes (``code``,
+``title``, HTTP ``status``, CLI ``exit_code``) and each instance a ``field``, a one-line
+``message`` and :meth:`JobsError.to_dict`; ``service.api.problems`` turns any such exception
+into problem details in one generic branch, so adding a class here touches this file only.
+"""
+
+from __future__ import annotations
+
+import errno
+import sqlite3
+from typing import Any, ClassVar
+
+from service.exit_codes import EXIT_INTERNAL, EXIT_USAGE
+
+__all__ = [
+    "IdempotencyConflict",
+    "JobTooLarge",
+    "JobsError",
+    "StorageError",
+    "StorageFull",
+    "StorageUnavailable",
+    "WebhookUrlRejected",
+    "storage_error",
+]
+
+
+class JobsError(Exception):
+    """Base class of the queue's typed errors.
+
+    Parameters
+    ----------
+    message : str
+        One line for humans (never a server path).
+    field : str, optional
+        The request member at fault (``"file"``, ``"webhook_url"``, ``"Idempotency-Key"``).
+    """
+
+    code: ClassVar[str] = "jobs-error"
+    title: ClassVar[str] = "Job queue error"
+    status: ClassVar[int] = 500
+    exit_code: ClassVar[int] = EXIT_INTERNAL
+
+    def __init__(self, message: str, *, field: str | None = None, **extra: Any) -> None:
+        super().__init__(message)
+        self.message = message
+        self.field = field
+        self.extra = extra
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{code, message, field?, **extra}`` (JSON-ready)."""
+        out: dict[str, Any] = {"code": self.code, "message": self.message}
+        if self.field is not None:
+            out["field"] = self.field
+        out.update(self.extra)
+        return out
+
+
+class IdempotencyConflict(JobsError):
+    """The idempotency key was used before with a different request."""
+
+    code = "idempotency-conflict"
+    title = "Idempotency key reused with a different request"
+    status = 409
+    exit_code = EXIT_USAGE
+
+    @classmethod
+    def check(cls, stored: str | None, given: str | None, key: str) -> None:
+        """Raise unless the request fingerprints of a key's two uses are equal."""
+        if stored != given:
+            raise cls(
+                f"the idempotency key {key!r} was used for a different request",
+                field="Idempotency-Key",
+            )
+
+
+class JobTooLarge(JobsError):
+    """The job's estimated memory is above the per-job limit (refused at submit).
+
+    Extras: ``estimate_bytes``, ``limit_bytes``, ``estimate_seconds``, ``path``.
+    """
+
+    code = "job-too-large"
+    title = "Job too large"
+    status = 422
+    exit_code = EXIT_USAGE
+
+
+class WebhookUrlRejected(JobsError):
+    """A ``webhook_url`` that is malformed or points at a refused address (SSRF guard)."""
+
+    code = "webhook-url-rejected"
+    title = "Webhook URL rejected"
+    status = 422
+    exit_code = EXIT_USAGE
+
+
+class StorageError(JobsError):
+    """The job store cannot take the write (base of the two storage conditions)."""
+
+
+class StorageFull(StorageError):
+    """No space left for the job store (HTTP 507 Insufficient Storage)."""
+
+    code = "storage-full"
+    title = "Insufficient storage"
+    status = 507
+
+
+class StorageUnavailable(StorageError):
+    """The job store is read-only, missing, corrupted or unreachable (HTTP 503)."""
+
+    code = "storage-unavailable"
+    title = "Storage unavailable"
+    status = 503
+
+
+_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+_UNAVAILABLE_ERRNOS = frozenset({errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO, errno.ENODEV,
+                                 errno.ESTALE, errno.ENOTCONN, errno.ETIMEDOUT})  # fmt: skip
+
+
+def storage_error(exc: BaseException) -> StorageError | None:
+    """The storage condition an ``OSError``/``sqlite3.Error`` stands for, ``None`` otherwise.
+
+    The message names the condition only (no paths, no driver text).
+    """
+    if isinstance(exc, StorageError):
+        return exc
+    if isinstance(exc, OSError):
+        if exc.errno in _FULL_ERRNOS:
+            return StorageFull("the job store is out of space")
+        if exc.errno in _UNAVAILABLE_ERRNOS:
+            return StorageUnavailable(f"the job store cannot be written ({_errno_name(exc)})")
+        return None
+    if isinstance(exc, sqlite3.OperationalError | sqlite3.DatabaseError) and not isinstance(
+        exc, sqlite3.IntegrityError | sqlite3.ProgrammingError | sqlite3.InterfaceError
+    ):
+        text = str(exc).lower()
+        if "full" in text:
+            return StorageFull("the job store is out of space")
+        return StorageUnavailable("the job database cannot be used")
+    return None
+
+
+def _errno_name(exc: OSError) -> str:
+    return errno.errorcode.get(exc.errno or 0, "I/O error")

@@ -1,0 +1,109 @@
+"""Resource limits of a job: the per-job memory limit and its enforcement.
+
+* **Admission** (:func:`check_admission`): before a job is accepted its peak memory is estimated
+  by the engine (``service.core.resources.estimate_resources``); above the per-job limit the job
+  is refused with :class:`~service.jobs.errors.JobTooLarge` (422, estimate and limit stated).
+* **Enforcement** (:func:`limit_memory`): every job process runs under ``RLIMIT_AS`` = its
+  address space when the job starts + the per-job limit. An estimate that was wrong makes that one
+  job fail with ``out-of-memory`` (``MemoryError``) instead of the machine swapping or the OOM
+  killer picking a random process. ``RLIMIT_AS`` needs no privileges and works in any container
+  (cgroups would need a delegated hierarchy); it counts address space, not resident memory, so
+  the limit is generous by what allocators reserve but do not touch.
+* **Threads**: BLAS/OpenMP threads per job process come from the engine's thread budget
+  (``service.core.threads``), applied once in the process that forks the job processes.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from service.jobs.errors import JobTooLarge
+
+if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
+    from service.jobs.queue import JobSize
+
+__all__ = [
+    "check_admission",
+    "default_job_memory",
+    "limit_memory",
+]
+
+_GIB = 1024**3
+
+
+def physical_memory() -> int:
+    """Bytes of RAM of this machine (or of the container's cgroup limit, if lower)."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = min(total, int(text))
+    return int(total)
+
+
+def default_job_memory(workers: int) -> int:
+    """Per-job memory limit when none is configured: 80 % of the RAM shared by ``workers`` jobs.
+
+    At least 256 MiB.
+    """
+    return max(256 * 1024**2, int(0.8 * physical_memory() / max(1, workers)))
+
+
+def check_admission(size: JobSize, params: SmoothingParams, limit: int | None) -> None:
+    """Refuse a job whose estimated peak memory is above ``limit`` bytes (``None``: no limit).
+
+    Raises
+    ------
+    JobTooLarge
+        With the estimate and the limit (bytes and GiB in the message).
+    """
+    if limit is None:
+        return
+    from service.core.resources import estimate_resources
+
+    est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces,
+                             memory_limit=limit)  # fmt: skip
+    if est.memory_bytes <= limit:
+        return
+    raise JobTooLarge(
+        f"the job needs about {est.memory_bytes / _GIB:.2f} GiB of memory ({size.n} points,"
+        f" {est.path} solver path), above the per-job limit of {limit / _GIB:.2f} GiB",
+        field="file",
+        estimate_bytes=int(est.memory_bytes),
+        limit_bytes=int(limit),
+        estimate_seconds=float(est.seconds),
+        path=est.path,
+    )
+
+
+def _address_space() -> int:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def limit_memory(limit: int | None) -> int | None:
+    """Cap this process's address space at its current size + ``limit`` bytes.
+
+    Returns the cap set (``None`` when ``limit`` is ``None`` or the platform has no
+    ``RLIMIT_AS``). Never raises the hard limit; never lowers below what is mapped already.
+    """
+    if limit is None or not hasattr(resource, "RLIMIT_AS"):
+        return None
+    cap = _address_space() + int(limit)
+    _soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    return cap

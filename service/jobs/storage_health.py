@@ -1,0 +1,76 @@
+"""Readiness of a job store on a file system: free space, writability, database integrity.
+
+The cheap checks (``statvfs``, creating and removing a probe file) run on every call; the
+database integrity check (SQLite ``quick_check``, O(database size)) at most every
+:data:`DB_CHECK_INTERVAL` seconds.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from service.jobs.queue import QueueHealth
+
+__all__ = ["DB_CHECK_INTERVAL", "StorageProbe", "probe_directory"]
+
+DB_CHECK_INTERVAL = 10.0
+
+
+def probe_directory(path: Path, min_free: int) -> str:
+    """``"ok"``, ``"full"`` (less than ``min_free`` bytes or ENOSPC), ``"read-only"`` or
+    ``"unavailable"``."""
+    try:
+        st = os.statvfs(path)
+        fd, name = tempfile.mkstemp(prefix=".probe-", dir=path)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return "full"
+        if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+            return "read-only"
+        return "unavailable"
+    return "full" if st.f_bavail * st.f_frsize < min_free else "ok"
+
+
+class StorageProbe:
+    """Health of a data directory and its database.
+
+    Parameters
+    ----------
+    data_dir : Path
+        The job store's directory.
+    min_free : int
+        Bytes below which the store counts as full.
+    db_check : callable
+        ``() -> "ok" | "corrupt" | "unavailable"``.
+    """
+
+    def __init__(self, data_dir: Path, min_free: int, db_check: Callable[[], str]) -> None:
+        self.data_dir = Path(data_dir)
+        self.min_free = min_free
+        self._db_check = db_check
+        self._db_state = "ok"
+        self._db_checked = float("-inf")
+        self._lock = threading.Lock()
+
+    def database(self) -> str:
+        """The (cached) result of the database check."""
+        with self._lock:
+            if time.monotonic() - self._db_checked >= DB_CHECK_INTERVAL:
+                self._db_state = self._db_check()
+                self._db_checked = time.monotonic()
+            return self._db_state
+
+    def health(self) -> QueueHealth:
+        """Storage and database checks."""
+        checks = {"storage": probe_directory(self.data_dir, self.min_free),
+                  "database": self.database()}  # fmt: skip
+        bad = [f"{name} {state}" for name, state in checks.items() if state != "ok"]
+        return QueueHealth(not bad, checks, ", ".join(bad) or None)

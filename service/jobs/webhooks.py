@@ -1,0 +1,196 @@
+"""Webhooks: a signed POST of the finished job (``JobRecord.public_dict()``) to ``webhook_url``.
+
+Signature (Stripe-style, so existing verification code carries over)::
+
+    Geosmooth-Signature: t=<unix seconds>,v1=<hex HMAC-SHA256(secret, "<t>.<raw body>")>
+
+with the secret of ``GEOSMOOTH_WEBHOOK_SECRET`` (no secret configured: no header). Verify it
+on the receiving side with :func:`verify_signature` (the README shows the same ten lines to copy).
+
+SSRF guard: a target whose host resolves to a loopback, private, link-local, multicast, reserved
+or unspecified address is refused (:func:`check_webhook_url`, at submit and again at every
+delivery), unless ``GEOSMOOTH_WEBHOOK_ALLOW_PRIVATE=true``. A delivery connects to the address
+that was checked (the ``Host`` header and TLS server name keep the URL's host), so a DNS answer
+that changes between the check and the connection (DNS rebinding) cannot redirect it. Redirects
+are not followed.
+
+Delivery: at least once, retried with exponential backoff (1, 2, 4, ... s, at most 60 s between
+tries) on connection errors and non-2xx answers, ``webhook_max_attempts`` tries in all.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import ipaddress
+import json
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+from urllib.parse import urlsplit, urlunsplit
+
+from service.jobs.errors import WebhookUrlRejected
+
+if TYPE_CHECKING:
+    from service.settings import Settings
+
+__all__ = [
+    "SIGNATURE_HEADER",
+    "Target",
+    "check_webhook_url",
+    "deliver",
+    "sign",
+    "verify_signature",
+]
+
+SIGNATURE_HEADER = "Geosmooth-Signature"
+_MAX_URL = 2048
+_MAX_BACKOFF = 60.0
+
+
+@dataclass(frozen=True)
+class Target:
+    """A checked webhook target: the URL and the address to connect to."""
+
+    url: str
+    host: str
+    address: str
+    port: int
+
+
+def _refused(address: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
+    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+        address = address.ipv4_mapped
+    return (
+        address.is_loopback
+        or address.is_private
+        or address.is_link_local
+        or address.is_multicast
+        or address.is_reserved
+        or address.is_unspecified
+        or not address.is_global
+    )
+
+
+def check_webhook_url(url: str, settings: Settings) -> Target:
+    """Check a webhook URL (scheme, host, resolved addresses); the target to connect to.
+
+    Raises
+    ------
+    WebhookUrlRejected
+        A URL that is not ``http(s)://host[:port]/...``, whose host does not resolve, or that
+        resolves to a refused address (unless ``settings.webhook_allow_private``).
+    """
+    if not isinstance(url, str) or len(url) > _MAX_URL:
+        raise WebhookUrlRejected("webhook_url must be an http(s) URL", field="webhook_url")
+    parts = urlsplit(url)
+    try:
+        port = parts.port or (443 if parts.scheme == "https" else 80)
+    except ValueError:
+        raise WebhookUrlRejected("webhook_url has an invalid port", field="webhook_url") from None
+    if parts.scheme not in ("http", "https") or not parts.hostname or parts.username:
+        raise WebhookUrlRejected(
+            "webhook_url must be an http(s) URL with a host and no credentials",
+            field="webhook_url",
+        )
+    host = parts.hostname
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        raise WebhookUrlRejected(
+            f"the host of webhook_url ({host}) does not resolve", field="webhook_url"
+        ) from None
+    addresses = [ipaddress.ip_address(str(info[4][0]).split("%", 1)[0]) for info in infos]
+    if not settings.webhook_allow_private:
+        bad = [a for a in addresses if _refused(a)]
+        if bad:
+            raise WebhookUrlRejected(
+                f"webhook_url resolves to a non-public address ({bad[0]}); set"
+                " GEOSMOOTH_WEBHOOK_ALLOW_PRIVATE=true to allow it",
+                field="webhook_url",
+            )
+    return Target(url=url, host=host, address=str(addresses[0]), port=port)
+
+
+def sign(secret: str, body: bytes, timestamp: int | None = None) -> str:
+    """The ``Geosmooth-Signature`` header value for ``body``."""
+    t = int(time.time()) if timestamp is None else int(timestamp)
+    mac = hmac.new(secret.encode(), f"{t}.".encode() + body, hashlib.sha256).hexdigest()
+    return f"t={t},v1={mac}"
+
+
+def verify_signature(
+    secret: str, body: bytes, header: str, tolerance: float = 300.0, now: float | None = None
+) -> bool:
+    """Whether ``header`` signs ``body`` with ``secret`` within ``tolerance`` seconds.
+
+    The receiving side's check (the README has a dependency-free copy of it).
+    """
+    fields = dict(part.split("=", 1) for part in header.split(",") if "=" in part)
+    try:
+        t = int(fields["t"])
+    except (KeyError, ValueError):
+        return False
+    expected = hmac.new(secret.encode(), f"{t}.".encode() + body, hashlib.sha256).hexdigest()
+    fresh = abs((time.time() if now is None else now) - t) <= tolerance
+    return fresh and hmac.compare_digest(expected, fields.get("v1", ""))
+
+
+def _post(target: Target, body: bytes, headers: dict[str, str], timeout: float) -> int:
+    """POST to the checked address (Host and TLS server name from the URL); the status."""
+    import httpx
+
+    parts = urlsplit(target.url)
+    literal = f"[{target.address}]" if ":" in target.address else target.address
+    direct = urlunsplit((parts.scheme, f"{literal}:{target.port}", parts.path or "/",
+                         parts.query, ""))  # fmt: skip
+    extensions = {"sni_hostname": target.host} if parts.scheme == "https" else {}
+    with httpx.Client(timeout=timeout, follow_redirects=False, trust_env=False) as client:
+        response = client.post(
+            direct,
+            content=body,
+            headers={**headers, "Host": parts.netloc.rpartition("@")[2]},
+            extensions=extensions,
+        )
+    return response.status_code
+
+
+def deliver(
+    url: str,
+    payload: dict[str, Any],
+    settings: Settings,
+    *,
+    stop: threading.Event | None = None,
+) -> tuple[bool, int]:
+    """POST ``payload`` to ``url`` until a 2xx answer or ``webhook_max_attempts`` tries.
+
+    ``stop``: set it to abandon the retries (checked between tries).
+
+    Returns
+    -------
+    delivered : bool
+    tries : int
+    """
+    body = json.dumps(payload, separators=(",", ":"), allow_nan=False).encode()
+    tries = 0
+    for tries in range(1, settings.webhook_max_attempts + 1):
+        if tries > 1:
+            delay = min(_MAX_BACKOFF, settings.webhook_backoff * 2 ** (tries - 2))
+            if (stop or threading.Event()).wait(delay) or (stop and stop.is_set()):
+                return False, tries - 1
+        headers = {"Content-Type": "application/json", "User-Agent": "geosmooth-webhook"}
+        secret = settings.webhook_secret.get_secret_value() if settings.webhook_secret else ""
+        if secret:
+            headers[SIGNATURE_HEADER] = sign(secret, body)
+        try:
+            target = check_webhook_url(url, settings)
+            status = _post(target, body, headers, settings.webhook_timeout)
+        except WebhookUrlRejected:
+            return False, tries  # refused now (e.g. DNS changed): trying again will not help
+        except Exception:  # connection refused, timeout, TLS: retried
+            continue
+        if 200 <= status < 300:
+            return True, tries
+    return False, tries
