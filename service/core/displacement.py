@@ -47,6 +47,7 @@ from service.core.system import SmoothingSystem
 __all__ = [
     "DEFAULT_DISPLACEMENT",
     "NormalSystem",
+    "auto_system",
     "normal_frames",
     "normal_mode",
     "normal_system",
@@ -282,4 +283,24 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
     if params.displacement != "auto":
         return params
     mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
+    if mode == "normal" and codimension(geometry) < 1:  # e.g. a planar mesh given in 2-D
+        mode = "free"
     return params.model_copy(update={"displacement": mode})
+
+
+ToPoints = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+def auto_system(
+    params: SmoothingParams,
+    requested: str,
+    build: Callable[[SmoothingParams], tuple[SmoothingSystem, ToPoints]],
+) -> tuple[SmoothingParams, SmoothingSystem, ToPoints]:
+    """``build(params)``, or the free system when ``displacement="auto"`` chose normal
+    displacement for an input that is already smooth across itself (a flat cloud or mesh:
+    nothing moves along the normals, every budget would be out of range)."""
+    system, to_points = build(params)
+    if requested == "auto" and params.displacement == "normal" and not np.any(system.r):
+        params = params.model_copy(update={"displacement": "free"})
+        system, to_points = build(params)
+    return params, system, to_points

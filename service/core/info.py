@@ -42,14 +42,15 @@ def _bbox(P: NDArray[np.float64]) -> dict[str, list[float]]:
 
 
 def _phi0(
-    geometry: Geometry, params: SmoothingParams
-) -> tuple[float, float, int, NDArray[np.bool_], Any]:
+    geometry: Geometry, params: SmoothingParams, requested: str
+) -> tuple[float, float, int, NDArray[np.bool_], Any, SmoothingParams]:
     """``phi(0)`` of the mode ``params`` selects (eq. 14 per component for free displacement,
     fixed points as boundary values; the system's limit for normal displacement), the weight
     sum ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the
     fixed points and the neighbourhood graph."""
     import scipy.sparse as sp
 
+    from service.core.displacement import auto_system
     from service.core.operator import build_operator
     from service.core.pipeline import free_set, phi_at_zero_of, smoothing_system
     from service.core.system import Deviation
@@ -60,9 +61,11 @@ def _phi0(
     fixed, _ = free_set(geometry, op, params, [])
     omega = geometry.omega()
     if fixed.all():
-        return 0.0, 0.0, n_edges, fixed, adj
+        return 0.0, 0.0, n_edges, fixed, adj, params
     frame = op.frame.weighted(omega[~fixed])
-    system, _ = smoothing_system(geometry, op, fixed, frame, params)
+    params, system, _ = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+    )
     phi0 = system.phi0
     if phi0 is None:
         solver: Literal["cholmod", "superlu"] = (
@@ -70,7 +73,7 @@ def _phi0(
         )
         phi0 = phi_at_zero_of(Deviation(system, solver=solver), op, fixed, params)
     w2 = float(np.sum(omega[~fixed] ** 2))
-    return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
+    return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj, params
 
 
 def _knee(
@@ -120,8 +123,9 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
 
     if params is None:
         params = SmoothingParams.model_construct()
+    requested = params.displacement
     params = resolve_displacement(params, geometry)
-    phi0, weight_sum, n_edges, fixed, adjacency = _phi0(geometry, params)
+    phi0, weight_sum, n_edges, fixed, adjacency, params = _phi0(geometry, params, requested)
     r = float(np.sqrt(phi0 / weight_sum)) if weight_sum > 0 else 0.0
     sigma: float | None = None
     suggested_tau: float | None = None

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from service.core import cache
 from service.core.autotau import auto_tau, gcv_lambda, knee_tau
-from service.core.displacement import normal_mode, resolve_displacement
+from service.core.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
 from service.core.errors import ParameterError, SolverError, TauOutOfRange
 from service.core.frame import Frame
@@ -112,12 +112,15 @@ def smooth(
     ParameterError, TauOutOfRange, SolverError
     """
     run = Run(progress)
+    requested = params.displacement
     params = resolve_displacement(params, geometry)
     run.emit("neighborhoods")
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, run.notes)
     run.frame = frame = op.frame.weighted(geometry.omega()[~fixed])
-    system, to_points = smoothing_system(geometry, op, fixed, frame, params)
+    params, system, to_points = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+    )
     run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
     if system.empty:

@@ -123,3 +123,16 @@ def test_gcv_displaces_freely() -> None:
     with pytest.raises(ParameterError) as info:
         smooth(g, SmoothingParams(tau="gcv", displacement="normal"))
     assert info.value.field == "params.displacement"
+
+
+def test_auto_displacement_falls_back_to_free_where_normals_cannot_move() -> None:
+    """A flat cloud is smooth across itself; a mesh in 2-D has no normal: free displacement."""
+    rng = np.random.default_rng(1)
+    flat = np.column_stack([rng.uniform(size=(200, 2)), np.full(200, 0.5)])
+    res = smooth(Geometry(flat), SmoothingParams(rms=0.01))
+    assert res.displacement == "free" and res.converged
+    from core_fixtures import grid_mesh
+
+    P, F = grid_mesh(8, 7, jitter=0.3)
+    res2 = smooth(Geometry(P[:, :2], faces=F), SmoothingParams(lam=0.1))
+    assert res2.displacement == "free"
