@@ -67,7 +67,11 @@ class SurfaceDistance:
 
     def __init__(self, vertices: FloatArray, faces: NDArray[np.int64], k: int = 12) -> None:
         self.triangles = np.asarray(vertices, dtype=np.float64)[faces]
-        self.tree = cKDTree(self.triangles.mean(axis=1))
+        centroids = self.triangles.mean(axis=1)
+        self.tree = cKDTree(centroids)
+        self.sizes = np.maximum(
+            np.linalg.norm(self.triangles - centroids[:, None], axis=2).max(axis=1), 1e-300
+        )
         self.k = k
 
     def __call__(self, X: FloatArray, chunk: int = 20000) -> FloatArray:
@@ -77,10 +81,14 @@ class SurfaceDistance:
         for start in range(0, X.shape[0], chunk):
             Q = X[start : start + chunk]
             _, idx = self.tree.query(Q, k=self.k)
-            tri = self.triangles[idx.ravel()]
             pts = np.repeat(Q, self.k, axis=0)
-            cp = closest_point(tri, pts)
-            d = np.linalg.norm(cp - pts, axis=1).reshape(-1, self.k)
+            # trimesh's tolerances are absolute: work in coordinates relative to the query
+            # point, in units of the triangle's size (small triangles of a mesh in metres
+            # were misclassified, giving distances up to 0.2 edge lengths for points inside)
+            scale = self.sizes[idx.ravel()][:, None, None]
+            tri = (self.triangles[idx.ravel()] - pts[:, None, :]) / scale
+            cp = closest_point(tri, np.zeros_like(pts)) * scale[:, :, 0]
+            d = np.linalg.norm(cp, axis=1).reshape(-1, self.k)
             out[start : start + chunk] = d.min(axis=1)
         return out
 

@@ -213,6 +213,35 @@ class Report(BaseModel):
     spectrum: dict[str, list[float]] | None = Field(
         default=None, description="Singular values and filter factors, when requested."
     )
+    # --- core-quality keys ---
+    displacement: str = Field(default="free", description="free or normal (along normals only).")
+    tau_rule: str = Field(
+        default="tau", description="How lambda was set: lam, tau, rms, auto or gcv."
+    )
+    sigma_estimate: float | None = Field(
+        default=None, description="Estimated noise level across the shape (automatic tau)."
+    )
+    tau_how: str | None = Field(
+        default=None, description="How the automatic tau was chosen, in words."
+    )
+    bound: dict[str, Any] | None = Field(
+        default=None,
+        description="max_deviation bound: {max_deviation, rounds, clipped}.",
+    )
+    flipped_faces: int | None = Field(
+        default=None, description="Faces whose normal turned against the input's (meshes)."
+    )
+    volume_change: float | None = Field(
+        default=None,
+        description="Relative change of the enclosed volume (closed meshes) or area (closed "
+        "2-D polygons).",
+    )
+    area_change: float | None = Field(
+        default=None, description="Relative change of the surface area (meshes) or length."
+    )
+    moved_far: int | None = Field(
+        default=None, description="Points that moved more than 5x the RMS deviation."
+    )
 
 
 # Reports are passed through exactly as ``SmoothResult.report()`` made them (no re-validation,

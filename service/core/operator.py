@@ -18,7 +18,7 @@ from service.core.curvature import curvature
 from service.core.errors import ParameterError
 from service.core.frame import Frame
 from service.core.geometry import Geometry
-from service.core.laplacian import laplacian
+from service.core.laplacian import laplacian, presmooth, without_junction_rows
 from service.core.neighborhoods import (
     Neighborhoods,
     cloud_delaunay_neighborhoods,
@@ -39,7 +39,9 @@ __all__ = [
 ]
 
 #: The parameters an operator depends on.
-BUILD_FIELDS = ("laplacian", "weights", "neighborhood", "k", "sigma_h", "sigma_f")
+BUILD_FIELDS = (
+    "laplacian", "weights", "neighborhood", "k", "sigma_h", "sigma_f", "presmooth", "junctions"
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,8 +151,13 @@ def _build(
         curv_nb = cloud_delaunay_neighborhoods(P, params.k)  # curvature from Delaunay fans
     t1 = time.perf_counter()
     W = neighbor_weights(P, nb, scheme)
-    kappa = curvature(P, curv_nb) if params.laplacian != "normalized" else None
-    L = laplacian(W, P, params.laplacian, kappa, params.sigma_h / frame.scale, params.sigma_f)
+    ref = P  # curvature and row scales of L(kappa)/L(f) from the pre-smoothed input (quality)
+    if params.laplacian != "normalized" and params.presmooth:
+        ref = presmooth(P, nb.adjacency, params.presmooth)
+    kappa = curvature(ref, curv_nb) if params.laplacian != "normalized" else None
+    L = laplacian(W, ref, params.laplacian, kappa, params.sigma_h / frame.scale, params.sigma_f)
+    if nb.source == "curve" and params.junctions == "corner":
+        L = without_junction_rows(L, nb.adjacency)
     t2 = time.perf_counter()
     timings = {"neighborhoods": t1 - t0, "laplacian": t2 - t1}
     return SmoothingOperator(L, nb, scheme, frame, key, timings)

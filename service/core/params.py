@@ -2,17 +2,24 @@
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 __all__ = [
+    "REPORT_PRESET",
+    "Displacement",
+    "Junctions",
     "LaplacianVariant",
     "MethodName",
     "NeighborhoodKind",
+    "Preset",
     "SearchName",
     "SmoothingParams",
     "SolverName",
+    "TauRule",
     "WeightScheme",
 ]
 
@@ -24,23 +31,50 @@ SolverName = Literal["auto", "cholmod", "superlu", "cg"]
 SearchName = Literal["auto", "newton", "rational"]
 MethodName = Literal["tikhonov", "windowed-sinc"]
 # --- end core-engine block --------------------------------------------------------------------
+TauRule = Literal["auto", "gcv"]
+Displacement = Literal["auto", "free", "normal"]
+Preset = Literal["report"]
+Junctions = Literal["corner", "smooth"]
+
+#: ``preset="report"``: the choices of report TW 451, for every field the caller does not give.
+REPORT_PRESET: dict[str, Any] = {
+    "laplacian": "normalized",
+    "weights": "auto",
+    "neighborhood": "delaunay",
+    "k": 12,
+    "displacement": "free",
+    "presmooth": 0,
+    "junctions": "smooth",
+    "order": 1,
+    "method": "tikhonov",
+    "search": "rational",
+    "solver": "cholmod",
+}
 
 
 class SmoothingParams(BaseModel):
     """Parameters of one smoothing run (report sections 2, 4, 6 and 8).
 
-    Exactly one of ``lam``, ``tau`` and ``rms`` selects how the regularization parameter
+    At most one of ``lam``, ``tau`` and ``rms`` selects how the regularization parameter
     lambda of eq. (4) is obtained: given directly, or found so that the deviation
     ``phi(lambda) = ||D(X - P)||_F^2`` of eq. (15) equals ``tau`` (section 6.3), where
-    ``rms`` stands for ``tau = sum_i omega_i^2 * rms^2``.
+    ``rms`` stands for ``tau = sum_i omega_i^2 * rms^2``. With none of them (or
+    ``tau="auto"``) tau is chosen from the estimated noise level (discrepancy principle);
+    ``tau="gcv"`` chooses it by generalized cross-validation instead.
+
+    ``preset="report"`` sets every field the caller does not give to the report's choice
+    (:data:`REPORT_PRESET`), reproducing its method exactly.
     """
 
     model_config = ConfigDict(
         extra="forbid",
         json_schema_extra={
             "examples": [
-                {"tau": 0.5},
+                {},
+                {"tau": 2e-4},
+                {"tau": "gcv"},
                 {"rms": 0.001, "laplacian": "feature", "sigma_f": 0.5},
+                {"tau": 2e-4, "preset": "report"},
                 {"lam": 0.05, "weights": "cotangent", "fix_boundary": True},
             ]
         },
@@ -53,15 +87,15 @@ class SmoothingParams(BaseModel):
         description="Regularization parameter lambda of eq. (4), given directly (no search).",
         examples=[0.05],
     )
-    tau: float | None = Field(
+    tau: Annotated[float, Field(gt=0, allow_inf_nan=False)] | TauRule | None = Field(
         default=None,
-        gt=0,
-        allow_inf_nan=False,
         description=(
             "Smoothing factor tau of eq. (3): the budget for the weighted sum of squared "
-            "displacements sum_i omega_i^2 ||x_i - p_i||^2. Must lie in (0, phi(0))."
+            "displacements sum_i omega_i^2 ||x_i - p_i||^2. A number in (0, phi(0)); 'auto' "
+            "(also when none of lam, tau, rms is given): from the estimated noise level; 'gcv': "
+            "by generalized cross-validation."
         ),
-        examples=[0.5],
+        examples=[2e-4, "auto", "gcv"],
     )
     rms: float | None = Field(
         default=None,
@@ -78,18 +112,25 @@ class SmoothingParams(BaseModel):
         ),
     )
     weights: WeightScheme = Field(
-        default="auto",
+        default="uniform",
         description=(
-            "Neighbour weights w_ij of eq. (1). 'auto': reciprocal distance for curves "
-            "(section 4.2), mean value for meshes and Delaunay neighbourhoods (4.3-4.4), "
-            "reciprocal distance for k-NN neighbourhoods."
+            "Neighbour weights w_ij of eq. (1). 'auto': the report's choice, reciprocal "
+            "distance for curves (section 4.2), mean value for meshes and Delaunay "
+            "neighbourhoods (4.3-4.4), reciprocal distance for k-NN neighbourhoods. Default "
+            "'uniform': weights computed from a noisy input move points along the shape "
+            "(benchmarks/quality/README.md)."
         ),
     )
     neighborhood: NeighborhoodKind = Field(
         default="delaunay",
         description="Point clouds only: Delaunay neighbourhoods (section 4.4) or plain k-NN.",
     )
-    k: int = Field(default=12, ge=3, le=64, description="Point clouds only: neighbours per point.")
+    k: int = Field(
+        default=20,
+        ge=3,
+        le=64,
+        description="Point clouds only: neighbours per point (the report: 12).",
+    )
     sigma_h: float = Field(
         default=1e-7, gt=0, allow_inf_nan=False, description="Huber threshold of eq. (8)."
     )
@@ -142,11 +183,12 @@ class SmoothingParams(BaseModel):
         "factorization).",
     )
     order: int = Field(
-        default=1,
+        default=2,
         ge=1,
         le=8,
         description="Iterated Tikhonov order k: filter 1 - (mu/(mu+lambda))^k, k solves per "
-        "lambda with one factorization (1 = the report's eq. 4).",
+        "lambda with one factorization (1 = the report's eq. 4; default 2, chosen by the "
+        "quality benchmark).",
     )
     # --- end core-engine block ------------------------------------------------------------
     spectrum: bool = Field(
@@ -155,12 +197,96 @@ class SmoothingParams(BaseModel):
         "(inputs up to 3000 points).",
     )
 
-    @model_validator(mode="after")
-    def _exactly_one_target(self) -> SmoothingParams:
-        given = [name for name in ("lam", "tau", "rms") if getattr(self, name) is not None]
-        if len(given) != 1:
-            raise ValueError(
-                "give exactly one of lam, tau or rms"
-                + (f" (got {', '.join(given)})" if given else "")
+    # --- core-quality: displacement, max-norm bound, preset --------------------------------------
+    displacement: Displacement = Field(
+        default="auto",
+        description=(
+            "'free': every coordinate of every point may move (eq. 4). 'normal': each point "
+            "moves along its normal only, x_i = p_i + t_i n_i, normals from the input's "
+            "neighbourhoods (surfaces and point clouds; the normal plane for curves in 3-D), "
+            "the smoothness measured across the shape. 'auto': the one the quality benchmark "
+            "found best for the kind of input (normal for meshes and point clouds, free for "
+            "curves)."
+        ),
+    )
+    presmooth: int = Field(
+        default=2,
+        ge=0,
+        le=100,
+        description=(
+            "Averaging steps x <- (x + mean of neighbours) / 2 applied to a copy of the input "
+            "before the curvature and the row scales of L(kappa) / L(f) (eqs. 7-10) are "
+            "computed, so that they follow the shape rather than the noise; 0 computes them "
+            "from the input itself (the report)."
+        ),
+    )
+    junctions: Junctions = Field(
+        default="corner",
+        description=(
+            "Curve networks: a vertex where three or more curves meet is a 'corner' (no "
+            "smoothness term of its own: each curve is smoothed up to it) or is smoothed like "
+            "any other vertex, towards the centroid of its neighbours ('smooth', the report)."
+        ),
+    )
+    max_deviation: float | None = Field(
+        default=None,
+        gt=0,
+        allow_inf_nan=False,
+        description=(
+            "Max-norm bound: no point moves further than this, ||x_i - p_i|| <= max_deviation "
+            "for every i (report section 9), alone or together with tau/rms/lam."
+        ),
+    )
+    preset: Preset | None = Field(
+        default=None,
+        description=(
+            "'report': every field not given takes the choice of report TW 451 (L(n), "
+            "mean-value/reciprocal weights, Delaunay k = 12, free displacement, first order, "
+            "rational lambda search), reproducing its method exactly."
+        ),
+    )
+
+    @field_validator("tau", mode="before")
+    @classmethod
+    def _tau_number_or_rule(cls, value: Any) -> Any:
+        """A positive finite number, or one of the rules (one error located at ``tau``)."""
+        if value is None or value in ("auto", "gcv"):
+            return value
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise PydanticCustomError(
+                "tau_type", "Input should be a number greater than 0, 'auto' or 'gcv'"
+            ) from None
+        if isinstance(value, bool) or not math.isfinite(number):
+            raise PydanticCustomError("finite_number", "Input should be a finite number")
+        if number <= 0:
+            raise PydanticCustomError(
+                "greater_than", "Input should be greater than 0", {"gt": 0}
             )
+        return number
+
+    @model_validator(mode="before")
+    @classmethod
+    def _apply_preset(cls, data: Any) -> Any:
+        if isinstance(data, dict) and data.get("preset") == "report":
+            data = {**REPORT_PRESET, **data}
+        return data
+
+    @model_validator(mode="after")
+    def _at_most_one_target(self) -> SmoothingParams:
+        given = [name for name in ("lam", "tau", "rms") if getattr(self, name) is not None]
+        if len(given) > 1:
+            raise ValueError(f"give at most one of lam, tau or rms (got {', '.join(given)})")
         return self
+
+    @property
+    def tau_rule(self) -> Literal["lam", "tau", "rms", "auto", "gcv"]:
+        """How lambda is chosen: given, from tau or rms, or automatically (auto, gcv)."""
+        if self.lam is not None:
+            return "lam"
+        if self.rms is not None:
+            return "rms"
+        if isinstance(self.tau, float):
+            return "tau"
+        return "gcv" if self.tau == "gcv" else "auto"

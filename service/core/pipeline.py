@@ -9,7 +9,9 @@ internal frame of :mod:`.frame`.
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -17,10 +19,14 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core import cache
+from service.core.autotau import auto_tau, gcv_lambda, knee_tau
+from service.core.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
 from service.core.errors import ParameterError, SolverError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
+from service.core.guards import guard_warnings, noise_ratio, shape_checks
+from service.core.maxnorm import bound_deviation, clip_points
 from service.core.operator import (
     SmoothingOperator,
     build_laplacian,
@@ -58,6 +64,9 @@ class Run:
         self.frame = frame
         self.notes: list[str] = []
         self.search_seconds = 0.0
+        self.sigma: float | None = None  # core-quality: automatic tau, max-norm bound
+        self.tau_how: str | None = None
+        self.bound: dict[str, Any] | None = None
 
     def emit(self, stage: str, **kw: Any) -> None:
         if self.progress is not None:
@@ -103,25 +112,37 @@ def smooth(
     ParameterError, TauOutOfRange, SolverError
     """
     run = Run(progress)
+    requested = params.displacement
+    params = resolve_displacement(params, geometry)
     run.emit("neighborhoods")
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, run.notes)
     run.frame = frame = op.frame.weighted(geometry.omega()[~fixed])
-    system = smoothing_system(geometry, op, fixed, frame, params)
-    run.tau = resolve_tau(params, geometry, fixed)
+    params, system, to_points = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+    )
+    run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
     if system.empty:
         return _unchanged(geometry, params, op, run, n_fixed)
     if params.method == "windowed-sinc":
-        return _filtered(geometry, params, op, run, system, fixed, n_fixed)
+        return _filtered(geometry, params, op, run, system, to_points, fixed, n_fixed)
     dev = _deviation(system, params, memory_limit, run)
-    search = find_lambda(dev, op, fixed, params, run)
+    if params.tau_rule == "auto" and run.tau:
+        _knee(dev, run)
+    if params.tau_rule == "gcv":
+        search = _gcv(dev, geometry, params, fixed, run)
+    else:
+        search = find_lambda(dev, op, fixed, params, run)
     run.emit("postprocess", iteration=len(dev.history))
+    U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
-    X[~fixed] = frame.back(dev.solution(search.lam))
+    X[~fixed] = frame.back(to_points(U))
     volume_scale = None
     if params.preserve_volume:
         X, volume_scale = preserve_measure(geometry, X)
+    if params.max_deviation is not None:
+        X, _ = clip_points(geometry.points, X, params.max_deviation)
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
 
 
@@ -186,25 +207,42 @@ def smoothing_system(
     fixed: NDArray[np.bool_],
     frame: Frame,
     params: SmoothingParams,
-) -> SmoothingSystem:
-    """The system of the selected mode, in the internal frame (the mode dispatch point).
+) -> tuple[SmoothingSystem, Callable[[Array], Array]]:
+    """The system of the selected mode, in the internal frame (the mode dispatch point), and
+    the map from its solution ``U`` to the free points.
 
     ``free`` displacement: eq. (4) with the fixed points eliminated
-    (:func:`~service.core.elimination.laplacian_system`).
+    (:func:`~service.core.elimination.laplacian_system`); ``normal``: one unknown per normal
+    direction of each point (:func:`~service.core.displacement.normal_mode`).
     """
     P = frame.points(geometry.points)
     omega = geometry.omega() / frame.weight_scale
-    return laplacian_system(op.L, P, omega, fixed)
+    if params.displacement == "normal":
+        return normal_mode(geometry, op.L, op.neighborhoods, P, omega, fixed)
+    return laplacian_system(op.L, P, omega, fixed), lambda U: U
 
 
 def resolve_tau(
-    params: SmoothingParams, geometry: Geometry, fixed: NDArray[np.bool_]
+    params: SmoothingParams,
+    geometry: Geometry,
+    fixed: NDArray[np.bool_],
+    run: Run,
+    op: SmoothingOperator | None = None,
 ) -> float | None:
-    """The target ``tau`` in the input's frame: given, or ``rms^2 sum omega_i^2`` (free points)."""
-    if params.lam is not None:
+    """The target ``tau`` in the input's frame: given, ``rms^2 sum omega_i^2`` (free points),
+    or from the estimated noise (:func:`~service.core.autotau.auto_tau`); ``None`` for a given
+    lambda and for ``tau="gcv"`` (known once lambda is).
+    """
+    rule = params.tau_rule
+    if rule in ("lam", "gcv"):
         return None
-    if params.tau is not None:
-        return float(params.tau)
+    if rule == "auto":
+        adjacency = op.neighborhoods.adjacency if op is not None else None
+        auto = auto_tau(geometry, params, fixed, adjacency)
+        run.sigma, run.tau_how = auto.sigma, auto.rule
+        return auto.tau
+    if rule == "tau":
+        return float(params.tau)  # type: ignore[arg-type]
     assert params.rms is not None
     return float(params.rms**2 * np.sum(geometry.omega()[~fixed] ** 2))
 
@@ -251,7 +289,7 @@ def _find_lambda(
     phi0 = system.phi0
     bound = system.phi0_bound if system.phi0_bound is not None else np.inf
     if params.search == "rational" or (phi0 is None and tau >= bound):
-        phi0 = phi_at_zero(dev, op.L, fixed)
+        phi0 = phi_at_zero_of(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
     if params.search == "rational":
@@ -300,9 +338,81 @@ def _check_range(
 ) -> None:
     """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``)."""
     assert run.frame is not None and run.tau is not None
-    phi0 = phi_at_zero(dev, op.L, fixed)
+    phi0 = phi_at_zero_of(dev, op, fixed, params)
     if run.tau / run.frame.phi_factor >= phi0:
         raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
+
+
+def phi_at_zero_of(
+    dev: Deviation, op: SmoothingOperator, fixed: NDArray[np.bool_], params: SmoothingParams
+) -> float:
+    """``phi(0)``: eqs. (13-14) for free displacement, the system's limit otherwise."""
+    return phi_at_zero(dev, op.L, fixed) if params.displacement == "free" else dev.phi0()
+
+
+def _gcv(
+    dev: Deviation, geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_], run: Run
+) -> LambdaSearch:
+    """``tau="gcv"``: lambda by generalized cross-validation (started at the Lanczos estimate
+    of the automatic tau's lambda, no factorization); tau is phi there."""
+    assert run.frame is not None
+    system = dev.system
+    lo = dev.floor
+    start = None
+    try:
+        tau0 = auto_tau(geometry, params, fixed).tau / run.frame.phi_factor
+        if tau0 > 0:
+            hi = max(system.lambda_ceiling(tau0), lo)
+            inv_d = 1.0 / np.sqrt(system.d2)[:, None]
+            start, _, _, _ = estimate_lambda(
+                lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * system.r, tau0, lo, hi,
+                order=dev.order,
+            )
+    except ParameterError:  # no noise estimate: start from the middle of the range
+        pass
+    scale = float(np.sum(system.r**2 / system.d2[:, None]))  # ||D^-1 r||^2 >= phi(lambda) lambda^2
+    hi = max(system.lambda_ceiling(1e-12 * scale), lo) if scale > 0 else lo
+    lam = gcv_lambda(dev, lo, hi, start if start else math.sqrt(lo * hi))
+    phi = dev(lam)
+    run.tau = phi * run.frame.phi_factor
+    run.tau_how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
+    return LambdaSearch(lam, phi, True, list(dev.history))
+
+
+def _knee(dev: Deviation, run: Run) -> None:
+    """Automatic tau: move the discrepancy estimate to the knee of ``phi(lambda)`` near it."""
+    assert run.frame is not None and run.tau is not None
+    tau = knee_tau(dev, run.tau / run.frame.phi_factor)
+    if tau is None:
+        run.tau_how = (run.tau_how or "") + "; no knee of phi(lambda) near it: used as is"
+        return
+    run.tau_how = (run.tau_how or "") + (
+        f"; moved to the knee of phi(lambda) at tau = {tau * run.frame.phi_factor:.6g} "
+        f"({tau * run.frame.phi_factor / run.tau:.3g} x)"
+    )
+    run.tau = tau * run.frame.phi_factor
+
+
+def _bounded(
+    dev: Deviation, search: LambdaSearch, params: SmoothingParams, run: Run, group: int
+) -> tuple[Array, LambdaSearch]:
+    """The solution ``U``; with ``max_deviation``, reweighted until every point is within it."""
+    if params.max_deviation is None:
+        return dev.solution(search.lam), search
+    assert run.frame is not None
+    frame = run.frame
+    tau = None if run.tau is None or params.tau_rule == "gcv" else run.tau / frame.phi_factor
+    hi = dev.system.lambda_ceiling(tau) if tau else search.lam
+    res = bound_deviation(
+        dev, params.max_deviation / frame.scale, search.lam, group=group, tau=tau,
+        bracket=(dev.floor, max(hi, search.lam)), tolerance=params.tolerance,
+    )
+    run.notes.extend(res.warnings)
+    run.bound = {"max_deviation": params.max_deviation, "rounds": res.rounds,
+                 "clipped": res.clipped}
+    history = [*search.history, *res.history]
+    converged = tau is None or abs(res.phi - tau) <= params.tolerance * tau
+    return dev.system.U0 + res.E, LambdaSearch(res.lam, res.phi, converged, history)
 
 
 def _filtered(
@@ -311,6 +421,7 @@ def _filtered(
     op: SmoothingOperator,
     run: Run,
     system: SmoothingSystem,
+    to_points: Callable[[Array], Array],
     fixed: NDArray[np.bool_],
     n_fixed: int,
 ) -> SmoothResult:
@@ -328,7 +439,7 @@ def _filtered(
         run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
     run.evaluated(search.lam, search.phi, 1)
     X = geometry.points.copy()
-    X[~fixed] = frame.back(U)
+    X[~fixed] = frame.back(to_points(U))
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed)
 
 
@@ -384,6 +495,9 @@ def diagnostics(
             solve=stats.solve,
             matvec=stats.matvec,
         )
+    checks = shape_checks(geometry, X)
+    ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
+    run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
     timings["search"] = run.search_seconds
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
@@ -417,6 +531,12 @@ def diagnostics(
         volume_scale=volume_scale,
         warnings=[*run.notes, *(stats.warnings if stats else [])],
         spectrum=spectrum,
+        displacement=params.displacement,
+        tau_rule=params.tau_rule,
+        sigma_estimate=run.sigma,
+        tau_how=run.tau_how,
+        checks=checks.to_dict(),
+        bound=run.bound,
     )
 
 

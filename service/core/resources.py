@@ -4,7 +4,7 @@ Two estimates:
 
 * :func:`estimate_resources` from the sizes alone (``n``, dimension, kind, parameters), for
   admission control at submit time (jobs, HTTP): a model calibrated on the benchmark of
-  ``benchmarks/speed`` (see ``service/core/README.md``).
+  ``benchmarks/speed`` (see ``benchmarks/quality/README.md``).
 * :func:`factor_size` from the symbolic analysis of the actual matrix (elimination tree and
   column counts of the Cholesky factor under the fill-reducing ordering), before any numeric
   factorization; :func:`choose_solver` uses it to take the matrix-free path when the factor

@@ -85,6 +85,19 @@ class SmoothResult:
         Anything the user should know (solver fallback, search not converged, ...).
     spectrum : Spectrum or None
         Present when requested and the input is small enough.
+    displacement : str
+        ``"free"`` or ``"normal"`` (core-quality).
+    tau_rule : str
+        How lambda was set: ``"lam"``, ``"tau"``, ``"rms"``, ``"auto"`` or ``"gcv"``.
+    sigma_estimate : float or None
+        Estimated noise level (automatic tau, ``service.core.noise``).
+    tau_how : str or None
+        How the automatic tau was chosen, in words.
+    checks : dict
+        Guard-rail measurements (``service.core.guards``): ``flipped_faces``,
+        ``volume_change``, ``area_change``, ``moved_far``.
+    bound : dict or None
+        ``max_deviation`` bound: ``{"max_deviation", "rounds", "clipped"}``.
     """
 
     points: NDArray[np.float64]
@@ -113,6 +126,17 @@ class SmoothResult:
     volume_scale: float | None = None
     warnings: list[str] = field(default_factory=list)
     spectrum: Spectrum | None = None
+    # --- core-quality block ---
+    displacement: str = "free"
+    tau_rule: str = "tau"
+    sigma_estimate: float | None = None
+    tau_how: str | None = None
+    checks: dict[str, Any] = field(
+        default_factory=lambda: dict.fromkeys(
+            ("flipped_faces", "volume_change", "area_change", "moved_far")
+        )
+    )
+    bound: dict[str, Any] | None = None
 
     @property
     def n_points(self) -> int:
@@ -151,6 +175,14 @@ class SmoothResult:
             "order": self.order,
             "warnings": list(self.warnings),
         }
+        out.update(
+            displacement=self.displacement,
+            tau_rule=self.tau_rule,
+            sigma_estimate=self.sigma_estimate,
+            tau_how=self.tau_how,
+            bound=self.bound,
+            **self.checks,
+        )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()
         return out

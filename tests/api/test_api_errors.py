@@ -197,7 +197,7 @@ def test_format_field_overrides_the_extension(client: httpx.Client) -> None:
     [
         ({"tau": -1}, "params.tau"),
         ({"tau": 0.1, "lam": 1}, "params"),
-        ({}, "params"),
+        ({"rms": 0.1, "lam": 1}, "params"),
         ({"tau": 0.1, "k": 1}, "params.k"),
         ({"tau": 0.1, "laplacian": "magic"}, "params.laplacian"),
         ({"tau": 0.1, "bogus": 1}, "params.bogus"),

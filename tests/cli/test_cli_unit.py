@@ -57,7 +57,9 @@ def test_options_map_to_fields():
         "weights": "cotangent", "neighborhood": "knn", "k": 8, "sigma_h": 1e-6,
         "sigma_f": 0.3, "tolerance": 1e-4, "max_iterations": 20, "fix_boundary": True,
         "preserve_volume": True, "solver": "superlu", "spectrum": True,
-        "search": "auto", "method": "tikhonov", "order": 1,
+        "search": "auto", "method": "tikhonov", "order": 2,
+        "displacement": "auto", "presmooth": 2, "junctions": "corner", "max_deviation": None,
+        "preset": None,
     }  # fmt: skip
 
 
@@ -105,7 +107,7 @@ def test_usage_errors_in_process(
 def test_exactly_one_target_message_names_options():
     ns = _ns("--tau", "1")
     ns.lam = "0.1"  # bypass argparse's own check: the model's validator still refuses
-    with pytest.raises(cli.CliError, match=r"exactly one of --lam, --tau or --rms"):
+    with pytest.raises(cli.CliError, match=r"at most one of --lam, --tau or --rms"):
         cli.params_from_args(ns)
 
 

@@ -13,7 +13,7 @@ from service.core.info import describe
 
 def test_mesh_phi0_is_centroid_deviation() -> None:
     P, F = noisy_icosphere(2, 0.01)
-    d = describe(Geometry(P, faces=F))
+    d = describe(Geometry(P, faces=F), SmoothingParams(displacement="free"))
     assert d["kind"] == "mesh" and d["n_points"] == len(P) and d["n_faces"] == len(F)
     assert d["n_edges"] == 3 * len(F) // 2  # closed triangle mesh: E = 3F/2
     phi0 = float(np.sum((P - P.mean(axis=0)) ** 2))
@@ -41,9 +41,10 @@ def test_phi0_with_fixed_points_is_the_limit_of_smooth() -> None:
     t = np.linspace(0, np.pi, 30)
     P = np.column_stack([t, np.sin(t)])
     g = Geometry(P, edges=polyline_edges(30))
-    d = describe(g, SmoothingParams(tau=1.0, fix_boundary=True))
-    # lambda -> 0 with both ends fixed: the chord between the ends (reciprocal weights)
-    X = smooth(g, SmoothingParams(lam=1e-9, fix_boundary=True)).points
+    params = {"fix_boundary": True, "order": 1}
+    d = describe(g, SmoothingParams(tau=1.0, **params))
+    # lambda -> 0 with both ends fixed: the chord between the ends
+    X = smooth(g, SmoothingParams(lam=1e-9, **params)).points
     assert np.isclose(d["phi0"], float(np.sum((X - P) ** 2)), rtol=1e-4)
     assert d["rms_range"][1] == np.sqrt(d["phi0"] / 28)
 
@@ -53,3 +54,29 @@ def test_cloud_spacing_is_nearest_neighbour_distance() -> None:
     P = np.column_stack([g, np.zeros(len(g))])
     d = describe(Geometry(P), SmoothingParams(tau=1.0, neighborhood="knn", k=4))
     assert d["kind"] == "cloud" and np.isclose(d["mean_spacing"], 0.5)
+
+
+def test_noise_estimate_and_suggestion() -> None:
+    P, F = noisy_icosphere(4, 0.01, seed=3)
+    g = Geometry(P, faces=F)
+    d = describe(g)
+    assert abs(d["sigma_estimate"] / 0.01 - 1) < 0.15
+    assert 0 < d["suggested_tau"] < d["phi0"]
+    assert np.isclose(d["suggested_rms"] ** 2 * len(P), d["suggested_tau"])
+    res = smooth(g, SmoothingParams())  # the automatic tau is the suggestion
+    assert np.isclose(res.tau, d["suggested_tau"]) and res.sigma_estimate == d["sigma_estimate"]
+
+
+def test_phi0_follows_the_displacement_mode() -> None:
+    """The valid range describe() states is the one smooth() enforces, in every mode."""
+    import pytest
+
+    from service.core.errors import TauOutOfRange
+
+    P, F = noisy_icosphere(2, 0.02, seed=4)
+    g = Geometry(P, faces=F)
+    for mode in ("free", "normal"):
+        phi0 = describe(g, SmoothingParams(displacement=mode))["phi0"]
+        smooth(g, SmoothingParams(tau=0.99 * phi0, displacement=mode))
+        with pytest.raises(TauOutOfRange):
+            smooth(g, SmoothingParams(tau=1.01 * phi0, displacement=mode))

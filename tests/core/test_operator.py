@@ -29,7 +29,7 @@ def test_operator_of_another_geometry_is_refused() -> None:
         smooth(Geometry(P * 1.01, faces=F), SmoothingParams(tau=0.01), operator=op)
     assert info.value.field == "operator"
     with pytest.raises(ParameterError):
-        smooth(Geometry(P, faces=F), SmoothingParams(tau=0.01, weights="uniform"), operator=op)
+        smooth(Geometry(P, faces=F), SmoothingParams(tau=0.01, weights="mean-value"), operator=op)
 
 
 def test_operator_cache_hits_and_any_change_misses() -> None:

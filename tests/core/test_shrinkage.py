@@ -13,8 +13,10 @@ from service.core import Geometry, ParameterError, SmoothingParams, smooth
 def test_volume_preserved_on_closed_mesh() -> None:
     P, F = noisy_icosphere(3, 0.02)
     before = trimesh.Trimesh(P, F, process=False).volume
-    plain = smooth(Geometry(P, faces=F), SmoothingParams(lam=1e-3))
-    kept = smooth(Geometry(P, faces=F), SmoothingParams(lam=1e-3, preserve_volume=True))
+    plain = smooth(Geometry(P, faces=F), SmoothingParams(lam=1e-3, preset="report"))
+    kept = smooth(
+        Geometry(P, faces=F), SmoothingParams(lam=1e-3, preserve_volume=True, preset="report")
+    )
     assert trimesh.Trimesh(plain.points, F, process=False).volume < 0.95 * before  # shrinks
     assert trimesh.Trimesh(kept.points, F, process=False).volume == pytest.approx(before, rel=1e-9)
     assert kept.volume_scale > 1.0

@@ -14,8 +14,8 @@ def test_solution_equals_filtered_svd_expansion_identity_weights() -> None:
     P, F = noisy_icosphere(1, 0.05)
     g = Geometry(P, faces=F)
     lam = 0.3
-    res = smooth(g, SmoothingParams(lam=lam, spectrum=True))
-    L = build_laplacian(g, SmoothingParams(lam=lam))[0].toarray()
+    res = smooth(g, SmoothingParams(lam=lam, spectrum=True, preset="report"))
+    L = build_laplacian(g, SmoothingParams(lam=lam, preset="report"))[0].toarray()
     _, sig, vt = np.linalg.svd(L)  # independent dense SVD (eq. 12)
     gamma = lam / (sig**2 + lam)
     X = vt.T @ (gamma[:, None] * (vt @ P))
@@ -32,8 +32,8 @@ def test_generalized_singular_values_with_weights() -> None:
     omega = np.random.default_rng(3).uniform(0.5, 2.0, len(P))
     g = Geometry(P, faces=F, weights=omega)
     lam = 0.2
-    res = smooth(g, SmoothingParams(lam=lam, spectrum=True))
-    L = build_laplacian(g, SmoothingParams(lam=lam))[0].toarray()
+    res = smooth(g, SmoothingParams(lam=lam, spectrum=True, preset="report"))
+    L = build_laplacian(g, SmoothingParams(lam=lam, preset="report"))[0].toarray()
     # generalized singular values of (L, D): sigma with L^T L v = sigma^2 D^2 v
     ev = np.sort(np.linalg.eigvals(np.linalg.solve(np.diag(omega**2), L.T @ L)).real)[::-1]
     np.testing.assert_allclose(res.spectrum.sigma**2, np.clip(ev, 0, None), atol=1e-9)
@@ -41,6 +41,6 @@ def test_generalized_singular_values_with_weights() -> None:
 
 def test_spectrum_size_limit_is_a_warning() -> None:
     P, F = noisy_icosphere(5, 0.001)  # 10242 points > SPECTRUM_MAX_POINTS
-    res = smooth(Geometry(P, faces=F), SmoothingParams(lam=0.1, spectrum=True))
+    res = smooth(Geometry(P, faces=F), SmoothingParams(lam=0.1, spectrum=True, preset="report"))
     assert res.spectrum is None
     assert any("spectrum" in w for w in res.warnings)
