@@ -27,7 +27,7 @@ RUN scripts/install-system-deps.sh --build \
 # Dependencies first (this layer stays cached while only the sources change; scikit-sparse is
 # compiled here against Debian's SuiteSparse), then the package itself.
 COPY pyproject.toml README.md ./
-# The pure-Python client (a dependency of the server package, not on PyPI) before the rest.
+# The pure-Python client (a dependency of the server package, not on PyPI) is installed first.
 COPY clients/python/ clients/python/
 RUN scripts/docker-build-steps.sh deps
 COPY service/ service/

@@ -22,7 +22,6 @@ $(VENV)/.installed: pyproject.toml clients/python/pyproject.toml | $(BIN)/python
 	touch $@
 
 $(VENV)/.installed-dev: pyproject.toml $(VENV)/.installed
-	scripts/install-system-deps.sh --test
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $@
 

@@ -86,7 +86,7 @@ for tool in gcc cc; do
 done
 if chroot "$BUILD" dpkg-query -W libc6-dev >/dev/null 2>&1; then echo "base has libc6-dev" >&2; exit 1; fi
 mkdir -p "$BUILD/src"
-tar -C "$SRC" -cf - pyproject.toml README.md scripts service $(cd "$SRC" && ls -d clients 2>/dev/null) \
+tar -C "$SRC" -cf - pyproject.toml README.md scripts service geosmooth clients/python \
   | tar -C "$BUILD/src" -xf -
 in_root "$BUILD" sh -c 'cd /src && scripts/install-system-deps.sh --build && rm -rf /var/lib/apt/lists/*'
 in_root "$BUILD" sh -c 'cd /src && PYTHON=python scripts/docker-build-steps.sh deps'
@@ -105,6 +105,7 @@ cp "$SRC/service/samples/"* "$RUN/tmp/" 2>/dev/null || true
 in_root "$RUN" /opt/geosmooth/bin/python - <<'EOF'
 import pathlib, subprocess, sys
 import sksparse.cholmod, service.api.app, service.jobs.rq_worker, rq, boto3  # noqa: F401
+import geosmooth, geosmooth_client  # noqa: F401
 import numpy as np
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams

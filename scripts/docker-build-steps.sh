@@ -12,7 +12,7 @@ case "${1:-}" in
   deps)
     "$PYTHON" -m venv "$VENV"
     "${PIP[@]}" --upgrade pip setuptools wheel
-    if [[ -d clients/python ]]; then "${PIP[@]}" ./clients/python; fi  # not on PyPI
+    "${PIP[@]}" ./clients/python  # geosmooth-client: a dependency, not on PyPI
     # runtime dependencies + the distributed backend (rq, redis, boto3), from pyproject.toml
     "$VENV/bin/python" -c 'import tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; print("\n".join(p["dependencies"] + p["optional-dependencies"]["distributed"]))' \
       | grep -v '^geosmooth-client' > /tmp/requirements.txt
@@ -20,7 +20,7 @@ case "${1:-}" in
     ;;
   package)
     "${PIP[@]}" --no-deps .
-    "$VENV/bin/python" -c "import sksparse.cholmod, service.api.app, service.cli, service.jobs.rq_worker, rq, boto3"
+    "$VENV/bin/python" -c "import sksparse.cholmod, service.api.app, service.cli, service.jobs.rq_worker, rq, boto3, geosmooth, geosmooth_client"
     ;;
   *) echo "usage: $0 deps|package" >&2; exit 2 ;;
 esac

@@ -4,25 +4,23 @@
 # same install path as the Docker image. Idempotent: does nothing when everything is present.
 #
 #   scripts/install-system-deps.sh            runtime + build packages (SuiteSparse, OpenBLAS, venv),
-#                                             plus Debian's chromium for the web page's browser tests
+#                                             plus what the tests start (chromium, redis-server) and
+#                                             scripts/check-image.sh uses (debootstrap)
 #   scripts/install-system-deps.sh --build    only what compiling scikit-sparse needs (Docker builder,
 #                                             whose Python is the image's own, not Debian's)
 #   scripts/install-system-deps.sh --runtime  only what the running service needs (Docker final stage)
 #   scripts/install-system-deps.sh --bench    also what the peer libraries of benchmarks/ need
-#   scripts/install-system-deps.sh --test     also what the tests start (redis-server) and the
-#                                             image check uses (debootstrap)
 set -euo pipefail
 
 # gcc with --no-install-recommends does not pull libc6-dev (crt1.o, libc headers): name it.
 build_pkgs=(libsuitesparse-dev libopenblas0-pthread gcc libc6-dev)
 python_pkgs=(python3-dev python3-venv)  # Debian's python3 needs these for venv + C extensions
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
-# tests/web drive this browser with Playwright; no browser is ever downloaded (fonts: screenshots).
-web_test_pkgs=(chromium fonts-dejavu-core)
+# tests/web drive this browser with Playwright; no browser is ever downloaded (fonts: screenshots);
+# tests/jobs start a real redis-server; scripts/check-image.sh builds Debian 12 roots.
+test_pkgs=(chromium fonts-dejavu-core redis-server debootstrap)
 pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
-# tests/jobs start a real redis-server; scripts/check-image.sh builds a Debian 12 root
-test_pkgs=(redis-server debootstrap "${web_test_pkgs[@]}")
 case "${1:-}" in
   --build) pkgs=("${build_pkgs[@]}") ;;
   --runtime) pkgs=("${runtime_pkgs[@]}") ;;

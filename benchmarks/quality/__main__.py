@@ -51,6 +51,9 @@ def main(argv: list[str] | None = None) -> int:
                      ours=not args.peers_only, log=_log)
         results.append(r)
         _log(f"    {r['seconds']:.1f} s")
+        if not args.peers_only:  # keep what is done if the run is interrupted
+            args.out.mkdir(parents=True, exist_ok=True)
+            (args.out / "quality-partial.json").write_text(json.dumps(results, default=float))
     if args.peers_only:
         return 0
     doc = {"machine": info, "peers": peer_versions(), "quick": args.quick, "cases": results,

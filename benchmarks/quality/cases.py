@@ -15,20 +15,68 @@ Seeds come from the case key, so every case is reproducible on its own.
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from benchmarks.quality.shapes import Shape, make_shape
+from benchmarks.quality.curves import circle2d, network2d, network3d, trefoil3d
+from benchmarks.quality.shapes import (
+    Shape,
+    box,
+    mesh_cloud,
+    real_mesh,
+    sphere,
+    sphere_cloud,
+    torus,
+    torus_cloud,
+)
 
-__all__ = ["FULL", "QUICK", "Case", "make_case"]
+__all__ = ["FULL", "QUICK", "SHAPES", "Case", "make_case", "make_shape"]
 
 FloatArray = NDArray[np.float64]
 NOISES = ("normal", "iso", "aniso", "outliers")
 TANGENTIAL = 0.2
 OUTLIER_FRACTION = 0.01
 OUTLIER_DISTANCE = 4.0
+
+
+SHAPES: dict[str, Callable[[], Shape]] = {
+    "sphere-642": lambda: sphere(3),
+    "sphere-2.5K": lambda: sphere(4),
+    "sphere-10K": lambda: sphere(5),
+    "sphere-41K": lambda: sphere(6),
+    "torus-1.4K": lambda: torus(60, 24),
+    "torus-5.8K": lambda: torus(120, 48),
+    "torus-40K": lambda: torus(320, 125),
+    "box": box,
+    "fandisk": lambda: real_mesh("fandisk.obj", "fandisk"),
+    "spot": lambda: real_mesh("spot.obj", "spot", weld=True),
+    "bunny": lambda: real_mesh("bun_zipper.ply", "bun_zipper"),
+    "horse": lambda: real_mesh("horse.ply", "horse"),
+    "circle-2d": circle2d,
+    "network-2d": network2d,
+    "trefoil-3d": trefoil3d,
+    "network-3d": network3d,
+    "cloud-sphere": sphere_cloud,
+    "cloud-torus": lambda: torus_cloud(10000),
+    "cloud-fandisk": lambda: mesh_cloud(
+        real_mesh("fandisk.obj", "fandisk"), 10000, "fandisk cloud 10K"
+    ),
+    "cloud-bunny": lambda: mesh_cloud(
+        real_mesh("bun_zipper.ply", "bunny"), 20000, "bunny cloud 20K"
+    ),
+}
+
+_CACHE: dict[str, Shape] = {}
+
+
+def make_shape(key: str) -> Shape:
+    """The clean shape ``key`` of :data:`SHAPES` (built once per process)."""
+    if key not in _CACHE:
+        _CACHE[key] = SHAPES[key]()
+    return _CACHE[key]
 
 
 @dataclass

@@ -172,6 +172,7 @@ class Report(BaseModel):
     matvecs: int = Field(default=0, description="Products with L^T L (Lanczos, CG).")
     search: str = Field(default="none", description="lambda search: auto, newton, rational, none.")
     order: int = Field(default=1, description="Iterated Tikhonov order k.")
+    method: str = Field(default="tikhonov", description="tikhonov or windowed-sinc.")
     history: list[HistoryEntry] = Field(description="(lambda, phi) for every lambda tried.")
     n_points: int = Field(description="Points smoothed.")
     dimension: int = Field(description="Coordinates per point.")
@@ -183,7 +184,7 @@ class Report(BaseModel):
     max_deviation: float = Field(description="Maximum of ||x_i - p_i||.")
     volume_scale: float | None = Field(description="Scale applied to preserve volume.")
     timings: dict[str, float] = Field(description="Seconds per stage.")
-    solver: str = Field(description="cholmod, superlu or cg (matrix-free).")
+    solver: str = Field(description="cholmod, superlu, cg (matrix-free) or none (filter).")
     warnings: list[str] = Field(description="Anything the user should know.")
     spectrum: dict[str, list[float]] | None = Field(
         default=None, description="Singular values and filter factors, when requested."

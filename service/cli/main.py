@@ -28,7 +28,7 @@ __all__ = ["main"]
 
 #: command -> module with ``run(ns, err) -> int`` (imported when the command runs, so that
 #: ``smooth`` never loads the HTTP stack).
-_COMMANDS = {"smooth": ".smooth", "serve": ".serve", "submit": ".submit"}
+_COMMANDS = {"smooth": ".smooth", "serve": ".serve", "submit": ".submit", "worker": ".worker"}
 
 
 def _debug() -> bool:
@@ -67,9 +67,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     err = sys.stderr
     ns: argparse.Namespace | None = None
+    args = list(argv) if argv is not None else sys.argv[1:]
     try:
+        if args[:1] == ["worker"]:  # the worker parses its own options (RQ's, --help included)
+            ns = argparse.Namespace(command="worker", worker_args=args[1:])
+            return int(importlib.import_module(".worker", __package__).run(ns, err))
         try:
-            ns = build_parser().parse_args(list(argv) if argv is not None else None)
+            ns = build_parser().parse_args(args)
         except SystemExit as exc:  # --help / --version
             return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
         command = importlib.import_module(_COMMANDS[ns.command], __package__)

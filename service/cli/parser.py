@@ -181,8 +181,22 @@ def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:
     _add_result_options(su, local=False)
 
 
+def _add_worker(sub: argparse._SubParsersAction[_Parser]) -> None:
+    wk = sub.add_parser(
+        "worker",
+        help="run a worker of the distributed (Redis + RQ) job queue",
+        description=_wrap(
+            "Run one RQ worker for GEOSMOOTH_QUEUE=rq (GEOSMOOTH_REDIS_URL, the blob store and "
+            "the limits come from the same GEOSMOOTH_* settings as 'serve'). Options: "
+            "--burst (exit when the queue is empty), --max-jobs N, --name NAME, --log-level L."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    wk.add_argument("worker_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)  # see main
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The ``geosmooth`` argument parser with its ``smooth``, ``serve`` and ``submit`` commands."""
+    """The ``geosmooth`` argument parser: ``smooth``, ``serve``, ``submit`` and ``worker``."""
     parser = _Parser(
         prog="geosmooth",
         description=_wrap(
@@ -197,4 +211,5 @@ def build_parser() -> argparse.ArgumentParser:
     _add_smooth(sub)
     _add_serve(sub)
     _add_submit(sub)
+    _add_worker(sub)
     return parser

@@ -91,9 +91,10 @@ def clear() -> None:
     analyses.clear()
 
 
-def analysis_of(pattern: Any, ordering: str = "amd") -> Any:
+def analysis_of(pattern: Any, ordering: str | None = None) -> Any:
     """A copy of the cached CHOLMOD analysis of the pattern of ``pattern`` (CSC), made once."""
-    from service.core.solver import analyze
+    from service.core.solver import analyze, ordering_for
 
+    ordering = ordering if ordering is not None else ordering_for(pattern.shape[0])
     key = digest(pattern.indptr, pattern.indices, pattern.shape, ordering)
     return analyses.get_or_make(key, lambda: analyze(pattern, ordering), copy=lambda f: f.copy())

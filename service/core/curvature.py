@@ -51,7 +51,10 @@ def osculating_curvature(
     den = a * b * c
     with np.errstate(divide="ignore", invalid="ignore"):
         k = np.where(den > 0, 4.0 * area / den, 0.0)
-    np.maximum.at(kappa, chains[:, 0], k)
+    order = np.lexsort((k, chains[:, 0]))  # by vertex, then value: the last one is the max
+    last = np.ones(order.size, dtype=bool)
+    last[:-1] = chains[order[1:], 0] != chains[order[:-1], 0]
+    kappa[chains[order[last], 0]] = k[order[last]]
     return kappa
 
 
@@ -79,9 +82,9 @@ def mean_curvature_normal(
     w = wedges[ok]
     pi = points[w[:, 0]]
     contrib = cot_k[ok, None] * (pi - points[w[:, 1]]) + cot_j[ok, None] * (pi - points[w[:, 2]])
-    np.add.at(out, w[:, 0], contrib)
-    ring_area = np.zeros(n)
-    np.add.at(ring_area, w[:, 0], area[ok])
+    for c in range(points.shape[1]):  # bincount: one pass, unlike np.add.at
+        out[:, c] = np.bincount(w[:, 0], weights=contrib[:, c], minlength=n)
+    ring_area = np.bincount(w[:, 0], weights=area[ok], minlength=n)
     # A of eq. (11) is the barycentric area (a third of the ring), so that |kappa n| is the
     # mean curvature H (1/r on a sphere), on the same scale as the polylines' 1/r
     scale = np.divide(3.0, 4.0 * ring_area, out=np.zeros(n), where=ring_area > 0)

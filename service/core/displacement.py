@@ -47,6 +47,7 @@ from service.core.system import SmoothingSystem
 __all__ = [
     "DEFAULT_DISPLACEMENT",
     "NormalSystem",
+    "auto_system",
     "normal_frames",
     "normal_mode",
     "normal_system",
@@ -56,7 +57,7 @@ __all__ = [
 ]
 
 #: ``displacement="auto"`` per kind of input (chosen on the quality benchmark).
-DEFAULT_DISPLACEMENT = {"mesh": "free", "curve": "free", "cloud": "normal"}
+DEFAULT_DISPLACEMENT = {"mesh": "normal", "curve": "free", "cloud": "normal"}
 FRAME_NEIGHBOURS = 12
 #: Averaging steps before the normals are estimated (sphere with noise 0.5 h: 0 steps give
 #: normals 19 degrees off, 3 steps 6.5, 10 steps 2.3; 10 steps round the creases of
@@ -263,7 +264,43 @@ def tangential_ratio(
 
 
 def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> SmoothingParams:
-    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input."""
+    """``params`` with ``displacement="auto"`` replaced by the mode for this kind of input:
+    free for ``method="windowed-sinc"`` (Taubin's filter of the points themselves) and for
+    ``tau="gcv"`` (cross-validation assumes the data are the points: in normal displacement the
+    Laplacian of the clean curved shape is part of the data and its score falls towards the
+    collapsed shape).
+
+    Raises
+    ------
+    ParameterError
+        ``tau="gcv"`` with ``displacement="normal"``.
+    """
+    free_only = params.method == "windowed-sinc" or params.tau_rule == "gcv"
+    if params.displacement == "normal" and params.tau_rule == "gcv":
+        raise ParameterError(
+            "tau 'gcv' needs displacement 'free' (or 'auto')", field="params.displacement"
+        )
     if params.displacement != "auto":
         return params
-    return params.model_copy(update={"displacement": DEFAULT_DISPLACEMENT[geometry.kind]})
+    mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
+    if mode == "normal" and codimension(geometry) < 1:  # e.g. a planar mesh given in 2-D
+        mode = "free"
+    return params.model_copy(update={"displacement": mode})
+
+
+ToPoints = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+def auto_system(
+    params: SmoothingParams,
+    requested: str,
+    build: Callable[[SmoothingParams], tuple[SmoothingSystem, ToPoints]],
+) -> tuple[SmoothingParams, SmoothingSystem, ToPoints]:
+    """``build(params)``, or the free system when ``displacement="auto"`` chose normal
+    displacement for an input that is already smooth across itself (a flat cloud or mesh:
+    nothing moves along the normals, every budget would be out of range)."""
+    system, to_points = build(params)
+    if requested == "auto" and params.displacement == "normal" and not np.any(system.r):
+        params = params.model_copy(update={"displacement": "free"})
+        system, to_points = build(params)
+    return params, system, to_points

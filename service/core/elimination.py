@@ -15,7 +15,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
-from service.core.solver import split_fixed
+from service.core._arrays import unique_keys
+from service.core.solver import Gram, split_fixed
 from service.core.system import Deviation, SmoothingSystem
 
 __all__ = ["laplacian_system", "phi_at_zero"]
@@ -41,8 +42,7 @@ def laplacian_system(
     b = np.zeros((free.size, P.shape[1]))
     if fixed_idx.size and free.size:
         b = -np.asarray(L_F.T @ (L_C @ P[fixed_idx]))
-    M = (L_F.T @ L_F).tocsr()
-    M.eliminate_zeros()
+    M = Gram(L_F)
     labels, has_fixed = _components(L, fixed, free)
     d2 = omega[free] ** 2
     phi0 = bound = None
@@ -71,7 +71,7 @@ def _centroid_offsets(lab: NDArray[np.int64], w2: Array, U: Array) -> Array:
     """``P_bar - P`` per component: the limit ``lambda -> 0`` of the deviation (eq. 14)."""
     if lab.size == 0:
         return np.zeros_like(U)
-    _, lab = np.unique(lab, return_inverse=True)
+    _, _, _, lab = unique_keys(lab)
     sw = np.bincount(lab, weights=w2)
     cen = np.stack([np.bincount(lab, weights=w2 * U[:, c]) for c in range(U.shape[1])], axis=1)
     return cen[lab] / np.maximum(sw, 1e-300)[lab, None] - U
@@ -94,7 +94,8 @@ def phi_at_zero(dev: Deviation, L: sp.csr_matrix, fixed: NDArray[np.bool_]) -> f
     E0 = np.zeros_like(s.U0)
     E0[~sub] = _centroid_offsets(lab[~sub], s.d2[~sub], s.U0[~sub])
     idx = np.flatnonzero(sub)
-    part = SmoothingSystem(s.M[idx][:, idx], s.d2[idx], s.b[idx], s.U0[idx])
+    M = s.M.columns(idx) if isinstance(s.M, Gram) else s.M[idx][:, idx]
+    part = SmoothingSystem(M, s.d2[idx], s.b[idx], s.U0[idx])
     name: Any = dev.solver.name
     sub_dev = Deviation(part, solver=name)
     E0[idx] = sub_dev.deviation(sub_dev.floor)

@@ -103,12 +103,19 @@ class Frame:
         """``(s w)^2``: ``phi = phi_factor * phi'``."""
         return (self.scale * self.weight_scale) ** 2
 
-    def _lam_factor_log(self) -> float:
-        return 2 * math.log(self.weight_scale) + 2 * self.power * math.log(self.scale)
+    def _lam_factor(self) -> tuple[float, float]:
+        """``w^2 s^(2p)`` as a float (``inf``/0 when not representable) and its logarithm."""
+        log = 2 * math.log(self.weight_scale) + 2 * self.power * math.log(self.scale)
+        try:
+            value = self.weight_scale**2 * self.scale ** (2 * self.power)
+        except OverflowError:
+            value = math.inf
+        return value, log
 
     def lam_in(self, lam: float) -> float:
-        """``lambda' = lambda w^2 s^(2p)``."""
-        out = math.exp(math.log(lam) + self._lam_factor_log())
+        """``lambda' = lambda w^2 s^(2p)`` (exact when the factor is 1)."""
+        factor, log = self._lam_factor()
+        out = lam * factor if 0 < factor < math.inf else math.exp(math.log(lam) + log)
         if not (0 < out < math.inf):
             raise ParameterError(
                 f"lam={lam:.3g} is outside the representable range for this input's scale",
@@ -118,5 +125,10 @@ class Frame:
 
     def lam_out(self, lam: float) -> float:
         """The input frame's lambda for an internal ``lambda'`` (finite, clamped)."""
-        v = math.log(lam) - self._lam_factor_log()
-        return math.exp(min(max(v, -700.0), 700.0))
+        if not lam > 0:
+            return 0.0
+        factor, log = self._lam_factor()
+        out = lam / factor if 0 < factor < math.inf else math.nan
+        if 0 < out < math.inf:
+            return out
+        return math.exp(min(max(math.log(lam) - log, -700.0), 700.0))

@@ -172,7 +172,7 @@ def guard_warnings(
     if loss > allowance:
         what = "surface area" if checks.flipped_faces is not None else "length"
         out.append(
-            f"the {what} changed by {100 * checks.area_change:+.1f} %, more than the noise "
+            f"the {what} changed by {-100 * loss:+.1f} %, more than the noise "
             f"explains ({-100 * allowance:+.1f} %): the shape was flattened; {fix}"
         )
     return out

@@ -8,7 +8,7 @@ upper end of the valid range of ``tau`` (section 6.1), and estimates the noise l
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,16 +42,17 @@ def _bbox(P: NDArray[np.float64]) -> dict[str, list[float]]:
 
 
 def _phi0(
-    geometry: Geometry, params: SmoothingParams
-) -> tuple[float, float, int, NDArray[np.bool_], Any]:
-    """``phi(0)`` (eq. 14, per component, fixed points as boundary values), the weight sum
-    ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the fixed
-    points and the neighbourhood graph."""
+    geometry: Geometry, params: SmoothingParams, requested: str
+) -> tuple[float, float, int, NDArray[np.bool_], Any, SmoothingParams]:
+    """``phi(0)`` of the mode ``params`` selects (eq. 14 per component for free displacement,
+    fixed points as boundary values; the system's limit for normal displacement), the weight
+    sum ``sum omega_i^2`` over the points that can move, the number of neighbour pairs, the
+    fixed points and the neighbourhood graph."""
     import scipy.sparse as sp
 
-    from service.core.elimination import laplacian_system, phi_at_zero
+    from service.core.displacement import auto_system
     from service.core.operator import build_operator
-    from service.core.pipeline import free_set
+    from service.core.pipeline import free_set, phi_at_zero_of, smoothing_system
     from service.core.system import Deviation
 
     op = build_operator(geometry, params)
@@ -60,17 +61,38 @@ def _phi0(
     fixed, _ = free_set(geometry, op, params, [])
     omega = geometry.omega()
     if fixed.all():
-        return 0.0, 0.0, n_edges, fixed, adj
+        return 0.0, 0.0, n_edges, fixed, adj, params
     frame = op.frame.weighted(omega[~fixed])
-    system = laplacian_system(
-        op.L, frame.points(geometry.points), omega / frame.weight_scale, fixed
+    params, system, _ = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
     )
     phi0 = system.phi0
     if phi0 is None:
-        solver = "superlu" if params.solver == "superlu" else "cholmod"
-        phi0 = phi_at_zero(Deviation(system, solver=solver), op.L, fixed)
+        solver: Literal["cholmod", "superlu"] = (
+            "superlu" if params.solver == "superlu" else "cholmod"
+        )
+        phi0 = phi_at_zero_of(Deviation(system, solver=solver), op, fixed, params)
     w2 = float(np.sum(omega[~fixed] ** 2))
-    return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj
+    return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj, params
+
+
+def _knee(
+    geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_], tau0: float
+) -> float:
+    """The automatic tau as :func:`~service.core.pipeline.smooth` chooses it: the knee of
+    ``phi(lambda)`` near the discrepancy estimate ``tau0`` (Lanczos, no factorization)."""
+    from service.core.autotau import knee_tau
+    from service.core.operator import build_operator
+    from service.core.pipeline import smoothing_system
+    from service.core.system import Deviation
+
+    op = build_operator(geometry, params)
+    frame = op.frame.weighted(geometry.omega()[~fixed])
+    system, _ = smoothing_system(geometry, op, fixed, frame, params)
+    solver: Literal["cholmod", "superlu"] = "superlu" if params.solver == "superlu" else "cholmod"
+    dev = Deviation(system, solver=solver, order=params.order)
+    tau = knee_tau(dev, tau0 / frame.phi_factor)
+    return tau0 if tau is None else tau * frame.phi_factor
 
 
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
@@ -101,8 +123,9 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
 
     if params is None:
         params = SmoothingParams.model_construct()
+    requested = params.displacement
     params = resolve_displacement(params, geometry)
-    phi0, weight_sum, n_edges, fixed, adjacency = _phi0(geometry, params)
+    phi0, weight_sum, n_edges, fixed, adjacency, params = _phi0(geometry, params, requested)
     r = float(np.sqrt(phi0 / weight_sum)) if weight_sum > 0 else 0.0
     sigma: float | None = None
     suggested_tau: float | None = None
@@ -114,9 +137,10 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
             auto = None
         if auto is not None:
             sigma = auto.sigma
-            if 0 < auto.tau < phi0:
-                suggested_tau = auto.tau
-                suggested_rms = float(np.sqrt(auto.tau / weight_sum))
+            tau = _knee(geometry, params, fixed, auto.tau) if auto.tau > 0 else auto.tau
+            if 0 < tau < phi0:
+                suggested_tau = tau
+                suggested_rms = float(np.sqrt(tau / weight_sum))
     return {
         "n_points": geometry.n,
         "dimension": geometry.dim,

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,19 +53,24 @@ class Quadrature:
     nodes: list[Array]
     weights: list[Array]
     order: int = 1
+    _flat_nodes: Array = field(init=False, repr=False)
+    _flat_weights: Array = field(init=False, repr=False)
 
-    def phi(self, lam: float) -> float:
-        """``phi_j(lambda)``: sum over columns of ``sum_i w_i f(theta_i)``."""
-        k = self.order
-        total = 0.0
-        for th, w in zip(self.nodes, self.weights, strict=True):
-            th = np.maximum(th, 0.0)
-            total += float(np.sum(w * th ** (2 * k - 2) / (th + lam) ** (2 * k)))
-        return total
+    def __post_init__(self) -> None:
+        self._flat_nodes = (
+            np.maximum(np.concatenate(self.nodes), 0.0) if self.nodes else np.zeros(0)
+        )
+        self._flat_weights = np.concatenate(self.weights) if self.weights else np.zeros(0)
 
-    def root(self, tau: float, lo: float, hi: float) -> float:
-        """``lambda`` in ``[lo, hi]`` with ``phi_j(lambda) = tau``."""
-        return log_bisect(self.phi, tau, lo, hi)
+    def phi(self, lam: float, order: int | None = None) -> float:
+        """``phi_j(lambda)``: sum over columns of ``sum_i w_i f(theta_i)`` (order ``k``)."""
+        k = self.order if order is None else order
+        th, w = self._flat_nodes, self._flat_weights
+        return float(np.dot(w, th ** (2 * k - 2) / (th + lam) ** (2 * k)))
+
+    def root(self, tau: float, lo: float, hi: float, order: int | None = None) -> float:
+        """``lambda`` in ``[lo, hi]`` with ``phi_j(lambda) = tau`` (to 1e-6 relative)."""
+        return log_bisect(lambda lam: self.phi(lam, order), tau, lo, hi, rtol=1e-6)
 
 
 def log_bisect(
@@ -93,6 +98,7 @@ def lanczos(
     steps: int,
     stop: Callable[[Quadrature, Quadrature], bool] | None = None,
     order: int = 1,
+    every: int = 1,
 ) -> tuple[Quadrature, Quadrature, int]:
     """Lanczos on ``M_t`` from each column of ``c``; Gauss and Gauss-Radau models of ``phi``.
 
@@ -112,6 +118,8 @@ def lanczos(
         Called with the Gauss and Radau models after every step; ``True`` ends the recurrence.
     order : int
         Iterated Tikhonov order of the models.
+    every : int
+        After the fourth step, build the models (and call ``stop``) every ``every`` steps only.
 
     Returns
     -------
@@ -137,9 +145,11 @@ def lanczos(
         alphas.append(a)
         betas.append(b)
         done = j + 1
-        gauss, radau = _models(alphas, betas, beta0, order)
-        if (stop is not None and stop(gauss, radau)) or not np.all(b > 1e-14 * np.abs(a).max()):
-            break
+        broke = not np.all(b > 1e-14 * np.abs(a).max())
+        if done <= 4 or done % every == 0 or done == steps or broke:
+            gauss, radau = _models(alphas, betas, beta0, order)
+            if (stop is not None and stop(gauss, radau)) or broke:
+                break
         V_prev, V, b_prev = V, W / b, b
     return gauss, radau, done
 
@@ -180,11 +190,13 @@ def pcg(
     x0: Array | None = None,
     rtol: float = 1e-10,
     maxiter: int = 5000,
+    bound: Callable[[Array, Array], float] | None = None,
 ) -> tuple[Array, int, bool]:
     """Preconditioned CG for ``K X = R`` column by column, ``K = M + lambda diag(d2)``.
 
-    Stops when the true residual satisfies ``||D^-1 (R - K X)||_F <= rtol * lambda * ||D X||_F``,
-    which bounds the error ``||D (X - X*)||_F / ||D X||_F`` by ``rtol`` (module docstring).
+    Stops when ``bound(R_k, Z_k) <= rtol ||D X||_F`` for the true residual ``R_k`` and the
+    preconditioned one ``Z_k``, where ``bound`` bounds the error ``||D (X - X*)||_F``; by default
+    ``||D^-1 R_k||_F / lambda`` (module docstring).
 
     Returns
     -------
@@ -195,11 +207,12 @@ def pcg(
     """
     d = np.sqrt(d2)[:, None]
     X = np.zeros_like(R) if x0 is None else np.array(x0, dtype=np.float64, copy=True)
+    if bound is None:
+        bound = lambda Rk, Zk: float(np.linalg.norm(Rk / d)) / lam  # noqa: E731
     products = 0
 
-    def small(Rk: Array) -> bool:
-        size = max(float(np.linalg.norm(d * X)), 1e-300)
-        return bool(float(np.linalg.norm(Rk / d)) <= rtol * lam * size)
+    def small(Rk: Array, Zk: Array) -> bool:
+        return bound(Rk, Zk) <= rtol * max(float(np.linalg.norm(d * X)), 1e-300)
 
     if not np.any(R):
         return np.zeros_like(R), 0, True
@@ -207,13 +220,12 @@ def pcg(
     if x0 is not None:
         Rk -= apply_k(X)
         products += 1
+    ok = False
     for _restart in range(4):
         Z = precond(Rk)
         Pk = Z.copy()
         rz = np.einsum("ij,ij->j", Rk, Z)
-        for _ in range(maxiter):
-            if small(Rk):
-                break
+        while products < maxiter and not small(Rk, Z):
             KP = apply_k(Pk)
             products += 1
             pKp = np.einsum("ij,ij->j", Pk, KP)
@@ -225,13 +237,12 @@ def pcg(
             beta = np.divide(rz_new, rz, out=np.zeros_like(rz), where=rz > 0)
             Pk = Z + Pk * beta
             rz = rz_new
-            if products >= maxiter:
-                break
         Rk = R - apply_k(X)  # the recursive residual drifts: confirm with the true one
         products += 1
-        if small(Rk) or products >= maxiter:
+        ok = small(Rk, precond(Rk))
+        if ok or products >= maxiter:
             break
-    return X, products, small(Rk)
+    return X, products, ok
 
 
 @dataclass
@@ -253,19 +264,24 @@ class ShiftInvert:
     basis: list[Array]
 
     def phi(self, lam: float) -> float:
-        d, k, total = lam - self.lam0, self.order, 0.0
-        for nrm, th, Z in zip(self.norms, self.thetas, self.vectors, strict=True):
-            g = th**2 * (1 - self.lam0 * th) ** (2 * k - 2) / (1 + d * th) ** (2 * k)
-            total += float(nrm**2 * np.sum(Z[0] ** 2 * g))
-        return total
+        d, k = lam - self.lam0, self.order
+        th = np.concatenate(self.thetas)
+        w = np.concatenate(
+            [nrm**2 * Z[0] ** 2 for nrm, Z in zip(self.norms, self.vectors, strict=True)]
+        )
+        g = th**2 * (1 - self.lam0 * th) ** (2 * k - 2) / (1 + d * th) ** (2 * k)
+        return float(np.dot(w, g))
 
-    def first_solution(self, lam: float) -> Array:
-        """``(M_t + lambda I)^-1 c`` from the Krylov basis (Galerkin), shape (m, s)."""
+    def vector(self, lam: float, h: Callable[[Array, float], Array]) -> Array:
+        """``h(S) c`` from the Krylov basis (Galerkin), shape (m, s); ``h(theta, delta)``.
+
+        E.g. ``h = theta / (1 + delta theta)`` gives ``(M_t + lambda I)^-1 c``.
+        """
         d = lam - self.lam0
         out = np.zeros((self.basis[0].shape[0], self.live.size))
         cols = np.flatnonzero(self.live)
         for col, (nrm, th, Z) in enumerate(zip(self.norms, self.thetas, self.vectors, strict=True)):
-            coef = Z @ (th / (1 + d * th) * Z[0]) * nrm
+            coef = Z @ (h(th, d) * Z[0]) * nrm
             for i in range(coef.size):
                 out[:, cols[col]] += coef[i] * self.basis[i][:, col]
         return out

@@ -29,6 +29,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from service.core._arrays import unique_keys
+
 __all__ = [
     "Neighborhoods",
     "cloud_delaunay_neighborhoods",
@@ -76,16 +78,41 @@ class Neighborhoods:
 
 
 def _adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
-    adj = sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
-    adj.sum_duplicates()
-    adj.data[:] = 1.0
-    return adj
+    """Pattern (ones) of the pairs ``(i, j)``, duplicates merged, via integer keys ``i n + j``."""
+    keys = np.sort(i.astype(np.int64) * n + j.astype(np.int64))
+    keys = keys[np.concatenate([[True], keys[1:] != keys[:-1]])] if keys.size else keys
+    rows, cols = np.divmod(keys, n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    return sp.csr_matrix((np.ones(keys.size), cols, indptr), shape=(n, n))
+
+
+def _row_keys(rows: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """One integer per row of small non-negative integers below ``n`` (sorted rows recommended):
+    exact mixed-radix keys when they fit in int64, else the row's index among distinct rows."""
+    width = rows.shape[1]
+    if width * np.log2(max(n, 2)) < 62:
+        key = np.zeros(rows.shape[0], dtype=np.int64)
+        for c in range(width):
+            key = key * n + rows[:, c]
+        return key
+    order = np.lexsort(rows.T[::-1])
+    srt = rows[order]
+    new = np.ones(len(rows), dtype=bool)
+    new[1:] = (srt[1:] != srt[:-1]).any(axis=1)
+    key = np.empty(len(rows), dtype=np.int64)
+    key[order] = np.cumsum(new) - 1
+    return key
 
 
 def unique_faces(faces: NDArray[np.int64]) -> NDArray[np.int64]:
     """Drop duplicate triangles (same vertex set, any order or winding), keeping the first."""
-    key = np.sort(faces, axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
+    if len(faces) == 0:
+        return faces
+    key = _row_keys(np.sort(faces, axis=1), int(faces.max()) + 1)
+    _, first, _, _ = unique_keys(key)
+    if first.size == len(faces):
+        return faces
     return faces[np.sort(first)]
 
 
@@ -156,11 +183,14 @@ def mesh_neighborhoods(
     i = np.concatenate([wedges[:, 0], wedges[:, 0]])
     j = np.concatenate([wedges[:, 1], wedges[:, 2]])
     adj = _adjacency(i, j, n)
-    # boundary: undirected edges used by exactly one face
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    # boundary: undirected edges used by exactly one face (integer keys min * n + max)
+    a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    uniq, _, counts, _ = unique_keys(np.minimum(a, b) * n + np.maximum(a, b))
     boundary = np.zeros(n, dtype=bool)
-    boundary[uniq[counts == 1].ravel()] = True
+    single = uniq[counts == 1]
+    boundary[single // n] = True
+    boundary[single % n] = True
     chains = _EMPTY3
     if edges is not None and len(edges):
         in_face = np.zeros(n, dtype=bool)
@@ -214,171 +244,4 @@ def cloud_knn_neighborhoods(points: NDArray[np.float64], k: int) -> Neighborhood
     return Neighborhoods(n, adj, _EMPTY3, _EMPTY3, np.zeros(n, dtype=bool), "knn")
 
 
-def _local_frames(
-    points: NDArray[np.float64], idx: NDArray[np.int64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Principal directions and variances of each point with its neighbours (least squares)."""
-    nbh = np.concatenate([points[:, None, :], points[idx]], axis=1)  # (n, k+1, s)
-    centered = nbh - nbh.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centered, centered) / nbh.shape[1]
-    evals, evecs = np.linalg.eigh(cov)  # ascending
-    return evals[:, ::-1], evecs[:, :, ::-1]
-
-
-def _polar_hull_fans(
-    q: NDArray[np.float64],
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
-    """Delaunay 1-rings of the origin among planar neighbours, for many points at once.
-
-    Parameters
-    ----------
-    q : ndarray, shape (n, m, 2)
-        Neighbours of each point, relative to the point, in its tangent plane.
-
-    Returns
-    -------
-    order : ndarray, shape (n, m)
-        Neighbour slots in counter-clockwise fan order, ``-1`` padded.
-    count : ndarray, shape (n,)
-        Fan size per point.
-    open_fan : ndarray of bool, shape (n,)
-        True where the origin is on the hull (the point lies on the cloud's border).
-    """
-    n, m, _ = q.shape
-    r2 = np.einsum("nmi,nmi->nm", q, q)
-    valid = r2 > 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(valid[..., None], 2.0 * q / r2[..., None], 0.0)
-    # candidate set: the m polar points plus the origin (slot m)
-    cand = np.concatenate([a, np.zeros((n, 1, 2))], axis=1)
-    cvalid = np.concatenate([valid, np.ones((n, 1), dtype=bool)], axis=1)
-    norms = np.where(cvalid, np.einsum("nmi,nmi->nm", cand, cand), -1.0)
-    norms[:, m] = -1.0
-    start = np.argmax(norms, axis=1)
-    rows = np.arange(n)
-    has_any = valid.any(axis=1)
-    cur = start.copy()
-    sp_ = cand[rows, start]
-    direction = np.column_stack([-sp_[:, 1], sp_[:, 0]])  # CCW tangent of the circle |x| = |start|
-    on_hull = np.zeros((n, m + 1), dtype=bool)
-    on_hull[rows[has_any], start[has_any]] = True
-    order = np.full((n, m + 1), -1, dtype=np.int64)
-    order[:, 0] = np.where(has_any, start, -1)
-    active = has_any.copy()
-    for step in range(1, m + 2):
-        if not active.any():
-            break
-        ar = rows[active]
-        c = cand[ar, cur[ar]]
-        d = direction[ar]
-        v = cand[ar] - c[:, None, :]
-        cross = d[:, None, 0] * v[..., 1] - d[:, None, 1] * v[..., 0]
-        dot = np.einsum("ni,nmi->nm", d, v)
-        ang = np.mod(np.arctan2(cross, dot), 2 * np.pi)
-        dist = np.einsum("nmi,nmi->nm", v, v)
-        scale = np.maximum(dist.max(axis=1, keepdims=True), 1e-300)
-        bad = ~cvalid[ar] | (dist <= 1e-24 * scale)
-        ang = np.where(bad, np.inf, ang)
-        # smallest turn; among (near-)collinear candidates the farthest one
-        key = np.round(ang, 12) - dist / scale * 1e-13
-        nxt = np.argmin(key, axis=1)
-        done = (nxt == start[ar]) | on_hull[ar, nxt] | ~np.isfinite(ang[np.arange(ar.size), nxt])
-        go = ar[~done]
-        on_hull[go, nxt[~done]] = True
-        order[go, step] = nxt[~done]
-        direction[go] = cand[go, nxt[~done]] - cand[go, cur[go]]
-        cur[go] = nxt[~done]
-        active[ar[done]] = False
-    open_fan = on_hull[:, m]
-    # rotate each fan to start right after the origin (open fans), then drop the origin slot
-    lengths = (order >= 0).sum(axis=1)
-    fans = np.full((n, m), -1, dtype=np.int64)
-    count = np.zeros(n, dtype=np.int64)
-    for length in np.unique(lengths[lengths > 0]):
-        for with_origin in (False, True):
-            sel = np.flatnonzero((lengths == length) & (open_fan == with_origin))
-            if sel.size == 0:
-                continue
-            o = order[sel, :length]
-            if with_origin:
-                shift = np.argmax(o == m, axis=1) + 1
-                roll = (np.arange(length)[None, :] + shift[:, None]) % length
-                o = np.take_along_axis(o, roll, axis=1)[:, : length - 1]
-            fans[sel, : o.shape[1]] = o
-            count[sel] = o.shape[1]
-    return fans, count, open_fan
-
-
-def cloud_delaunay_neighborhoods(
-    points: NDArray[np.float64], k: int, line_ratio: float = 0.05
-) -> Neighborhoods:
-    """Delaunay neighbourhoods of a point cloud (report section 4.4).
-
-    The k nearest neighbours of each point are projected onto their least-squares plane
-    (surface samples) or line (curve samples); the 1-ring of the point in the Delaunay
-    triangulation of the projection is its neighbourhood. A cloud is taken as curve samples when
-    the median ratio of the second to the first principal variance of the neighbourhoods is
-    below ``line_ratio`` (and always for ``s == 1``).
-
-    Parameters
-    ----------
-    points : ndarray, shape (n, s)
-    k : int
-        Neighbours considered per point.
-    line_ratio : float
-        Threshold for telling curve samples from surface samples.
-
-    Returns
-    -------
-    Neighborhoods
-        Surface samples get fans (wedges) and boundary flags for open fans; curve samples get
-        chains (predecessor, successor along the local line).
-    """
-    n, s = points.shape
-    dist, idx = _knn(points, k)
-    if idx.shape[1] == 0:
-        empty = _adjacency(np.zeros(0, np.int64), np.zeros(0, np.int64), n)
-        return Neighborhoods(n, empty, _EMPTY3, _EMPTY3, np.zeros(n, dtype=bool), "delaunay")
-    evals, evecs = _local_frames(points, idx)
-    rel = points[idx] - points[:, None, :]  # (n, k, s)
-    curve_like = s == 1 or float(np.median(evals[:, 1] / np.maximum(evals[:, 0], 1e-300))) < (
-        line_ratio
-    )
-    rows = np.arange(n)
-    if curve_like:
-        t = np.einsum("nks,ns->nk", rel, evecs[:, :, 0])
-        t = np.where(dist > 0, t, np.nan)
-        neg = np.where(t < 0, t, -np.inf)
-        pos = np.where(t > 0, t, np.inf)
-        prev = idx[rows, np.argmax(neg, axis=1)]
-        nxt = idx[rows, np.argmin(pos, axis=1)]
-        has_prev = np.isfinite(neg.max(axis=1))
-        has_next = np.isfinite(pos.min(axis=1))
-        i = np.concatenate([rows[has_prev], rows[has_next]])
-        j = np.concatenate([prev[has_prev], nxt[has_next]])
-        adj = _adjacency(i, j, n)
-        both = has_prev & has_next
-        chains = np.column_stack([rows[both], prev[both], nxt[both]]).astype(np.int64)
-        return Neighborhoods(n, adj, _EMPTY3, chains, has_prev ^ has_next, "delaunay")
-    q = np.stack(
-        [np.einsum("nks,ns->nk", rel, evecs[:, :, c]) for c in (0, 1)],
-        axis=-1,
-    )
-    q = np.where((dist > 0)[..., None], q, 0.0)
-    fans, count, open_fan = _polar_hull_fans(q)
-    slot_ok = fans >= 0
-    nb = np.where(slot_ok, idx[rows[:, None], np.maximum(fans, 0)], -1)
-    i = np.repeat(rows, slot_ok.sum(axis=1))
-    adj = _adjacency(i, nb[slot_ok], n)
-    # wedges between consecutive fan neighbours; closed fans wrap around
-    w_i, w_j, w_k = [], [], []
-    for t in range(fans.shape[1]):
-        closing = np.asarray(t + 1 == count)  # last slot: wraps to slot 0 for closed fans
-        ok = (t < count) & (~closing | (~open_fan & (count >= 3)))
-        sel = rows[ok]
-        w_i.append(sel)
-        w_j.append(nb[sel, t])
-        w_k.append(nb[sel, np.where(closing[sel], 0, t + 1)])
-    wedges = np.column_stack([np.concatenate(w_i), np.concatenate(w_j), np.concatenate(w_k)])
-    wedges = wedges[(wedges[:, 1] != wedges[:, 2])].astype(np.int64)
-    return Neighborhoods(n, adj, wedges, _EMPTY3, open_fan, "delaunay")
+from service.core.delaunay import cloud_delaunay_neighborhoods  # noqa: E402  (re-export)

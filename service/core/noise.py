@@ -215,8 +215,8 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
 #: ``c`` of the discrepancy rule ``tau = c * r * sigma^2 * sum omega_i^2 * (1 + alpha rho)``
 #: (``r`` normal directions per point), per displacement mode, and ``alpha`` (free
 #: displacement only); calibrated on the quality benchmark (``benchmarks/quality/README.md``).
-TAU_FACTOR: dict[str, float] = {"free": 1.0, "normal": 0.9}
-TANGENTIAL_SHARE = 0.8
+TAU_FACTOR: dict[str, float] = {"free": 0.9, "normal": 1.0}
+TANGENTIAL_SHARE = 1.0
 
 
 def codimension(geometry: Geometry) -> int:

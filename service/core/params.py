@@ -205,7 +205,8 @@ class SmoothingParams(BaseModel):
             "moves along its normal only, x_i = p_i + t_i n_i, normals from the input's "
             "neighbourhoods (surfaces and point clouds; the normal plane for curves in 3-D), "
             "the smoothness measured across the shape. 'auto': the one the quality benchmark "
-            "found best for the kind of input (normal for point clouds, free otherwise)."
+            "found best for the kind of input (normal for meshes and point clouds, free for "
+            "curves)."
         ),
     )
     presmooth: int = Field(

@@ -19,10 +19,10 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core import cache
-from service.core.autotau import auto_tau, gcv_lambda
-from service.core.displacement import normal_mode, resolve_displacement
+from service.core.autotau import auto_tau, gcv_lambda, knee_tau
+from service.core.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.elimination import laplacian_system, phi_at_zero
-from service.core.errors import ParameterError, TauOutOfRange
+from service.core.errors import ParameterError, SolverError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.guards import guard_warnings, noise_ratio, shape_checks
@@ -34,8 +34,9 @@ from service.core.operator import (
     operator_key,
 )
 from service.core.params import SmoothingParams
+from service.core.polyfilter import filter_system
 from service.core.progress import ProgressCallback, ProgressEvent
-from service.core.resources import choose_solver
+from service.core.resources import choose_solver, prefer_matrix_free
 from service.core.result import SmoothResult, Spectrum
 from service.core.shrinkage import check_preservable, preserve_measure
 from service.core.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
@@ -62,6 +63,7 @@ class Run:
         self.tau: float | None = None
         self.frame = frame
         self.notes: list[str] = []
+        self.search_seconds = 0.0
         self.sigma: float | None = None  # core-quality: automatic tau, max-norm bound
         self.tau_how: str | None = None
         self.bound: dict[str, Any] | None = None
@@ -88,60 +90,46 @@ def smooth(
 ) -> SmoothResult:
     """Smooth points, curves or meshes (report KU Leuven TW 451).
 
-    Solves ``X* = argmin ||L X||_F^2 + lambda ||D (X - P)||_F^2`` (eq. 4) with ``L`` the chosen
-    Laplacian variant (section 4), ``D`` the per-point weights, fixed points eliminated
-    (infinite weights, section 8), and ``lambda`` either given or found such that
-    ``phi(lambda) = ||D(X - P)||_F^2 = tau`` (eqs. 3, 15; section 6).
+    Solves ``X* = argmin ||L X||_F^2 + lambda ||D (X - P)||_F^2`` (eq. 4): ``L`` the chosen
+    Laplacian (section 4), ``D`` the per-point weights, fixed points eliminated (section 8),
+    ``lambda`` given or found so that ``phi(lambda) = ||D(X - P)||_F^2 = tau`` (eqs. 3, 15).
+    Steps: neighbourhoods and L -> free points -> system -> lambda -> X -> diagnostics.
 
     Parameters
     ----------
     geometry : Geometry
-        Validated input.
     params : SmoothingParams
-        Exactly one of ``lam``, ``tau``, ``rms``; see the model for the other fields.
     progress : callable, optional
-        ``progress(event)`` with a :class:`~service.core.progress.ProgressEvent`: once per
-        stage, and once per lambda tried (stage ``search``). From the ``analysis`` stage on,
-        ``event.tau`` is the resolved target (the one ``rms`` implies, over the free points).
+        Called with a :class:`~service.core.progress.ProgressEvent` per stage and per lambda
+        tried; from the ``analysis`` stage on ``event.tau`` is the resolved target.
     operator : SmoothingOperator, optional
-        From :func:`build_operator` for this geometry and the same build parameters: smooth
-        the same input at several tau without rebuilding.
+        From :func:`build_operator` for this geometry and build parameters (reuse across tau).
     memory_limit : int, optional
-        Bytes the run may use; with ``solver="auto"`` a factorization that would not fit
-        selects the matrix-free path.
-
-    Returns
-    -------
-    SmoothResult
+        Bytes for the run: with ``solver="auto"`` a factor that would not fit selects CG.
 
     Raises
     ------
-    ParameterError
-        Parameters that do not fit the geometry (e.g. triangle weights on a curve).
-    TauOutOfRange
-        ``tau`` (or the ``tau`` implied by ``rms``) outside ``(0, phi(0))``.
-    SolverError
-        The factorization failed.
+    ParameterError, TauOutOfRange, SolverError
     """
     run = Run(progress)
+    requested = params.displacement
     params = resolve_displacement(params, geometry)
     run.emit("neighborhoods")
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, run.notes)
     run.frame = frame = op.frame.weighted(geometry.omega()[~fixed])
-    system, to_points = smoothing_system(geometry, op, fixed, frame, params)
+    params, system, to_points = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+    )
     run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
-    if system.size == 0 or system.M.nnz == 0:
+    if system.empty:
         return _unchanged(geometry, params, op, run, n_fixed)
-    dev = Deviation(
-        system,
-        solver=choose_solver(system, params, memory_limit, run.notes),
-        order=params.order,
-        reuse=params.search != "rational",
-        symbolic=cache.analysis_of,
-    )
-    dev.listener = run.evaluated
+    if params.method == "windowed-sinc":
+        return _filtered(geometry, params, op, run, system, to_points, fixed, n_fixed)
+    dev = _deviation(system, params, memory_limit, run)
+    if params.tau_rule == "auto" and run.tau:
+        _knee(dev, run)
     if params.tau_rule == "gcv":
         search = _gcv(dev, geometry, params, fixed, run)
     else:
@@ -156,6 +144,21 @@ def smooth(
     if params.max_deviation is not None:
         X, _ = clip_points(geometry.points, X, params.max_deviation)
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
+
+
+def _deviation(
+    system: SmoothingSystem, params: SmoothingParams, memory_limit: int | None, run: Run
+) -> Deviation:
+    """phi(lambda) of ``system`` on the path :func:`choose_solver` picks, reporting to ``run``."""
+    dev = Deviation(
+        system,
+        solver=choose_solver(system, params, memory_limit, run.notes),
+        order=params.order,
+        reuse=params.search != "rational",
+        symbolic=cache.analysis_of,
+    )
+    dev.listener = run.evaluated
+    return dev
 
 
 def _operator(
@@ -262,25 +265,36 @@ def find_lambda(
     run: Run,
 ) -> LambdaSearch:
     """lambda (internal frame): given, or the root of ``phi(lambda) = tau`` (section 6)."""
+    t0 = time.perf_counter()
+    try:
+        return _find_lambda(dev, op, fixed, params, run)
+    finally:
+        run.search_seconds = time.perf_counter() - t0
+
+
+def _find_lambda(
+    dev: Deviation,
+    op: SmoothingOperator,
+    fixed: NDArray[np.bool_],
+    params: SmoothingParams,
+    run: Run,
+) -> LambdaSearch:
     assert run.frame is not None
     frame = run.frame
     if params.lam is not None:
         lam = frame.lam_in(params.lam)
-        return LambdaSearch(lam, dev(lam), True, list(dev.history))
-    if run.tau is not None and run.tau <= 0:  # automatic tau on noise-free input
-        lam = dev.system.lambda_ceiling(1e-300)
         return LambdaSearch(lam, dev(lam), True, list(dev.history))
     assert run.tau is not None
     tau, system = run.tau / frame.phi_factor, dev.system
     phi0 = system.phi0
     bound = system.phi0_bound if system.phi0_bound is not None else np.inf
     if params.search == "rational" or (phi0 is None and tau >= bound):
-        phi0 = _phi0(dev, op, fixed, params)
+        phi0 = phi_at_zero_of(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
         raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
     if params.search == "rational":
         assert phi0 is not None
-        lam0 = initial_lambda(_fro(system.M), float(np.linalg.norm(system.d2)))
+        lam0 = initial_lambda(_fro(system.explicit()), float(np.linalg.norm(system.d2)))
         return search_lambda(dev, tau, phi0, lam0, params.tolerance, params.max_iterations)
     lo, hi = dev.floor, max(system.lambda_ceiling(tau), dev.floor)
     inv_d = 1.0 / np.sqrt(system.d2)[:, None]
@@ -292,6 +306,11 @@ def find_lambda(
         hi,
         order=dev.order,
     )
+    if params.solver == "auto" and prefer_matrix_free(system.size, lam0, system.mu_bound()):
+        dev.use_matrix_free()
+        run.notes.append(
+            "matrix-free path: conjugate gradients are cheaper at this size and lambda"
+        )
     search = newton_search(
         dev,
         dev.derivative,
@@ -319,12 +338,12 @@ def _check_range(
 ) -> None:
     """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``)."""
     assert run.frame is not None and run.tau is not None
-    phi0 = _phi0(dev, op, fixed, params)
+    phi0 = phi_at_zero_of(dev, op, fixed, params)
     if run.tau / run.frame.phi_factor >= phi0:
         raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
 
 
-def _phi0(
+def phi_at_zero_of(
     dev: Deviation, op: SmoothingOperator, fixed: NDArray[np.bool_], params: SmoothingParams
 ) -> float:
     """``phi(0)``: eqs. (13-14) for free displacement, the system's limit otherwise."""
@@ -351,12 +370,27 @@ def _gcv(
             )
     except ParameterError:  # no noise estimate: start from the middle of the range
         pass
-    hi = max(system.lambda_ceiling(1e-12 * float(np.sum(system.d2[:, None] * system.U0**2))), lo)
+    scale = float(np.sum(system.r**2 / system.d2[:, None]))  # ||D^-1 r||^2 >= phi(lambda) lambda^2
+    hi = max(system.lambda_ceiling(1e-12 * scale), lo) if scale > 0 else lo
     lam = gcv_lambda(dev, lo, hi, start if start else math.sqrt(lo * hi))
     phi = dev(lam)
     run.tau = phi * run.frame.phi_factor
     run.tau_how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
     return LambdaSearch(lam, phi, True, list(dev.history))
+
+
+def _knee(dev: Deviation, run: Run) -> None:
+    """Automatic tau: move the discrepancy estimate to the knee of ``phi(lambda)`` near it."""
+    assert run.frame is not None and run.tau is not None
+    tau = knee_tau(dev, run.tau / run.frame.phi_factor)
+    if tau is None:
+        run.tau_how = (run.tau_how or "") + "; no knee of phi(lambda) near it: used as is"
+        return
+    run.tau_how = (run.tau_how or "") + (
+        f"; moved to the knee of phi(lambda) at tau = {tau * run.frame.phi_factor:.6g} "
+        f"({tau * run.frame.phi_factor / run.tau:.3g} x)"
+    )
+    run.tau = tau * run.frame.phi_factor
 
 
 def _bounded(
@@ -379,6 +413,34 @@ def _bounded(
     history = [*search.history, *res.history]
     converged = tau is None or abs(res.phi - tau) <= params.tolerance * tau
     return dev.system.U0 + res.E, LambdaSearch(res.lam, res.phi, converged, history)
+
+
+def _filtered(
+    geometry: Geometry,
+    params: SmoothingParams,
+    op: SmoothingOperator,
+    run: Run,
+    system: SmoothingSystem,
+    to_points: Callable[[Array], Array],
+    fixed: NDArray[np.bool_],
+    n_fixed: int,
+) -> SmoothResult:
+    """``method="windowed-sinc"`` (:func:`~service.core.polyfilter.filter_system`)."""
+    assert run.frame is not None
+    frame = run.frame
+    dev = Deviation(system, solver="cg")  # products with M (counted), no solve
+    tau = None if run.tau is None else run.tau / frame.phi_factor
+    lam = None if params.lam is None else frame.lam_in(params.lam)
+    bound = system.phi0 if system.phi0 is not None else system.phi0_bound
+    if tau is not None and bound is not None and tau >= bound:
+        _check_range(dev, op, fixed, params, run)
+    U, search = filter_system(dev, params.laplacian, tau, lam, params.tolerance)
+    if not search.converged:
+        run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
+    run.evaluated(search.lam, search.phi, 1)
+    X = geometry.points.copy()
+    X[~fixed] = frame.back(to_points(U))
+    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed)
 
 
 def _fro(M: sp.spmatrix) -> float:
@@ -419,6 +481,11 @@ def diagnostics(
     dev_pt = np.linalg.norm(moved, axis=1)
     # phi of the solution (before any volume rescaling), as recorded in the history
     phi = search.phi * frame.phi_factor if dev is not None else 0.0
+    if not (np.isfinite(phi) and np.isfinite(search.lam) and np.isfinite(X).all()):
+        raise SolverError(  # never report a non-finite number (issue 15)
+            "the solution is not finite at this scale (lambda, phi or the points overflowed)",
+            field="params",
+        )
     stats = dev.stats if dev is not None else None
     timings = dict(op.timings)
     if stats is not None:
@@ -431,6 +498,7 @@ def diagnostics(
     checks = shape_checks(geometry, X)
     ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
     run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
+    timings["search"] = run.search_seconds
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
     spectrum = None
@@ -438,7 +506,7 @@ def diagnostics(
         spectrum = _spectrum(op, geometry, frame, search.lam, n_fixed, run.notes)
     return SmoothResult(
         points=X,
-        lam=frame.lam_out(search.lam) if search.lam > 0 else 0.0,
+        lam=params.lam if params.lam is not None else frame.lam_out(search.lam),
         phi=phi,
         tau=tau,
         relative_error=None if tau is None else abs(phi - tau) / tau,
@@ -452,7 +520,8 @@ def diagnostics(
         rms_deviation=float(np.sqrt(np.mean(dev_pt**2))),
         max_deviation=float(dev_pt.max()),
         timings=timings,
-        solver=dev.solver.name if dev is not None else "none",
+        solver=dev.solver.name if dev is not None and params.method == "tikhonov" else "none",
+        method=params.method,
         search="none" if params.lam is not None else params.search,
         order=params.order,
         laplacian=params.laplacian,

@@ -67,7 +67,10 @@ class SmoothResult:
     solver : str
         ``"cholmod"``, ``"superlu"`` or ``"cg"`` (matrix-free).
     search : str
-        lambda search used: ``"newton"``, ``"rational"``, ``"auto"`` (newton) or ``"none"``.
+        lambda search used: ``"auto"``, ``"newton"``, ``"rational"`` or ``"none"``.
+    method : str
+        ``"tikhonov"`` or ``"windowed-sinc"`` (then ``lam`` is the pass band's edge on the
+        same scale, and ``solver`` is ``"none"``).
     order : int
         Iterated Tikhonov order.
     laplacian, weights : str
@@ -117,6 +120,7 @@ class SmoothResult:
     solves: int = 0
     matvecs: int = 0
     search: str = "none"
+    method: str = "tikhonov"
     order: int = 1
     n_fixed: int = 0
     volume_scale: float | None = None
@@ -167,6 +171,7 @@ class SmoothResult:
             "timings": dict(self.timings),
             "solver": self.solver,
             "search": self.search,
+            "method": self.method,
             "order": self.order,
             "warnings": list(self.warnings),
         }

@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
+from service.core._arrays import unique_keys
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.neighborhoods import unique_faces
@@ -28,8 +29,10 @@ __all__ = [
 
 def is_closed_mesh(faces: NDArray[np.int64]) -> bool:
     """Every (undirected) edge is shared by exactly two faces."""
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(e, axis=0, return_counts=True)
+    a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]]).astype(np.int64)
+    b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]]).astype(np.int64)
+    n = int(max(a.max(), b.max())) + 1 if a.size else 1
+    _, _, counts, _ = unique_keys(np.minimum(a, b) * n + np.maximum(a, b))
     return bool(np.all(counts == 2))
 
 
@@ -74,8 +77,7 @@ def enclosed_measure(
         a, b = points[edges[:, 0]], points[edges[:, 1]]
         signed = (a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]) / 2.0
         labels = _component_labels(edges, n)[edges[:, 0]]
-    per = np.zeros(int(labels.max()) + 1 if labels.size else 0)
-    np.add.at(per, labels, signed)
+    per = np.bincount(labels, weights=signed).astype(np.float64) if labels.size else np.zeros(0)
     return float(np.abs(per).sum())
 
 

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from service.core.errors import ParameterError
 from service.core.krylov import ShiftInvert, log_bisect, shift_invert
-from service.core.solver import Direct, LinearSolver, MatrixFree, SolverStats
+from service.core.solver import Direct, Gram, LinearSolver, MatrixFree, SolverStats, explicit
 
 __all__ = ["LAMBDA_FLOOR", "Deviation", "SmoothingSystem", "make_solver"]
 
@@ -54,8 +54,9 @@ class SmoothingSystem:
 
     Parameters
     ----------
-    M : sparse matrix, shape (m, m)
-        ``A^T A`` (symmetric positive semi-definite).
+    M : sparse matrix or Gram, shape (m, m)
+        ``A^T A`` (symmetric positive semi-definite), formed or kept as ``A``
+        (:class:`~service.core.solver.Gram`).
     d2 : ndarray, shape (m,)
         Positive diagonal of ``D^2``.
     b : ndarray, shape (m, c)
@@ -68,7 +69,7 @@ class SmoothingSystem:
         An upper bound of ``phi(0)`` when known (a ``tau`` above it is out of range).
     """
 
-    M: sp.spmatrix
+    M: sp.spmatrix | Gram
     d2: Array
     b: Array
     U0: Array
@@ -77,7 +78,7 @@ class SmoothingSystem:
     r: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        M = sp.csr_matrix(self.M)
+        M = self.M if isinstance(self.M, Gram) else sp.csr_matrix(self.M)
         object.__setattr__(self, "M", M)
         object.__setattr__(self, "d2", np.asarray(self.d2, dtype=np.float64))
         object.__setattr__(self, "r", np.asarray(self.b - M @ self.U0))
@@ -88,9 +89,26 @@ class SmoothingSystem:
 
     def mu_bound(self) -> float:
         """Gershgorin bound of the largest eigenvalue of ``M_t = D^-1 M D^-1``."""
+        if not self.size:
+            return 0.0
         inv = 1.0 / np.sqrt(self.d2)
+        if isinstance(self.M, Gram):
+            return float(self.M.abs_row_sums(inv).max())
         Mt = sp.diags(inv) @ abs(self.M) @ sp.diags(inv)
-        return float(np.asarray(Mt.sum(axis=1)).max()) if self.size else 0.0
+        return float(np.asarray(Mt.sum(axis=1)).max())
+
+    @property
+    def empty(self) -> bool:
+        """No unknown, or ``M = 0`` (nothing can move)."""
+        if self.size == 0:
+            return True
+        if isinstance(self.M, Gram):
+            return self.M.A.nnz == 0 or not np.any(self.M.A.data)
+        return self.M.nnz == 0
+
+    def explicit(self) -> sp.csr_matrix:
+        """``M`` formed."""
+        return explicit(self.M)
 
     def lambda_floor(self) -> float:
         """Smallest lambda whose solution is numerically meaningful (:data:`LAMBDA_FLOOR`)."""
@@ -159,6 +177,15 @@ class Deviation:
     def stats(self) -> SolverStats:
         return self.solver.stats
 
+    def use_matrix_free(self) -> None:
+        """Switch to the matrix-free solver (work counted so far is kept)."""
+        if isinstance(self.solver, MatrixFree):
+            return
+        stats = self.solver.stats
+        self.solver = MatrixFree(self.system.M, self.system.d2)
+        self.solver.stats = stats
+        self._warm.clear()
+
     def _solve(self, lam: float, R: Array, role: str, offset: Array | None = None) -> Array:
         X = self.solver.solve(lam, R, self._warm.get(role), offset)
         self._warm[role] = X
@@ -220,9 +247,12 @@ class Deviation:
         """Root of ``phi = tau`` in ``[lo, hi]`` from the factorization made at ``lam``.
 
         Shift-invert Lanczos with the factor of ``K(lam)`` (one solve per step,
-        :func:`~service.core.krylov.shift_invert`) until the model's root is stable to 1e-7;
-        the Galerkin solution at that root seeds the next solve. ``None`` when the solver holds
-        no factorization at ``lam`` (matrix-free path).
+        :func:`~service.core.krylov.shift_invert`) until the model's root lies inside the
+        bracket and is stable to 1e-7. Below ``lam`` the model's Gauss rule underestimates
+        ``phi`` (every derivative of ``theta^2 / (1 + delta theta)^2`` is positive for
+        ``delta < 0``), so an unconverged root is still a lower bound of ``lambda*``. The
+        Galerkin vectors at the root seed the next solves. ``None`` without a factorization
+        at ``lam`` (matrix-free path).
         """
         solver = self.solver
         if not isinstance(solver, Direct) or solver.lam_factored != lam:
@@ -235,15 +265,34 @@ class Deviation:
             if len(model.basis) < 2:
                 return False
             roots.append(log_bisect(model.phi, tau, lo, hi))
-            return len(roots) >= 2 and abs(roots[-1] - roots[-2]) <= 1e-7 * roots[-1]
+            inside = lo < roots[-1] < hi
+            return inside and len(roots) >= 2 and abs(roots[-1] - roots[-2]) <= 1e-7 * roots[-1]
 
         model, _ = shift_invert(
-            lambda V: d * solver.apply_factor(d * V), s.r / d, lam, self.order, 16, stop
+            lambda V: d * solver.apply_factor(d * V), s.r / d, lam, self.order, 20, stop
         )
         if not roots:
             return None
-        self._warm["U1"] = s.U0 + model.first_solution(roots[-1]) / d
+        self._seed(model, roots[-1], d)
         return roots[-1]
+
+    def _seed(self, model: ShiftInvert, lam: float, d: Array) -> None:
+        """Warm starts at ``lam`` for every solve of :meth:`deviation` and :meth:`derivative`.
+
+        In the basis of ``S`` (``theta = 1 / (mu + lambda_0)``): ``D E_1`` is
+        ``theta / (1 + delta theta)`` and ``D Z_{j+1} = (M_t + lambda)^-1 D E_j`` is
+        ``(1 - lambda_0 theta)^(j-1) theta^2 / (1 + delta theta)^(j+1)`` applied to ``c``.
+        """
+        lam0 = model.lam0
+        U0 = self.system.U0
+        self._warm["U1"] = U0 + model.vector(lam, lambda t, dl: t / (1 + dl * t)) / d
+        for j in range(1, self.order + 1):
+            role = f"Z{j + 1}" if j < self.order else "dphi"
+
+            def h(t: Array, dl: float, j: int = j) -> Array:
+                return (1 - lam0 * t) ** (j - 1) * t**2 / (1 + dl * t) ** (j + 1)
+
+            self._warm[role] = model.vector(lam, h) / d
 
     def reweighted(self, d2: Array) -> Deviation:
         """The same system with ``D^2 = diag(d2)``: same pattern, so no new analysis."""

@@ -174,14 +174,16 @@ def estimate_lambda(
     hi: float,
     *,
     order: int = 1,
-    max_steps: int = 30,
+    max_steps: int = 60,
     ratio: float = 1.01,
 ) -> tuple[float, float, float, int]:
-    """lambda estimate from the Gauss and Gauss-Radau quadrature models (no factorization).
+    """lambda estimate from Gauss and Gauss-Radau quadrature models (no factorization).
 
-    The root of the Gauss model is a lower bound of ``lambda*`` and the root of the Radau model
-    an upper bound (in exact arithmetic, :func:`~service.core.krylov.lanczos`); the steps stop
-    when they agree within ``ratio`` or after ``max_steps``.
+    For ``k = 1`` the root of the Gauss model is a lower bound of ``lambda*`` and the root of
+    the Radau model an upper bound (in exact arithmetic, :func:`~service.core.krylov.lanczos`);
+    the steps stop when they agree within ``ratio`` or after ``max_steps``. For ``k > 1``,
+    ``phi_k(lambda) <= phi_1(k lambda)`` termwise (Bernoulli's inequality), so ``lambda*_k``
+    lies below ``upper_1 / k``; the estimate is the root of the order-``k`` Gauss model below it.
 
     Parameters
     ----------
@@ -201,22 +203,27 @@ def estimate_lambda(
     Returns
     -------
     lam : float
-        The estimate (geometric mean of the bounds; below the upper bound when the lower one
-        is not yet informative).
+        The estimate.
     lower, upper : float
-        Quadrature bounds.
+        Bounds for order 1 (``upper / k`` bounds ``lambda*_k`` from above).
     steps : int
         Products with ``M_t``.
     """
-    bounds = [lo, hi]
+    bounds = [lo, hi, lo]
 
     def stop(gauss: Quadrature, radau: Quadrature) -> bool:
-        bounds[0] = gauss.root(tau, lo, hi)
-        bounds[1] = radau.root(tau, lo, hi)
-        return bounds[1] <= ratio * bounds[0]
+        bounds[0] = gauss.root(tau, lo, hi, order=1)
+        bounds[1] = radau.root(tau, lo, hi, order=1)
+        if order > 1:
+            bounds[2] = gauss.root(tau, lo, hi)
+        return lo < bounds[0] and bounds[1] <= ratio * bounds[0]
 
-    _, _, steps = lanczos(apply_mt, c, max_steps, stop, order)
-    lower, upper = bounds
+    # the models cost more than a step at small n: look at them every third step after four
+    _, _, steps = lanczos(apply_mt, c, max_steps, stop, order, every=3)
+    lower, upper, root_k = bounds
+    if order > 1:
+        cap = upper / order
+        return (min(root_k, cap) if root_k > lo else cap), lower, upper, steps
     # close bounds: their geometric mean; else the upper bound, from where the shift-invert
     # model of the factorization made there converges fastest (krylov.ShiftInvert)
     lam = math.sqrt(lower * upper) if upper <= 1.5 * lower else upper

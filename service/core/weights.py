@@ -147,8 +147,7 @@ def _cotangent(points: NDArray[np.float64], nb: Neighborhoods) -> sp.csr_matrix:
     W.sum_duplicates()
     # clamp to a positive floor: a fraction of the row's mean absolute weight
     row_of = np.repeat(np.arange(nb.n), np.diff(W.indptr))
-    mean_abs = np.zeros(nb.n)
-    np.add.at(mean_abs, row_of, np.abs(W.data))
+    mean_abs = np.bincount(row_of, weights=np.abs(W.data), minlength=nb.n).astype(np.float64)
     cnt = np.maximum(np.diff(W.indptr), 1)
     mean_abs /= cnt
     W.data = np.maximum(W.data, _COT_FLOOR * mean_abs[row_of])

@@ -1,4 +1,4 @@
-"""Resource limits of a job: the per-job memory limit, its enforcement, and BLAS threads.
+"""Resource limits of a job: the per-job memory limit and its enforcement.
 
 * **Admission** (:func:`check_admission`): before a job is accepted its peak memory is estimated
   by the engine (``service.core.resources.estimate_resources``); above the per-job limit the job
@@ -9,9 +9,8 @@
   killer picking a random process. ``RLIMIT_AS`` needs no privileges and works in any container
   (cgroups would need a delegated hierarchy); it counts address space, not resident memory, so
   the limit is generous by what allocators reserve but do not touch.
-* **Threads** (:func:`limit_threads`, :func:`thread_env`): OpenBLAS/OpenMP/MKL threads per job
-  process, set at run time with threadpoolctl and in the environment of processes started
-  afterwards (several jobs per machine must not each start one BLAS thread per core).
+* **Threads**: BLAS/OpenMP threads per job process come from the engine's thread budget
+  (``service.core.threads``), applied once in the process that forks the job processes.
 """
 
 from __future__ import annotations
@@ -28,15 +27,11 @@ if TYPE_CHECKING:
     from service.jobs.queue import JobSize
 
 __all__ = [
-    "THREAD_VARIABLES",
     "check_admission",
     "default_job_memory",
     "limit_memory",
-    "limit_threads",
-    "thread_env",
 ]
 
-THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 _GIB = 1024**3
 
 
@@ -112,19 +107,3 @@ def limit_memory(limit: int | None) -> int | None:
         cap = min(cap, hard)
     resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
     return cap
-
-
-def limit_threads(threads: int) -> None:
-    """Limit every BLAS/OpenMP library loaded in this process to ``threads`` threads.
-
-    threadpoolctl finds numpy's and scipy's OpenBLAS, Debian's OpenBLAS under CHOLMOD and
-    libgomp, whatever the import order (environment variables only work before the first load).
-    """
-    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
-
-    threadpool_limits(limits=max(1, int(threads)))
-
-
-def thread_env(threads: int) -> dict[str, str]:
-    """The environment variables that give BLAS/OpenMP ``threads`` threads per process."""
-    return {name: str(max(1, int(threads))) for name in THREAD_VARIABLES}

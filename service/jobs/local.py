@@ -14,9 +14,7 @@ Guarantees
   :mod:`service.jobs.child`); independently of that, every write of a run is conditional on the
   run still holding the job, so a stale process can neither record an outcome nor progress.
 
-A run's owner is presumed dead when its lease expired (the owner renews it every third of
-``lease`` seconds), or at once when the owner ran on this host and its process is gone (or is this
-very process, e.g. a container restarted with the same pid, but not a live queue of it).
+Recovery and housekeeping (the sweep): :mod:`service.jobs.local_maintenance`.
 """
 
 from __future__ import annotations
@@ -26,25 +24,25 @@ import dataclasses
 import json
 import logging
 import os
-import socket
 import threading
-import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from service.jobs import admit, problems
-from service.jobs.errors import IdempotencyConflict, storage_error
+from service.core.threads import threads_per_worker
+from service.jobs import admit
+from service.jobs.errors import IdempotencyConflict
 from service.jobs.files import JobFiles, is_job_id
 from service.jobs.limits import default_job_memory
+from service.jobs.local_maintenance import HOST, LIVE_OWNERS, Maintenance
 from service.jobs.metrics import DurationHistogram
 from service.jobs.notify import Notifier
 from service.jobs.pool import WorkerPool, default_start_method
 from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
 from service.jobs.runner import DEFAULT_RUNNER
 from service.jobs.storage_health import StorageProbe
-from service.jobs.store import JobStore, NewJob, RunningRow
+from service.jobs.store import JobStore, NewJob
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
@@ -54,43 +52,8 @@ if TYPE_CHECKING:
 __all__ = ["LocalQueue"]
 
 log = logging.getLogger("geosmooth.jobs")
-_HOST = socket.gethostname()
-_LIVE_OWNERS: set[str] = set()  # owners of the queues started in this process
-_ORPHAN_AGE = 600.0
 
-
-def _pid_alive(pid: int) -> bool:
-    """Whether a process runs (a zombie nobody reaped, e.g. under a container's PID 1, does not)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:  # gone meanwhile, or no procfs (macOS)
-        return Path("/proc/self/stat").exists() is False
-    except OSError:
-        return True
-    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
-
-
-def _owner_dead(owner: str | None) -> bool:
-    """Whether an owner is certainly gone (same host only; other hosts: lease expiry)."""
-    if not owner:
-        return True
-    host, _, rest = owner.rpartition("@")
-    pid_text = rest.partition(":")[0]
-    if host != _HOST or not pid_text.isdigit():
-        return False
-    pid = int(pid_text)
-    if pid == os.getpid():
-        return owner not in _LIVE_OWNERS
-    return not _pid_alive(pid)
-
-
-class LocalQueue:
+class LocalQueue(Maintenance):
     """Embedded job queue (the default backend of the service).
 
     Parameters
@@ -177,25 +140,14 @@ class LocalQueue:
         self.sweep_interval = sweep_interval
         self.files = JobFiles(self.data_dir)
         self.store = JobStore(self.data_dir / "jobs.sqlite3", self.result_ttl)
-        self.owner = f"{_HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
-        threads = threads_per_job or max(1, (os.cpu_count() or 1) // self.workers)
+        self.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
         self.pool = WorkerPool(
-            self.store,
-            self.data_dir,
-            self.workers,
-            self.owner,
-            runner,
-            self.job_timeout,
-            lease=lease,
-            kill_grace=kill_grace,
-            poll_interval=poll_interval,
-            start_method=self.start_method,
-            progress_interval=progress_interval,
-            on_settled=self._finished,
-            retry_backoff=retry_backoff,
-            memory_limit=memory_limit,
-            threads=threads,
-        )
+            self.store, self.data_dir, self.workers, self.owner, runner, self.job_timeout,
+            lease=lease, kill_grace=kill_grace, poll_interval=poll_interval,
+            start_method=self.start_method, progress_interval=progress_interval,
+            on_settled=self._finished, retry_backoff=retry_backoff, memory_limit=memory_limit,
+            threads=threads_per_job or threads_per_worker(self.workers),
+        )  # fmt: skip
         self.probe = StorageProbe(self.data_dir, min_free_bytes, self.store.check)
         self.notifier = Notifier(settings, self._webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
@@ -241,8 +193,8 @@ class LocalQueue:
         if self._started:
             return
         # a fresh identity per start (and per process, should the object cross a fork)
-        self.owner = self.pool.owner = f"{_HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
-        _LIVE_OWNERS.add(self.owner)
+        self.owner = self.pool.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
+        LIVE_OWNERS.add(self.owner)
         self._started = True
         self._maintain(initial=True)
         self.pool.start()
@@ -261,7 +213,7 @@ class LocalQueue:
         self.notifier.stop()
         if self._sweeper is not None:
             self._sweeper.join(10.0)
-        _LIVE_OWNERS.discard(self.owner)
+        LIVE_OWNERS.discard(self.owner)
         self._started = False
         self.store.close()
 
@@ -442,94 +394,6 @@ class LocalQueue:
             return health
         return QueueHealth(False, {**health.checks, "queue": "stopped"}, "job queue not started")
 
-    # -- maintenance ---------------------------------------------------------------------
-    def recover(self) -> tuple[builtins.list[str], builtins.list[str]]:
-        """Requeue the runs of dead servers (or fail them after ``max_attempts`` runs).
-
-        A requeued job waits ``retry_backoff * 2**(attempts-1)`` seconds before it runs again.
-
-        Returns
-        -------
-        requeued, failed : list of str
-            Job ids.
-        """
-        now = time.time()
-        requeued, failed = [], []
-        for row in self.store.running():
-            if row.owner == self.owner or not self._stale(row, now):
-                continue
-            if row.attempts >= row.max_attempts:
-                problem = problems.attempts_exhausted(row.attempts)
-                if self.store.fail(row.job_id, row.owner or "", row.attempts, problem):
-                    failed.append(row.job_id)
-                    self._finished(row.job_id)
-            elif self.store.requeue(row.job_id, row.owner or "", row.attempts, True,
-                                    now + self.pool.backoff(row.attempts)):  # fmt: skip
-                requeued.append(row.job_id)
-        if requeued:
-            log.warning("requeued %d interrupted job(s): %s", len(requeued), ", ".join(requeued))
-            self.pool.notify()
-        if failed:
-            log.warning("gave up %d job(s) interrupted too often: %s", len(failed),
-                        ", ".join(failed))  # fmt: skip
-        return requeued, failed
-
-    @staticmethod
-    def _stale(row: RunningRow, now: float) -> bool:
-        return row.lease_until is None or row.lease_until < now or _owner_dead(row.owner)
-
-    def expire(self, now: float | None = None) -> builtins.list[str]:
-        """Delete finished jobs older than ``result_ttl``; returns their ids."""
-        gone = []
-        for job_id in self.store.expired(now):
-            if self.delete(job_id):
-                gone.append(job_id)
-        return gone
-
-    def sweep(self) -> None:
-        """One maintenance pass: recover runs of dead servers, purge expired results, remove
-        stray temp files, deliver webhooks that are due."""
-        self._maintain()
-
-    def _maintain(self, initial: bool = False) -> None:
-        steps: builtins.list[Callable[[], object]] = [
-            self._keep_reserve, self.recover, self.expire, self._remove_strays,
-            self._webhooks_due,
-        ]  # fmt: skip
-        if initial:
-            steps.append(self._remove_orphans)
-        for step in steps:
-            try:
-                step()
-            except Exception as exc:
-                if storage_error(exc) is None:
-                    log.exception("job store maintenance failed")
-                else:  # full or read-only disk: try again at the next sweep
-                    log.warning("job store maintenance postponed: %s", exc)
-
-    def _sweep_loop(self) -> None:
-        while not self._stop_sweeper.wait(self.sweep_interval):
-            self._maintain()
-
-    def _keep_reserve(self) -> None:
-        self.store.keep_reserve(self.reserve_bytes, self.min_free_bytes)
-
-    def _remove_orphans(self) -> None:
-        for job_id in self.files.orphans(self.store.ids(), _ORPHAN_AGE):
-            self.files.remove(job_id)
-
-    def _remove_strays(self) -> None:
-        if time.monotonic() - self._last_strays < _ORPHAN_AGE and self._last_strays > 0:
-            return  # a walk of every job directory: at start, then every 10 minutes
-        self._last_strays = time.monotonic()
-        for tmp in self.files.stray_temporaries(_ORPHAN_AGE):
-            tmp.unlink(missing_ok=True)
-
-    def _migrate_v0_files(self) -> None:
-        for job_id in self.store.ids():
-            if self.files.legacy_weld(job_id):
-                self.store.set_weld(job_id)
-
     def _finished(self, job_id: str) -> None:
         """A job reached a final state in this process: metrics, then its webhook."""
         rec = self.store.get(job_id)
@@ -540,10 +404,6 @@ class LocalQueue:
         if rec.status is JobStatus.SUCCEEDED and rec.run_seconds is not None:
             self._histogram.observe(float(rec.run_seconds))
         if rec.webhook_url:
-            self.notifier.enqueue(job_id)
-
-    def _webhooks_due(self) -> None:
-        for job_id in self.store.webhooks_due():
             self.notifier.enqueue(job_id)
 
     def _webhook_payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:

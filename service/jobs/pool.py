@@ -31,7 +31,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from service.jobs import child, problems
-from service.jobs.limits import thread_env
 from service.jobs.store import Claim, JobStore
 
 __all__ = ["WorkerPool", "default_start_method"]
@@ -175,7 +174,8 @@ class WorkerPool:
     def start(self) -> None:
         """Prepare the process context (start the forkserver) and start the slot threads."""
         self._ctx = multiprocessing.get_context(self.start_method)
-        os.environ.update(thread_env(self.threads))  # read by BLAS as a job process loads it
+        # read by service.jobs.preload in the forkserver: the limit every job process inherits
+        os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.threads)
         if self.start_method == "forkserver":
             preload = []
             names = (*_PRELOAD, self.runner.partition(":")[0], *main_module_imports())

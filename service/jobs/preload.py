@@ -10,14 +10,17 @@ rest first-use initialisation; see service/jobs/README.md.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 from service.core.pipeline import smooth
+from service.core.threads import limit_threads
 from service.io import GeometryDocument, read_geometry, write_geometry
 
-__all__ = ["warm_up"]
+__all__ = ["apply_thread_limit", "warm_up"]
 
 
 def warm_up() -> None:
@@ -33,4 +36,13 @@ def warm_up() -> None:
         read_geometry(write_geometry(doc, fmt, result.points), fmt)
 
 
+def apply_thread_limit() -> None:
+    """Cap the BLAS/OpenMP pools at ``GEOSMOOTH_THREADS_PER_JOB`` (set by the pool before it
+    starts the forkserver): the cap is a library global, inherited by every fork."""
+    threads = os.environ.get("GEOSMOOTH_THREADS_PER_JOB")
+    if threads:
+        limit_threads(int(threads))
+
+
+apply_thread_limit()
 warm_up()

@@ -85,9 +85,15 @@ class ProgressTracker:
 
     tolerance: float = 1e-3
     _first_error: float | None = field(default=None, repr=False)
+    _last: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def update(self, event: ProgressEvent) -> dict[str, Any]:
-        """The progress dict for ``event``."""
+        """The progress dict for ``event``.
+
+        The search's latest ``iteration``, ``lambda``, ``phi``, ``tau`` and relative error carry
+        over to the later stages (``postprocess``, ``writing``), whose events do not repeat
+        them: the iteration count never goes back within a run.
+        """
         rel = event.relative_error
         percent = self._percent(event, rel)
         elapsed = float(event.elapsed)
@@ -96,13 +102,15 @@ class ProgressTracker:
             eta = 0.0
         elif percent >= _MIN_PERCENT_FOR_ETA and elapsed > 0:
             eta = round(elapsed * (100.0 - percent) / percent, 3)
+        last = self._last
+        found = {"lambda": _finite(event.lam), "phi": _finite(event.phi),
+                 "tau": _finite(event.tau), "relative_error": _finite(rel)}  # fmt: skip
+        values = {k: last.get(k) if v is None else v for k, v in found.items()}
+        self._last = {**values, "iteration": max(int(event.iteration), last.get("iteration", 0))}
         return {
             "stage": event.stage,
-            "iteration": int(event.iteration),
-            "lambda": _finite(event.lam),
-            "phi": _finite(event.phi),
-            "tau": _finite(event.tau),
-            "relative_error": _finite(rel),
+            "iteration": self._last["iteration"],
+            **values,
             "percent": round(percent, 2),
             "eta_seconds": eta,
             "elapsed_seconds": round(elapsed, 3),

@@ -40,15 +40,13 @@ class _Config:
     backend: Backend | None = None
     runner: str = DEFAULT_RUNNER
     memory_limit: int | None = None
-    threads: int = 1
 
 
-def configure(backend: Backend, runner: str, memory_limit: int | None, threads: int) -> None:
+def configure(backend: Backend, runner: str, memory_limit: int | None) -> None:
     """Set what the work horses of this worker use (called in the worker before it forks)."""
     _Config.backend = backend
     _Config.runner = runner
     _Config.memory_limit = memory_limit
-    _Config.threads = threads
 
 
 def _infrastructure(exc: BaseException) -> bool:

@@ -32,8 +32,12 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
+from rq import Worker
+
+from service.core.threads import limit_threads, threads_per_worker
 from service.jobs import problems
-from service.jobs.limits import default_job_memory, limit_threads, thread_env
+from service.jobs.limits import default_job_memory
+from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
 from service.jobs.rq_backend import Backend
 from service.jobs.runner import DEFAULT_RUNNER
@@ -44,7 +48,7 @@ if TYPE_CHECKING:
 
     from service.settings import Settings
 
-__all__ = ["main", "make_worker"]
+__all__ = ["GeosmoothWorker", "main", "make_worker"]
 
 log = logging.getLogger("geosmooth.jobs")
 
@@ -53,98 +57,96 @@ _CRASH_SIGNALS = frozenset({signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal
 _PRELOAD = ("service.jobs.rq_tasks", "service.jobs.preload")
 
 
-def make_worker(backend: Backend, *, name: str | None = None, runner: str = DEFAULT_RUNNER) -> Any:
-    """A configured :class:`GeosmoothWorker` (an ``rq.Worker``) for ``backend``."""
-    from rq import Worker
+class GeosmoothWorker(Worker):  # type: ignore[misc]
+    """RQ's forking worker with geosmooth's run bookkeeping (see the module docstring)."""
 
-    from service.jobs import rq_tasks
-    from service.jobs.notify import Notifier
+    def __init__(self, backend: Backend, name: str | None = None) -> None:
+        settings = backend.settings
+        super().__init__(
+            [backend.queue], name=name, connection=backend.redis,
+            job_monitoring_interval=max(1, int(settings.worker_lease // 3)),
+            work_horse_killed_handler=self._horse_killed,
+        )  # fmt: skip
+        self.backend = backend
+        store = backend.store
+        self.notifier = Notifier(settings, backend.webhook_payload, store.claim_webhook,
+                                 store.webhook_state)  # fmt: skip
+        self.stopping = False  # SIGTERM/SIGINT received: exit instead of starting again
 
-    settings = backend.settings
+    @staticmethod
+    def _job_id(job: Job) -> str:
+        return str(job.args[0])
 
-    class GeosmoothWorker(Worker):  # type: ignore[misc]
-        """RQ's forking worker with geosmooth's run bookkeeping (see the module docstring)."""
-
-        def __init__(self) -> None:
-            super().__init__(
-                [backend.queue], name=name, connection=backend.redis,
-                job_monitoring_interval=max(1, int(settings.worker_lease // 3)),
-                work_horse_killed_handler=self._horse_killed,
-            )  # fmt: skip
-            store = backend.store
-            self.notifier = Notifier(settings, backend.webhook_payload, store.claim_webhook,
-                                     store.webhook_state)  # fmt: skip
-            self.stopping = False  # SIGTERM/SIGINT received: exit instead of starting again
-
-        @staticmethod
-        def _job_id(job: Job) -> str:
-            return str(job.args[0])
-
-        def _run_of(self, job: Job) -> dict[str, Any]:
-            return {"owner": self.name, "rq_job": job.id}
-
-        def maintain_heartbeats(self, job: Job, execution: Any) -> None:
-            super().maintain_heartbeats(job, execution)
-            job_id = self._job_id(job)
-            renewed = backend.store.update(
-                job_id, expect=(JobStatus.RUNNING,), when=self._run_of(job),
-                lease_until=time.time() + settings.worker_lease,
-            )  # fmt: skip
-            if renewed is None:
-                rec = backend.store.get(job_id)
-                if rec is None or rec.status is not JobStatus.QUEUED:  # cancelled or taken over
-                    log.info("job %s: the run lost its job, stopping it", job_id)
-                    self.kill_horse()
-
-        def execute_job(self, job: Job, queue: Queue) -> None:
-            super().execute_job(job, queue)
-            rec = backend.store.get(self._job_id(job))
-            if rec is not None and rec.finished and rec.webhook_url:
-                self.notifier.enqueue(rec.id)
-
-        def _horse_killed(self, job: Job, retpid: int, status: int, rusage: Any) -> None:
-            job_id = self._job_id(job)
-            raw = backend.store.raw(job_id) or {}
-            if raw.get("status") != "running" or raw.get("owner") != self.name or raw.get(
-                    "rq_job") != job.id:  # fmt: skip
-                return  # cancelled (RQ's stop command) or taken over: already recorded
-            when = {"owner": self.name, "attempts": raw["attempts"]}
-            sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
-            if sig == signal.SIGALRM:
-                backend.fail(job_id, when, problems.timed_out(settings.job_timeout))
-            elif self.stopping:
-                backend.requeue(job_id, when, raw["attempts"], count=False)
-            elif sig is None or sig in _CRASH_SIGNALS:
-                code = -sig if sig else os.waitstatus_to_exitcode(status)
-                backend.fail(job_id, when, problems.crashed(code))
-            elif raw["attempts"] >= raw["max_attempts"]:
-                last = problems.crashed(-sig)["detail"]
-                backend.fail(job_id, when, problems.attempts_exhausted(raw["attempts"], last))
-            else:  # killed from outside (the OOM killer's SIGKILL): like a server death
-                log.warning("job %s: work horse killed by signal %s, requeued", job_id, sig)
-                backend.requeue(job_id, when, raw["attempts"], count=True)
-
-        def request_stop(self, signum: int, frame: Any) -> None:
-            """SIGTERM/SIGINT: put the running job back (not a try), then exit."""
-            self.stopping = True
-            super().request_stop(signum, frame)
-            if self.horse_pid:
+    def maintain_heartbeats(self, job: Job, execution: Any) -> None:
+        """RQ's heartbeat, then the run's lease; a run that lost its job is stopped."""
+        super().maintain_heartbeats(job, execution)
+        store, job_id = self.backend.store, self._job_id(job)
+        renewed = store.update(
+            job_id, expect=(JobStatus.RUNNING,), when={"owner": self.name, "rq_job": job.id},
+            lease_until=time.time() + self.backend.settings.worker_lease,
+        )  # fmt: skip
+        if renewed is None:
+            rec = store.get(job_id)
+            if rec is None or rec.status is not JobStatus.QUEUED:  # cancelled or taken over
+                log.info("job %s: the run lost its job, stopping it", job_id)
                 self.kill_horse()
 
-    worker = GeosmoothWorker()
+    def execute_job(self, job: Job, queue: Queue) -> None:
+        """RQ's run of a job, then its webhook (in the background)."""
+        super().execute_job(job, queue)
+        rec = self.backend.store.get(self._job_id(job))
+        if rec is not None and rec.finished and rec.webhook_url:
+            self.notifier.enqueue(rec.id)
+
+    def _horse_killed(self, job: Job, retpid: int, status: int, rusage: Any) -> None:
+        """Record the end of a horse that died without recording it (see the module docstring)."""
+        backend, job_id = self.backend, self._job_id(job)
+        raw = backend.store.raw(job_id) or {}
+        ours = (raw.get("status"), raw.get("owner"), raw.get("rq_job"))
+        if ours != ("running", self.name, job.id):
+            return  # cancelled (RQ's stop command) or taken over: already recorded
+        when, attempts = {"owner": self.name, "attempts": raw["attempts"]}, raw["attempts"]
+        sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
+        if sig == signal.SIGALRM:
+            backend.fail(job_id, when, problems.timed_out(backend.settings.job_timeout))
+        elif self.stopping:
+            backend.requeue(job_id, when, attempts, count=False)
+        elif sig is None or sig in _CRASH_SIGNALS:
+            code = -sig if sig else os.waitstatus_to_exitcode(status)
+            backend.fail(job_id, when, problems.crashed(code))
+        elif attempts >= raw["max_attempts"]:
+            last = problems.crashed(-sig)["detail"]
+            backend.fail(job_id, when, problems.attempts_exhausted(attempts, last))
+        else:  # killed from outside (the OOM killer's SIGKILL): like a server death
+            log.warning("job %s: work horse killed by signal %s, requeued", job_id, sig)
+            backend.requeue(job_id, when, attempts, count=True)
+
+    def request_stop(self, signum: int, frame: Any) -> None:
+        """SIGTERM/SIGINT: put the running job back (not a try), then exit."""
+        self.stopping = True
+        super().request_stop(signum, frame)
+        if self.horse_pid:
+            self.kill_horse()
+
+
+def make_worker(
+    backend: Backend, *, name: str | None = None, runner: str = DEFAULT_RUNNER
+) -> GeosmoothWorker:
+    """A configured worker for ``backend`` (its work horses run ``runner``)."""
+    from service.jobs import rq_tasks
+
+    settings = backend.settings
     memory = settings.job_memory_limit
     if memory is None:
         memory = default_job_memory(settings.workers)
-    rq_tasks.configure(backend, runner, memory or None, _threads(settings))
-    return worker
+    rq_tasks.configure(backend, runner, memory or None)
+    return GeosmoothWorker(backend, name)
 
 
 def _threads(settings: Settings) -> int:
     """BLAS threads per job: ``GEOSMOOTH_THREADS_PER_JOB``, else cores / ``GEOSMOOTH_WORKERS``
     (the worker processes sharing this machine)."""
-    if settings.threads_per_job:
-        return settings.threads_per_job
-    return max(1, (os.cpu_count() or 1) // settings.workers)
+    return settings.threads_per_job or threads_per_worker(settings.workers)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -166,7 +168,6 @@ def main(argv: list[str] | None = None) -> int:
         print("geosmooth worker: set GEOSMOOTH_QUEUE=rq (and GEOSMOOTH_REDIS_URL)",
               file=sys.stderr)  # fmt: skip
         return 2
-    os.environ.update(thread_env(_threads(settings)))
     os.environ["GEOSMOOTH_WORKER_PID"] = str(os.getpid())
     limit_threads(_threads(settings))  # inherited by every horse (a global of the libraries)
     for module in (*_PRELOAD, ns.runner.partition(":")[0]):  # loaded once, shared by every horse

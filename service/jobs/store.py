@@ -1,4 +1,4 @@
-"""SQLite job metadata, safe across threads and processes.
+"""SQLite job metadata, safe across threads and processes (plumbing: :mod:`service.jobs.sqlite_db`).
 
 One connection per (process, thread), WAL journal, ``synchronous=FULL`` (a committed row
 survives a crash of the process and of the machine). Every state change made by a worker is
@@ -9,76 +9,20 @@ away (cancelled, timed out, requeued after its server died) can no longer write 
 from __future__ import annotations
 
 import builtins
-import contextlib
-import functools
 import json
-import logging
-import os
 import sqlite3
-import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.progress import queued_progress
 from service.jobs.queue import FINISHED, JobRecord, JobStatus
+from service.jobs.sqlite_db import Database, with_reserve
 
 __all__ = ["Claim", "JobStore", "NewJob", "RunningRow"]
 
-log = logging.getLogger("geosmooth.jobs")
-
-_SCHEMA_VERSION = 1
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS jobs (
-    seq             INTEGER PRIMARY KEY AUTOINCREMENT,
-    id              TEXT NOT NULL UNIQUE,
-    status          TEXT NOT NULL,
-    fmt             TEXT NOT NULL,
-    filename        TEXT,
-    params          TEXT NOT NULL,
-    input_bytes     INTEGER NOT NULL,
-    created_at      REAL NOT NULL,
-    updated_at      REAL NOT NULL,
-    started_at      REAL,
-    finished_at     REAL,
-    attempts        INTEGER NOT NULL DEFAULT 0,
-    max_attempts    INTEGER NOT NULL,
-    owner           TEXT,
-    lease_until     REAL,
-    pid             INTEGER,
-    problem         TEXT,
-    run_seconds     REAL,
-    weld            INTEGER NOT NULL DEFAULT 0,
-    tenant          TEXT,
-    webhook_url     TEXT,
-    idempotency_key TEXT,
-    request_hash    TEXT,
-    not_before      REAL,
-    progress        TEXT,
-    webhook_state   TEXT
-);
-CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, seq);
-CREATE INDEX IF NOT EXISTS jobs_tenant ON jobs (tenant, seq);
-CREATE UNIQUE INDEX IF NOT EXISTS jobs_idempotency ON jobs (COALESCE(tenant, ''), idempotency_key)
-    WHERE idempotency_key IS NOT NULL;
-"""
-# version 0 (before tenants): progress in five columns, the report in the row (and in
-# report.json), weld in options.json next to the input.
-_V0_ADDED = (
-    "weld INTEGER NOT NULL DEFAULT 0", "tenant TEXT", "webhook_url TEXT", "idempotency_key TEXT",
-    "request_hash TEXT", "not_before REAL", "progress TEXT", "webhook_state TEXT",
-)  # fmt: skip
-_V0_DROPPED = ("iteration", "lam", "phi", "tau", "relative_error", "report")
-_V0_PROGRESS = (
-    "UPDATE jobs SET progress = json_object('stage', CASE status WHEN 'succeeded' THEN 'done'"
-    " ELSE 'search' END, 'iteration', iteration, 'lambda', lam, 'phi', phi, 'tau', tau,"
-    " 'relative_error', relative_error, 'percent', NULL, 'eta_seconds', NULL,"
-    " 'elapsed_seconds', NULL) WHERE iteration IS NOT NULL"
-)
 _MAX_OFFSET = 2**62
 
 _FINISHED = tuple(s.value for s in FINISHED)
@@ -109,29 +53,6 @@ class RunningRow:
     max_attempts: int
 
 
-_F = TypeVar("_F", bound=Callable[..., Any])
-RESERVE_NAME = "jobs.reserve"
-
-
-def _with_reserve(method: _F) -> _F:
-    """Retry a state change once after releasing the store's reserve when the disk is full.
-
-    The reserve is a file the server keeps next to the database (:meth:`JobStore.keep_reserve`);
-    without it a full disk would leave runs ``running`` (their outcome cannot be written).
-    """
-
-    @functools.wraps(method)
-    def wrapper(self: JobStore, *args: Any, **kwargs: Any) -> Any:
-        try:
-            return method(self, *args, **kwargs)
-        except sqlite3.OperationalError as exc:
-            if "full" not in str(exc).lower() or not self.release_reserve():
-                raise
-            return method(self, *args, **kwargs)
-
-    return wrapper  # type: ignore[return-value]
-
-
 @dataclass(frozen=True)
 class NewJob:
     """What ``insert`` stores for a submitted job."""
@@ -149,7 +70,7 @@ class NewJob:
     request_hash: str | None = None
 
 
-class JobStore:
+class JobStore(Database):
     """Job metadata in one SQLite file.
 
     Parameters
@@ -163,140 +84,8 @@ class JobStore:
     """
 
     def __init__(self, path: Path, result_ttl: float | None = None, *, create: bool = True) -> None:
-        self.path = Path(path)
         self.result_ttl = result_ttl
-        self._local = threading.local()
-        self._lock = threading.Lock()
-        self._all: builtins.list[sqlite3.Connection] = []
-        self.migrated_v0 = False
-        if create:
-            self._create()
-
-    def _create(self) -> None:
-        try:
-            self._create_schema()
-        except sqlite3.OperationalError as exc:  # a read-only file system: reads only
-            if self._conn() is getattr(self._local, "conn", None):
-                raise
-            log.warning("job store opened read-only: %s", exc)
-
-    def _create_schema(self) -> None:
-        conn = self._conn()
-        if conn.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
-            conn.execute("PRAGMA journal_mode=WAL")
-        if conn.execute("PRAGMA user_version").fetchone()[0] == _SCHEMA_VERSION:
-            return  # nothing to write (a full disk must not keep the store from opening)
-        with self._write() as conn:
-            version = conn.execute("PRAGMA user_version").fetchone()[0]
-            columns = {r[1] for r in conn.execute("PRAGMA table_info(jobs)")}
-            if version == 0 and "report" in columns:
-                self._migrate_v0(conn)
-            for statement in _SCHEMA.split(";"):
-                if statement.strip():
-                    conn.execute(statement)
-            conn.execute(f"PRAGMA user_version = {_SCHEMA_VERSION}")
-
-    def _migrate_v0(self, conn: sqlite3.Connection) -> None:
-        for column in _V0_ADDED:
-            conn.execute(f"ALTER TABLE jobs ADD COLUMN {column}")
-        conn.execute(_V0_PROGRESS)
-        for column in _V0_DROPPED:
-            conn.execute(f"ALTER TABLE jobs DROP COLUMN {column}")
-        self.migrated_v0 = True
-
-    # -- connections ---------------------------------------------------------------------
-    def _conn(self) -> sqlite3.Connection:
-        conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
-        if conn is None or getattr(self._local, "pid", None) != os.getpid():
-            try:
-                conn = sqlite3.connect(
-                    self.path, timeout=30.0, isolation_level=None, check_same_thread=False
-                )
-                conn.execute("PRAGMA schema_version").fetchone()
-            except sqlite3.OperationalError:
-                if not self.path.exists():
-                    raise
-                return self._read_only()  # not cached: the next call tries read-write again
-            conn.row_factory = sqlite3.Row
-            conn.execute("PRAGMA synchronous=FULL")
-            conn.execute("PRAGMA busy_timeout=30000")
-            self._local.conn = conn
-            self._local.pid = os.getpid()
-            with self._lock:
-                self._all.append(conn)
-        return conn
-
-    def _read_only(self) -> sqlite3.Connection:
-        """A connection for a store on a read-only file system (reads only; SQLite cannot open
-        a WAL database there otherwise). ``immutable``: nothing can change the file meanwhile."""
-        conn = sqlite3.connect(f"{self.path.as_uri()}?mode=ro&immutable=1", uri=True,
-                               isolation_level=None, check_same_thread=False)  # fmt: skip
-        conn.row_factory = sqlite3.Row
-        return conn
-
-    @contextmanager
-    def _write(self) -> Iterator[sqlite3.Connection]:
-        """A write transaction that takes the database lock up front (no upgrade deadlocks)."""
-        conn = self._conn()
-        conn.execute("BEGIN IMMEDIATE")
-        try:
-            yield conn
-        except BaseException:
-            with contextlib.suppress(sqlite3.Error):  # a failed COMMIT may have rolled back
-                conn.execute("ROLLBACK")
-            raise
-        try:
-            conn.execute("COMMIT")
-        except BaseException:
-            with contextlib.suppress(sqlite3.Error):
-                conn.execute("ROLLBACK")
-            raise
-
-    @property
-    def reserve(self) -> Path:
-        """The reserve file (released to record outcomes on a full disk)."""
-        return self.path.with_name(RESERVE_NAME)
-
-    def release_reserve(self) -> bool:
-        """Delete the reserve file; whether there was one."""
-        try:
-            self.reserve.unlink()
-        except FileNotFoundError:
-            return False
-        return True
-
-    def keep_reserve(self, size: int, min_free: int = 0) -> bool:
-        """(Re)create the reserve of ``size`` bytes when the disk has room for it and
-        ``min_free`` more; whether it exists afterwards."""
-        if size <= 0:
-            return False
-        if self.reserve.exists() and self.reserve.stat().st_size >= size:
-            return True
-        st = os.statvfs(self.path.parent)
-        if st.f_bavail * st.f_frsize < size + min_free:
-            return False
-        tmp = self.reserve.with_suffix(".tmp")
-        try:
-            with open(tmp, "wb") as fh:
-                fh.truncate(0)
-                for _ in range(0, size, 1 << 20):
-                    fh.write(b"\0" * min(1 << 20, size - fh.tell()))
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, self.reserve)
-        except OSError:
-            tmp.unlink(missing_ok=True)
-            return False
-        return True
-
-    def close(self) -> None:
-        """Close every connection this object opened in this process."""
-        with self._lock:
-            conns, self._all = self._all, []
-        for conn in conns:
-            with contextlib.suppress(sqlite3.Error):  # closing is best effort
-                conn.close()
-        self._local = threading.local()
+        super().__init__(path, create=create)
 
     def check(self) -> str:
         """``"ok"``, or ``"corrupt"`` when SQLite's quick check finds damage."""
@@ -486,7 +275,7 @@ class JobStore:
         """Record the progress of a run; ``False`` if the run lost the job."""
         return self._update_run(job_id, owner, attempt, "progress = ?", (json.dumps(progress),))
 
-    @_with_reserve
+    @with_reserve
     def succeed(
         self, job_id: str, owner: str, attempt: int, progress: dict[str, Any], run_seconds: float
     ) -> bool:
@@ -499,7 +288,7 @@ class JobStore:
             (JobStatus.SUCCEEDED.value, time.time(), run_seconds, json.dumps(progress)),
         )
 
-    @_with_reserve
+    @with_reserve
     def fail(self, job_id: str, owner: str, attempt: int, problem: dict[str, Any]) -> bool:
         """Mark a run failed with a problem; ``False`` if the run lost the job."""
         return self._update_run(
@@ -510,7 +299,7 @@ class JobStore:
             (JobStatus.FAILED.value, time.time(), json.dumps(problem)),
         )
 
-    @_with_reserve
+    @with_reserve
     def requeue(
         self,
         job_id: str,
@@ -533,7 +322,7 @@ class JobStore:
              json.dumps(queued_progress())),
         )  # fmt: skip
 
-    @_with_reserve
+    @with_reserve
     def cancel(self, job_id: str) -> tuple[JobRecord | None, JobStatus | None]:
         """Cancel a queued or running job.
 
@@ -583,7 +372,7 @@ class JobStore:
             )
             return cur.rowcount == 1
 
-    @_with_reserve
+    @with_reserve
     def webhook_state(self, job_id: str, state: str) -> None:
         """Record the outcome of a delivery: ``delivered`` or ``failed``."""
         with self._write() as conn:
@@ -601,7 +390,7 @@ class JobStore:
         return [r[0] for r in rows]
 
     # -- deletion ------------------------------------------------------------------------
-    @_with_reserve
+    @with_reserve
     def delete_finished(self, job_id: str) -> bool:
         """Delete a finished job's row; ``False`` if unknown or not finished."""
         with self._write() as conn:

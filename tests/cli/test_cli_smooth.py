@@ -31,7 +31,8 @@ def test_bunny_tau_report_and_progress(cli: Run, data: Callable[[str], Path], tm
     src = data("bunny.ply")
     out, rep = tmp_path / "bunny-smooth.ply", tmp_path / "report.json"
     tau = 2e-4
-    res = cli(["smooth", src, "-o", out, "--tau", tau, "--report", rep])
+    # free displacement: the deviations recomputed from the float32 file below match to 1e-6
+    res = cli(["smooth", src, "-o", out, "--tau", tau, "--report", rep, "--displacement", "free"])
     assert res.returncode == 0, res.stderr
     assert res.stdout == ""
 

@@ -110,14 +110,14 @@ def test_tau_beyond_phi0_is_refused_or_fails_with_the_valid_range(live: LiveServ
     pts, faces = noisy_sphere(1, seed=55)
     with Client(live.url) as client:
         try:  # a 422 at submit once the service checks the range up front, a failed job before
-            client.smooth({"points": pts, "faces": faces}, tau=1e9)
+            client.smooth({"points": pts, "faces": faces}, tau=1e9, displacement="free")
         except InvalidInput as exc:
             field, valid = exc.field, exc.problem.get("valid_range")
         except JobFailed as exc:
             assert exc.job.status == "failed" and exc.code == "tau-out-of-range"
             field, valid = exc.field, exc.job.error.extra.get("valid_range")  # type: ignore[union-attr]
     assert field == "params.tau"
-    phi0 = float(((pts - pts.mean(axis=0)) ** 2).sum())  # eq. 14, unit weights, one part
+    phi0 = float(((pts - pts.mean(axis=0)) ** 2).sum())  # eq. 14 (free displacement), one part
     assert valid[0] == 0 and valid[1] == pytest.approx(phi0, rel=1e-9)
 
 

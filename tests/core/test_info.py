@@ -13,7 +13,7 @@ from service.core.info import describe
 
 def test_mesh_phi0_is_centroid_deviation() -> None:
     P, F = noisy_icosphere(2, 0.01)
-    d = describe(Geometry(P, faces=F))
+    d = describe(Geometry(P, faces=F), SmoothingParams(displacement="free"))
     assert d["kind"] == "mesh" and d["n_points"] == len(P) and d["n_faces"] == len(F)
     assert d["n_edges"] == 3 * len(F) // 2  # closed triangle mesh: E = 3F/2
     phi0 = float(np.sum((P - P.mean(axis=0)) ** 2))
@@ -65,3 +65,18 @@ def test_noise_estimate_and_suggestion() -> None:
     assert np.isclose(d["suggested_rms"] ** 2 * len(P), d["suggested_tau"])
     res = smooth(g, SmoothingParams())  # the automatic tau is the suggestion
     assert np.isclose(res.tau, d["suggested_tau"]) and res.sigma_estimate == d["sigma_estimate"]
+
+
+def test_phi0_follows_the_displacement_mode() -> None:
+    """The valid range describe() states is the one smooth() enforces, in every mode."""
+    import pytest
+
+    from service.core.errors import TauOutOfRange
+
+    P, F = noisy_icosphere(2, 0.02, seed=4)
+    g = Geometry(P, faces=F)
+    for mode in ("free", "normal"):
+        phi0 = describe(g, SmoothingParams(displacement=mode))["phi0"]
+        smooth(g, SmoothingParams(tau=0.99 * phi0, displacement=mode))
+        with pytest.raises(TauOutOfRange):
+            smooth(g, SmoothingParams(tau=1.01 * phi0, displacement=mode))

@@ -80,3 +80,21 @@ def test_curve_network_junctions() -> None:
         (1, 3),
         (2, 3),
     ]
+
+
+def test_delaunay_small_k_matches_local_triangulations() -> None:
+    """Regression (issues 9, 15): k = 3..8 crashed in _polar_hull_fans (IndexError). The ring
+    is the Delaunay 1-ring of the point among its k nearest neighbours (planar sample)."""
+    rng = np.random.default_rng(4)
+    Q = rng.random((300, 2))
+    P = np.c_[Q, np.zeros(len(Q))] @ random_rotation(3, seed=5)
+    for k in range(3, 9):
+        nb = cloud_delaunay_neighborhoods(P, k)
+        _, knn = cKDTree(Q).query(Q, k + 1)
+        for i in range(0, len(Q), 7):
+            local = knn[i]  # i itself first
+            tri = Delaunay(Q[local])
+            indptr, ind = tri.vertex_neighbor_vertices
+            first = int(np.flatnonzero(local == i)[0])
+            ring = set(local[ind[indptr[first] : indptr[first + 1]]].tolist())
+            assert _nbrs(nb.adjacency, i) == ring, (k, i)

@@ -105,7 +105,7 @@ def test_limit_small_lambda_tends_to_weighted_centroid(kind: str) -> None:
     centroid = (w2[:, None] * g.points).sum(0) / w2.sum()
     errs = []
     for lam in (1e-6, 1e-8, 1e-10):
-        X = smooth(g, SmoothingParams(lam=lam)).points
+        X = smooth(g, SmoothingParams(lam=lam, preset="report")).points
         errs.append(np.abs(X - centroid).max())
     assert errs[2] < 1e-4 * np.abs(P).max()
     # X(lambda) - centroid = O(lambda): two decades of lambda give about two decades of error
@@ -183,20 +183,21 @@ def test_tau_out_of_range_gives_valid_range() -> None:
     g = Geometry(P, faces=F)
     phi0 = float(np.sum((P - P.mean(0)) ** 2))  # eq. (14) with D = I
     with pytest.raises(TauOutOfRange) as info:
-        smooth(g, SmoothingParams(tau=phi0 * 1.0001))
+        smooth(g, SmoothingParams(tau=phi0 * 1.0001, preset="report"))
     assert info.value.tau_max == pytest.approx(phi0, rel=1e-12)
     assert f"{phi0:.6g}" in str(info.value)
     with pytest.raises(TauOutOfRange) as info2:
-        smooth(g, SmoothingParams(rms=10.0))
+        smooth(g, SmoothingParams(rms=10.0, preset="report"))
     assert info2.value.field == "params.rms"
-    smooth(g, SmoothingParams(tau=phi0 * 0.999))  # just inside is fine
+    smooth(g, SmoothingParams(tau=phi0 * 0.999, preset="report"))  # just inside is fine
 
 
 def test_fixed_points_bit_identical() -> None:
     P, F = noisy_icosphere(3, 0.02)
     fixed = np.arange(0, len(P), 17)
     g = Geometry(P * 1e3 + np.pi, faces=F, fixed=fixed)
-    res = smooth(g, SmoothingParams(tau=float(np.sum((g.points - g.points.mean(0)) ** 2)) * 1e-3))
+    tau = float(np.sum((g.points - g.points.mean(0)) ** 2)) * 1e-3
+    res = smooth(g, SmoothingParams(tau=tau, preset="report"))
     assert np.array_equal(res.points[fixed], g.points[fixed])
     assert res.n_fixed == fixed.size
     weights = np.ones(len(P))
@@ -243,9 +244,11 @@ def test_reproduction_property(weights: str) -> None:
         P = P2 @ random_rotation(3, seed=2)
         g = Geometry(P, faces=F)
         uniform = g
-    res = smooth(g, SmoothingParams(lam=1e-3, weights=weights, fix_boundary=True))
+    res = smooth(g, SmoothingParams(lam=1e-3, weights=weights, fix_boundary=True, preset="report"))
     assert np.abs(res.points - P).max() < 1e-10
-    moved = smooth(uniform, SmoothingParams(lam=1e-3, weights="uniform", fix_boundary=True))
+    moved = smooth(
+        uniform, SmoothingParams(lam=1e-3, weights="uniform", fix_boundary=True, preset="report")
+    )
     assert np.abs(moved.points - P).max() > 1e-3  # uniform weights do not reproduce
 
 
@@ -340,7 +343,7 @@ def test_one_analysis_and_one_factorization_per_lambda(monkeypatch: pytest.Monke
 
     monkeypatch.setattr(solver._cholmod, "analyze", counting)
     P, F = noisy_icosphere(2, 0.02)
-    res = smooth(Geometry(P, faces=F), SmoothingParams(tau=0.05, search="rational"))
+    res = smooth(Geometry(P, faces=F), SmoothingParams(tau=0.05, preset="report"))
     assert calls["analyze"] == 1
     assert res.factorizations == res.iterations
 

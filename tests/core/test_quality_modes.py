@@ -113,3 +113,26 @@ def test_report_preset_reproduces_the_report() -> None:
                                   solver="cholmod"))
     assert a.weights == "mean-value" and a.search == "rational"
     np.testing.assert_array_equal(a.points, b.points)
+
+
+def test_gcv_displaces_freely() -> None:
+    from service.core.errors import ParameterError
+
+    g = _mesh()
+    assert smooth(g, SmoothingParams(tau="gcv", order=1)).displacement == "free"
+    with pytest.raises(ParameterError) as info:
+        smooth(g, SmoothingParams(tau="gcv", displacement="normal"))
+    assert info.value.field == "params.displacement"
+
+
+def test_auto_displacement_falls_back_to_free_where_normals_cannot_move() -> None:
+    """A flat cloud is smooth across itself; a mesh in 2-D has no normal: free displacement."""
+    rng = np.random.default_rng(1)
+    flat = np.column_stack([rng.uniform(size=(200, 2)), np.full(200, 0.5)])
+    res = smooth(Geometry(flat), SmoothingParams(rms=0.01))
+    assert res.displacement == "free" and res.converged
+    from core_fixtures import grid_mesh
+
+    P, F = grid_mesh(8, 7, jitter=0.3)
+    res2 = smooth(Geometry(P[:, :2], faces=F), SmoothingParams(lam=0.1))
+    assert res2.displacement == "free"

@@ -111,7 +111,7 @@ def settings_env(settings: Settings) -> dict[str, str]:
 
 @dataclass
 class WorkerProcess:
-    """``python -m service.jobs.rq_worker`` with the test runner (fakes or the real job)."""
+    """``geosmooth worker`` (``python -m service.cli worker``) with the test runner."""
 
     settings: Settings
     name: str
@@ -121,7 +121,7 @@ class WorkerProcess:
 
     def start(self) -> WorkerProcess:
         env = {**settings_env(self.settings), **self.extra_env}
-        args = [PYTHON, "-m", "service.jobs.rq_worker", "--name", self.name, "--runner",
+        args = [PYTHON, "-m", "service.cli", "worker", "--name", self.name, "--runner",
                 "jobs_fakes:scripted_or_real", "--log-level", "INFO"]  # fmt: skip
         with open(self.log, "ab") as out:
             self.proc = subprocess.Popen(args, env=env, cwd=REPO, stdout=out, stderr=out)

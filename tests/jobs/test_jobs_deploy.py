@@ -57,11 +57,11 @@ def test_every_setting_named_in_the_deployment_exists() -> None:
 
 def test_the_worker_command_of_the_compose_file_runs() -> None:
     command = _load(COMPOSE)["services"]["worker"]["command"]
-    assert command[:3] == ["python", "-m", "service.jobs.rq_worker"]
-    done = subprocess.run([sys.executable, "-m", "service.jobs.rq_worker", "--help"],
+    assert command == ["geosmooth", "worker"]
+    done = subprocess.run([sys.executable, "-m", "service.cli", "worker", "--help"],
                           capture_output=True, text=True, cwd=REPO)  # fmt: skip
-    assert done.returncode == 0 and "geosmooth worker" in done.stdout
-    local = subprocess.run([sys.executable, "-m", "service.jobs.rq_worker"], capture_output=True,
+    assert done.returncode == 0 and "geosmooth worker" in done.stdout and "--burst" in done.stdout
+    local = subprocess.run([sys.executable, "-m", "service.cli", "worker"], capture_output=True,
                            text=True, cwd=REPO, env={"PATH": "/usr/bin:/bin",
                                                      "PYTHONPATH": str(REPO)})  # fmt: skip
     assert local.returncode == 2 and "GEOSMOOTH_QUEUE=rq" in local.stderr

@@ -21,7 +21,7 @@ from service.core.progress import ProgressEvent
 from service.io.errors import FormatError, UnsupportedFormat
 from service.jobs import JobStatus, LocalQueue, problems
 from service.jobs.files import JobFiles, is_job_id, write_durable
-from service.jobs.local import _owner_dead
+from service.jobs.local_maintenance import owner_dead as _owner_dead
 from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
 from service.jobs.store import JobStore, NewJob
@@ -233,6 +233,8 @@ def test_progress_dict_has_stage_percent_and_eta(tmp_path: Path) -> None:
     assert search[1] == pytest.approx(expected_mid, abs=0.01)
     assert all(p["tau"] == 1.0 for p in seen[2:7])
     late = seen[-1]
+    assert late["iteration"] == 3 and late["lambda"] == 1.0  # the search's, carried over
+    assert late["tau"] == 1.0 and [p["iteration"] for p in seen] == [0, 0, 0, 0, 1, 2, 3, 3]
     assert late["eta_seconds"] is not None and late["elapsed_seconds"] is not None
     eta, elapsed = float(late["eta_seconds"]), float(late["elapsed_seconds"])  # type: ignore[arg-type]
     assert eta == pytest.approx(elapsed * 5.0 / 95.0, abs=2e-3)

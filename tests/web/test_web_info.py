@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from web_helpers import SAMPLES, WebServer
 
+from service.core.info import describe
 from service.io import read_geometry
 
 
@@ -48,7 +49,12 @@ def test_mesh_upload_without_params(client: httpx.Client) -> None:
     assert out["format"] == "ply" and out["filename"] == path.name and out["weld"] is False
     assert out["bbox"]["min"] == pytest.approx(points.min(axis=0).tolist())
     assert out["bbox"]["max"] == pytest.approx(points.max(axis=0).tolist())
-    assert out["phi0"] == pytest.approx(centroid_phi0(points), rel=1e-8)
+    # default displacement for meshes moves points along their normals: its phi(0) is the one
+    # smooth() enforces; eq. (14) is the phi(0) of free displacement
+    assert out["phi0"] == pytest.approx(describe(read_geometry(path).geometry)["phi0"], rel=1e-8)
+    free = info(client, files={"file": (path.name, path.read_bytes())},
+                data={"params": json.dumps({"displacement": "free"})}).json()
+    assert free["phi0"] == pytest.approx(centroid_phi0(points), rel=1e-8)
     assert out["tau_range"] == pytest.approx([0.0, out["phi0"]])
     assert out["rms_range"][1] == pytest.approx(np.sqrt(out["phi0"] / n), rel=1e-12)
     assert out["preview"] is None

@@ -317,7 +317,7 @@ def test_invalid_tau_shown_by_its_field(browsing: Browsing, web_server: WebServe
         "() => /out of range/.test(document.querySelector(\"[data-error-for='params.tau']\")"
         ".textContent)"
     )
-    assert "641.2" in error.text_content()  # phi(0) of the sample
+    assert "610.7" in error.text_content()  # phi(0) of the sample (normal displacement)
     browsing.shot("09-tau-too-large")
     browsing.assert_offline()
 

@@ -99,12 +99,10 @@ async def job_event_stream(
     record: JobRecord | None = first
     while record is not None:
         job = _job_json(record)
-        if job["status"] != status:  # the status first: the stream opens with it
+        if job["status"] != status:  # first: a queued job has a progress (stage "queued") too
             status = job["status"]
             seq += 1
             yield _event("status", job, seq)
-            if record.finished:
-                return
         if job.get("progress") is not None and job["progress"] != progress:
             progress = job["progress"]
             seq += 1
