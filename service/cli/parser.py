@@ -152,12 +152,22 @@ def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:
         epilog=_epilog(SERVE_EXIT_CODES),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    sv.add_argument("--host", default="127.0.0.1", help="interface to bind [default: %(default)s]")
-    sv.add_argument("--port", type=int, default=8000, help="TCP port [default: %(default)s]")
+    sv.add_argument(
+        "--host", default=None, help="interface to bind [default: $GEOSMOOTH_HOST or 127.0.0.1]"
+    )
+    sv.add_argument(
+        "--port", type=int, default=None, help="TCP port [default: $GEOSMOOTH_PORT or 8000]"
+    )
     sv.add_argument(
         "--workers", type=int, default=None, help="solver worker processes [default: settings]"
     )
     sv.add_argument("--data-dir", default=None, help="job store directory [default: settings]")
+    sv.add_argument(
+        "--insecure-no-auth",
+        action="store_true",
+        help="serve a non-loopback address without API keys (anyone who reaches the port may "
+        "submit, read and delete jobs) [default: $GEOSMOOTH_INSECURE_NO_AUTH or off]",
+    )
 
 
 def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:

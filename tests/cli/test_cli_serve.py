@@ -46,6 +46,14 @@ def test_configuration_error_names_the_variable(cli: Run, tmp_path: Path) -> Non
     assert "GEOSMOOTH_WORKERS='abc'" in line and "integer" in line and "internal" not in line
 
 
+def test_network_address_without_keys_is_refused(cli: Run, tmp_path: Path) -> None:
+    env = {"GEOSMOOTH_DATA_DIR": str(tmp_path / "d"), "GEOSMOOTH_API_KEYS": ""}
+    res = cli(["serve", "--host", "0.0.0.0", "--port", "1"], env=env, timeout=60)
+    line = _one_line(res, EXIT_USAGE)
+    assert "without API keys" in line and "--insecure-no-auth" in line
+    assert not (tmp_path / "d").exists()  # nothing was started
+
+
 def test_serve_runs_until_sigterm(tmp_path: Path) -> None:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))

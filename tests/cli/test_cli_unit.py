@@ -285,8 +285,8 @@ def test_serve_and_submit_are_lazy_and_forward_arguments(
 
     calls: dict[str, object] = {}
     server = types.ModuleType("service.api.server")
-    server.serve = lambda host, port, workers, data_dir: calls.update(  # type: ignore[attr-defined]
-        serve=(host, port, workers, data_dir)
+    server.serve = lambda host, port, workers, data_dir, *, insecure_no_auth: calls.update(  # type: ignore[attr-defined]
+        serve=(host, port, workers, data_dir, insecure_no_auth)
     )
     monkeypatch.setitem(sys.modules, "service.api.server", server)
     with socket.socket() as sock:  # a port that is free now
@@ -294,7 +294,7 @@ def test_serve_and_submit_are_lazy_and_forward_arguments(
         port = sock.getsockname()[1]
     argv = ["serve", "--port", str(port), "--workers", "2", "--data-dir", str(tmp_path / "d")]
     assert cli.main(argv) == 0
-    assert calls["serve"] == ("127.0.0.1", port, 2, str(tmp_path / "d"))
+    assert calls["serve"] == (None, port, 2, str(tmp_path / "d"), False)  # host: settings
 
     def remote(ns, params, out_fmt, progress):  # what would go to the server
         calls["submit"] = (ns.input, ns.server, params, out_fmt, ns.weld)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import pytest
 import yaml
 from jobs_helpers import REPO
 
@@ -79,3 +80,39 @@ def test_the_dockerfile_builds_with_the_scripts_the_image_check_runs() -> None:
     install = (Path(REPO) / "scripts" / "install-system-deps.sh").read_text()
     build = re.search(r"^build_pkgs=\((.*)\)", install, re.M)
     assert build and "libc6-dev" in build.group(1).split()  # gcc --no-install-recommends lacks it
+
+
+def _compose_value(value: str, env: dict[str, str]) -> str:
+    """``${NAME:-default}`` as docker compose resolves it from ``env``."""
+    return re.sub(r"\$\{(\w+):-([^}]*)\}", lambda m: env.get(m[1]) or m[2], str(value))
+
+
+def _starts(environment: dict[str, str], host: str) -> None:
+    """The checks ``geosmooth serve --host HOST`` runs before it binds (raises if refused)."""
+    from service.api.auth import KeyRing
+    from service.api.server import check_bind
+    from service.settings import load_settings
+
+    fields = {k.removeprefix("GEOSMOOTH_").lower(): v for k, v in environment.items()
+              if k.startswith("GEOSMOOTH_") and v != ""}  # fmt: skip
+    settings = load_settings(**fields)
+    check_bind(host, KeyRing.from_settings(settings).enabled, settings.insecure_no_auth)
+
+
+def test_the_image_serves_0000_only_with_keys_or_the_explicit_opt_out() -> None:
+    from service.api.server import InsecureBind
+
+    cmd = (Path(REPO) / "Dockerfile").read_text().rsplit("CMD", 1)[1]
+    assert "--host 0.0.0.0" in cmd
+    with pytest.raises(InsecureBind, match="GEOSMOOTH_API_KEYS"):
+        _starts({}, "0.0.0.0")  # docker run without keys: refused, exit status 2
+    _starts({"GEOSMOOTH_API_KEYS": "k1,k2"}, "0.0.0.0")
+    services = _load(COMPOSE)["services"]
+    for name in ("geosmooth", "api"):  # `docker compose up` with an empty environment starts
+        env = {k: _compose_value(v, {}) for k, v in services[name]["environment"].items()}
+        assert env["GEOSMOOTH_INSECURE_NO_AUTH"] == "true"
+        _starts(env, "0.0.0.0")
+        assert all(p.startswith("127.0.0.1:") for p in services[name]["ports"])  # loopback only
+        keyed = {k: _compose_value(v, {"GEOSMOOTH_API_KEYS": "k"}) for k, v in
+                 services[name]["environment"].items()}  # fmt: skip
+        assert keyed["GEOSMOOTH_API_KEYS"] == "k"
