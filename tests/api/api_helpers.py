@@ -24,6 +24,24 @@ from numpy.typing import NDArray
 ROOT = Path(__file__).resolve().parents[2]
 FINISHED = ("succeeded", "failed", "cancelled")
 
+#: API keys of the keyed server: two from GEOSMOOTH_API_KEYS, one (carol, tight bounds) from a
+#: keys file of sha256 digests, one for the schemathesis run.
+KEYS = {"alice": "alice-key-0001", "bob": "bob-key-0002", "carol": "carol-key-0003",
+        "fuzz": "schemathesis-key-0004"}  # fmt: skip
+
+#: Short timeouts, small connection bounds and a trusted CORS origin.
+TIGHT_ENV = {
+    "GEOSMOOTH_TIMEOUT_REQUEST_HEADER": "2",
+    "GEOSMOOTH_TIMEOUT_BODY_READ": "2",
+    "GEOSMOOTH_TIMEOUT_GRACEFUL_SHUTDOWN": "3",
+    "GEOSMOOTH_MAX_CONNECTIONS": "500",
+    "GEOSMOOTH_MAX_CONNECTIONS_PER_CLIENT": "200",
+    "GEOSMOOTH_SYNC_MAX_POINTS": "60000",
+    "GEOSMOOTH_SYNC_TIMEOUT": "3",
+    "GEOSMOOTH_MAX_UPLOAD_BYTES": str(64 * 1024 * 1024),
+    "GEOSMOOTH_CORS_ORIGINS": "https://app.example",
+}
+
 
 # --------------------------------------------------------------------------- live server
 

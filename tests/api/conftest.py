@@ -9,7 +9,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from api_helpers import LiveServer
+from api_helpers import KEYS, TIGHT_ENV, LiveServer
 
 # Small limits so that the 413 paths are cheap to exercise.
 SERVER_ENV = {
@@ -34,25 +34,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
         yield live
     finally:
         live.stop()
-
-
-#: API keys of the keyed server: two from GEOSMOOTH_API_KEYS, one (carol, tight bounds) from a
-#: keys file of sha256 digests, one for the schemathesis run.
-KEYS = {"alice": "alice-key-0001", "bob": "bob-key-0002", "carol": "carol-key-0003",
-        "fuzz": "schemathesis-key-0004"}  # fmt: skip
-
-#: Short timeouts, small connection bounds and a trusted CORS origin.
-TIGHT_ENV = {
-    "GEOSMOOTH_TIMEOUT_REQUEST_HEADER": "2",
-    "GEOSMOOTH_TIMEOUT_BODY_READ": "2",
-    "GEOSMOOTH_TIMEOUT_GRACEFUL_SHUTDOWN": "3",
-    "GEOSMOOTH_MAX_CONNECTIONS": "500",
-    "GEOSMOOTH_MAX_CONNECTIONS_PER_CLIENT": "200",
-    "GEOSMOOTH_SYNC_MAX_POINTS": "60000",
-    "GEOSMOOTH_SYNC_TIMEOUT": "3",
-    "GEOSMOOTH_MAX_UPLOAD_BYTES": str(64 * 1024 * 1024),
-    "GEOSMOOTH_CORS_ORIGINS": "https://app.example",
-}
 
 
 @pytest.fixture(scope="session")

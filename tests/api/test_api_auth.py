@@ -12,8 +12,7 @@ from typing import Any
 
 import httpx
 import pytest
-from api_helpers import LiveServer, json_geometry, noisy_plane_cloud, noisy_sphere, wait_done
-from conftest import KEYS
+from api_helpers import KEYS, LiveServer, json_geometry, noisy_plane_cloud, noisy_sphere, wait_done
 
 from service.api.auth import KeyRing
 from service.api.server import InsecureBind, check_bind

@@ -17,8 +17,7 @@ from typing import Any
 
 import httpx
 import pytest
-from api_helpers import LiveServer, cpu_ticks, descendants, encode, noisy_plane_cloud
-from conftest import TIGHT_ENV
+from api_helpers import TIGHT_ENV, LiveServer, cpu_ticks, descendants, encode, noisy_plane_cloud
 
 MIB = 2**20
 

@@ -18,8 +18,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from api_helpers import ROOT, LiveServer
-from conftest import KEYS
+from api_helpers import KEYS, ROOT, LiveServer
 
 KEY = KEYS["fuzz"]
 MAX_EXAMPLES = 25
