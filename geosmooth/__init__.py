@@ -7,6 +7,7 @@
     smoothed = geosmooth.smooth(points, tau=0.5)                 # (n, s) array -> array
     mesh2 = geosmooth.smooth(trimesh_mesh, rms=1e-4)             # trimesh in, trimesh out
     cloud2, result = geosmooth.smooth(o3d_cloud, tau=2e-4, full_output=True)
+    geosmooth.describe(points)["suggested_tau"]                   # noise estimate, tau range
     doc = geosmooth.read("bunny.ply")
     geosmooth.write(geosmooth.smooth(doc, tau=2e-4), "bunny-smooth.ply")
 
@@ -50,6 +51,7 @@ __all__ = [
     "SolverError",
     "TauOutOfRange",
     "UnsupportedFormat",
+    "describe",
     "read",
     "smooth",
     "write",
@@ -104,6 +106,26 @@ def smooth(
     result = core.smooth(doc.geometry, _params(params, values), progress=progress)
     smoothed = rebuild(result.points)
     return (smoothed, result) if full_output else smoothed
+
+
+def describe(
+    geometry: Any,
+    params: SmoothingParams | dict[str, Any] | None = None,
+    *,
+    faces: Any = None,
+    edges: Any = None,
+    **values: Any,
+) -> dict[str, Any]:
+    """What ``geometry`` is and which budgets it admits, without smoothing it.
+
+    Takes what :func:`smooth` takes and returns :func:`service.core.info.describe`'s dict
+    (``n_points``, ``kind``, ``phi0``, ``tau_range``, ``rms_range``, ``sigma_estimate``,
+    ``suggested_tau``, ...: the body of ``POST /v1/info`` and ``geosmooth info``).
+    """
+    from service.core.info import describe as describe_geometry
+
+    doc, _ = adapt(geometry, faces=faces, edges=edges)
+    return describe_geometry(doc.geometry, _params(params, values))
 
 
 def read(

@@ -28,7 +28,13 @@ __all__ = ["main"]
 
 #: command -> module with ``run(ns, err) -> int`` (imported when the command runs, so that
 #: ``smooth`` never loads the HTTP stack).
-_COMMANDS = {"smooth": ".smooth", "serve": ".serve", "submit": ".submit", "worker": ".worker"}
+_COMMANDS = {
+    "smooth": ".smooth",
+    "info": ".info",
+    "serve": ".serve",
+    "submit": ".submit",
+    "worker": ".worker",
+}
 
 
 def _debug() -> bool:

@@ -23,6 +23,7 @@ __all__ = ["build_parser", "version"]
 _EXAMPLES = (
     "geosmooth smooth bunny.ply -o bunny-smooth.ply --tau 2e-4 --report report.json",
     "geosmooth smooth track.obj -o track-smooth.obj --rms 3 --fix-boundary",
+    "geosmooth info scan.xyz        # noise estimate, valid tau / rms ranges",
     "geosmooth serve --port 8000",
     "geosmooth submit bunny.ply --server http://127.0.0.1:8000 -o out.ply --tau 2e-4",
 )
@@ -144,6 +145,37 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
         )  # fmt: skip
 
 
+def _add_info(sub: argparse._SubParsersAction[_Parser]) -> None:
+    inf = sub.add_parser(
+        "info",
+        help="describe a file and the smoothing budgets it admits (nothing is smoothed)",
+        description=_wrap(
+            "Print, as JSON, what INPUT is (points, dimension, kind, faces, edges, bounding "
+            "box, mean spacing) and the smoothing budgets it admits: phi(0), the valid ranges "
+            "of tau and rms, the estimated noise level and the tau / rms the automatic rule "
+            "would choose (report eq. 14; the same body as POST /v1/info). Neighbourhood, "
+            "weight and fixed-point options change the analysis as they would change 'smooth'."
+        ),
+        epilog=_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    inf.add_argument(
+        "input", metavar="INPUT", help="input file ('-' reads stdin; the format is sniffed)"
+    )
+    add_smoothing_options(inf)
+    more = inf.add_argument_group("input details")
+    more.add_argument(
+        "--input-format", metavar=_formats(), help="input format when the extension does not say"
+    )
+    more.add_argument(
+        "--xyz-dims", type=int, metavar="D", help="XYZ input: the first D columns are coordinates"
+    )
+    more.add_argument(
+        "--weld", action="store_true", help="weld exactly coincident vertices first (as smooth)"
+    )
+    more.add_argument("--compact", action="store_true", help="one line of JSON")
+
+
 def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:
     sv = sub.add_parser(
         "serve",
@@ -206,7 +238,7 @@ def _add_worker(sub: argparse._SubParsersAction[_Parser]) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``geosmooth`` argument parser: ``smooth``, ``serve``, ``submit`` and ``worker``."""
+    """The ``geosmooth`` argument parser: smooth, info, serve, submit and worker."""
     parser = _Parser(
         prog="geosmooth",
         description=_wrap(
@@ -219,6 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"geosmooth {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_smooth(sub)
+    _add_info(sub)
     _add_serve(sub)
     _add_submit(sub)
     _add_worker(sub)

@@ -73,7 +73,7 @@ def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
     return out
 
 
-def _read_input(
+def read_input(
     source: str, fmt: str | None, weld: bool, xyz_dims: int | None
 ) -> GeometryDocument:
     """Read INPUT (``-``: stdin); the format from ``fmt``, the name, or the content."""
@@ -177,7 +177,7 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     started = time.perf_counter()
     params, out_fmt = _check_options(ns)
     fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
-    doc = _read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+    doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
     geometry = _with_fixed(doc, fixed)
     out_fmt = out_fmt or doc.source_format
 

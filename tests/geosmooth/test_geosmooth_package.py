@@ -146,3 +146,16 @@ def test_errors() -> None:
         geosmooth.smooth(_noisy_sphere(), faces=[[0, 1, 2]], tau=0.1)
     with pytest.raises(geosmooth.GeometryError):
         geosmooth.smooth(np.array([[0.0, np.nan, 0.0]] * 4), tau=0.1)
+
+
+def test_describe_takes_what_smooth_takes() -> None:
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 4 * np.pi, 300)
+    points = np.c_[np.cos(t), np.sin(t), 0.1 * t] + 0.01 * rng.standard_normal((300, 3))
+    edges = np.c_[np.arange(299), np.arange(1, 300)]
+    facts = geosmooth.describe(points, edges=edges, weights="uniform")
+    assert (facts["kind"], facts["n_points"], facts["n_edges"]) == ("curve", 300, 299)
+    phi0 = float(((points - points.mean(axis=0)) ** 2).sum())  # eq. (14), D = I
+    assert np.isclose(facts["phi0"], phi0, rtol=1e-9)
+    _, result = geosmooth.smooth(points, edges=edges, full_output=True)
+    assert np.isclose(result.tau, facts["suggested_tau"], rtol=1e-9)  # the default budget

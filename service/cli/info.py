@@ -1,0 +1,41 @@
+"""``geosmooth info INPUT``: what an input is and which smoothing budgets make sense.
+
+Prints :func:`service.core.info.describe` as JSON (the body ``POST /v1/info`` returns): size,
+kind, bounding box, mean spacing, ``phi(0)`` and the valid ranges of ``tau`` and ``rms``, the
+estimated noise level and the budget the automatic rule would choose. Nothing is smoothed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import TextIO
+
+from service.exit_codes import EXIT_OK, EXIT_USAGE
+
+from .errors import CliError
+from .output import check_format
+from .params import params_from_args
+from .smooth import read_input
+
+__all__ = ["run"]
+
+
+def run(ns: argparse.Namespace, err: TextIO) -> int:
+    """Run ``geosmooth info``; prints one JSON object on stdout."""
+    import sys
+
+    from service.core.info import describe
+
+    params = params_from_args(ns)
+    check_format(ns.input_format, "--input-format")
+    if ns.xyz_dims is not None and ns.xyz_dims < 1:
+        raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
+    doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+    facts = {"input": ns.input, "format": doc.source_format}
+    facts.update(describe(doc.geometry, params))
+    if doc.weld is not None:
+        facts["welded_from"] = int(doc.weld.n_original)
+    json.dump(facts, sys.stdout, indent=None if ns.compact else 2, allow_nan=False)
+    sys.stdout.write("\n")
+    return EXIT_OK
