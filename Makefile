@@ -1,6 +1,6 @@
 # geosmooth: two commands on a fresh Debian 12 machine (python3 + make):
 #   make run    install what is needed, start the service on 127.0.0.1:8000 (embedded queue, no Redis)
-#   make test   install what is needed (with dev tools), run ruff and the whole test suite
+#   make test   install what is needed (with dev tools), run ruff, mypy and the whole test suite
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -36,6 +36,7 @@ lint: setup-dev
 
 test: setup-dev
 	$(BIN)/ruff check .
+	$(BIN)/mypy service geosmooth
 	$(BIN)/python -m pytest -q
 
 openapi: setup

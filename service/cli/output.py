@@ -101,7 +101,7 @@ def writer_options() -> dict[str, tuple[tuple[str, ...], str]]:
     return out
 
 
-def given_writer_options(ns: argparse.Namespace) -> dict[str, str]:
+def given_writer_options(ns: argparse.Namespace) -> dict[str, Any]:
     """The writer options given on the command line (the writer's defaults apply otherwise)."""
     return {name: getattr(ns, name) for name in writer_options() if getattr(ns, name, None)}
 
