@@ -52,8 +52,9 @@ def _phi0(
 
     from service.core.displacement import auto_system
     from service.core.operator import build_operator
-    from service.core.pipeline import free_set, phi_at_zero_of, smoothing_system
+    from service.core.pipeline import free_set, smoothing_system
     from service.core.system import Deviation
+    from service.core.target import phi_at_zero_of
 
     op = build_operator(geometry, params)
     adj = op.neighborhoods.adjacency
