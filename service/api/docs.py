@@ -98,12 +98,16 @@ def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True)
 
 
 #: Every media type a result can have (from the formats of the io registry).
+def _result_schema(media: str) -> dict[str, Any]:
+    if media == "application/json":
+        return {"$ref": "#/components/schemas/GeometryJson"}
+    if media.endswith("+json"):  # GeoJSON: a JSON document (RFC 7946), not a byte string
+        return {"type": "object", "description": "A GeoJSON FeatureCollection (RFC 7946)."}
+    return {"type": "string", "format": "binary"}
+
+
 RESULT_CONTENT: dict[str, Any] = {
-    media: (
-        {"schema": {"$ref": "#/components/schemas/GeometryJson"}}
-        if media == "application/json"
-        else {"schema": {"type": "string", "format": "binary"}}
-    )
+    media: {"schema": _result_schema(media)}
     for media in dict.fromkeys(f.media_type.split(";")[0].strip() for f in FORMATS.values())
 }
 

@@ -171,8 +171,11 @@ def _check_param_bounds(params: SmoothingParams, limits: Limits, kind: str | Non
             )
 
 
-def _flag(raw: str | None) -> bool:
+def _flag(raw: str | None) -> bool | None:
+    """``weld`` as given (``None``: not given, the format's default applies)."""
     text = (raw or "").strip().lower()
+    if not text:
+        return None
     if text in _TRUE:
         return True
     if text in _FALSE:
@@ -223,7 +226,8 @@ def _from_multipart(req: IngestRequest) -> ParsedRequest:
     params = _params(req.fields.get("params"), req.params_required)
     _check_param_bounds(params, req.limits)
     fmt = _format(req)
-    weld = _flag(req.fields.get("weld"))
+    given = _flag(req.fields.get("weld"))
+    weld = FORMATS[fmt].weld_default if given is None else given  # STL, GLB: welded
     if Path(req.path).stat().st_size == 0:
         raise FormatError("the uploaded file is empty", fmt=fmt)
     try:

@@ -93,9 +93,10 @@ def _add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None
         help="output format when the OUTPUT extension does not say [default: the input's]",
     )  # fmt: skip
     files.add_argument(
-        "--weld", action="store_true",
+        "--weld", action=argparse.BooleanOptionalAction, default=None,
         help="weld exactly coincident vertices before smoothing (meshes stored with split "
-        "normals, e.g. STL exports); the output keeps the input's vertices",
+        "normals, e.g. STL exports); the output keeps the input's vertices [default: yes for "
+        "STL and GLB, no for other formats]",
     )  # fmt: skip
     what = "the run's diagnostics" if local else "the job's report"
     files.add_argument("--report", metavar="REPORT.json", help=f"write {what} as JSON")
@@ -136,8 +137,10 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
         "two columns, else 3; other columns are ignored]",
     )  # fmt: skip
     more.add_argument(
-        "--ascii", action="store_true", help="write ASCII PLY [default: binary little-endian]"
-    )
+        "--ascii", action=argparse.BooleanOptionalAction, default=None,
+        help="PLY output: ASCII (--ascii) or binary little-endian (--no-ascii) [default: the "
+        "input's encoding for PLY input, else binary]",
+    )  # fmt: skip
     for name, (choices, default) in writer_options().items():
         more.add_argument(
             "--" + name.replace("_", "-"), dest=name, choices=choices,
@@ -171,8 +174,9 @@ def _add_info(sub: argparse._SubParsersAction[_Parser]) -> None:
         "--xyz-dims", type=int, metavar="D", help="XYZ input: the first D columns are coordinates"
     )
     more.add_argument(
-        "--weld", action="store_true", help="weld exactly coincident vertices first (as smooth)"
-    )
+        "--weld", action=argparse.BooleanOptionalAction, default=None,
+        help="weld exactly coincident vertices first, as smooth does [default: the format's]",
+    )  # fmt: skip
     more.add_argument("--compact", action="store_true", help="one line of JSON")
 
 

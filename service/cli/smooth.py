@@ -74,7 +74,7 @@ def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
 
 
 def read_input(
-    source: str, fmt: str | None, weld: bool, xyz_dims: int | None
+    source: str, fmt: str | None, weld: bool | None, xyz_dims: int | None
 ) -> GeometryDocument:
     """Read INPUT (``-``: stdin); the format from ``fmt``, the name, or the content."""
     from service.io import detect_format, read_geometry, sniff_format

@@ -18,7 +18,7 @@ from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 
-__all__ = ["describe", "mean_spacing"]
+__all__ = ["describe", "mean_spacing", "valid_range"]
 
 
 def mean_spacing(geometry: Geometry) -> float:
@@ -75,6 +75,20 @@ def _phi0(
         phi0 = phi_at_zero_of(Deviation(system, solver=solver), op, fixed, params)
     w2 = float(np.sum(omega[~fixed] ** 2))
     return float(phi0) * frame.phi_factor, w2, n_edges, fixed, adj, params
+
+
+def valid_range(geometry: Geometry, params: SmoothingParams) -> tuple[float, float]:
+    """``(phi(0), sum omega_i^2 over the points that can move)`` for ``params``' mode: the
+    valid ``tau`` lie in ``(0, phi(0))``, the valid ``rms`` in ``(0, sqrt(phi(0) / sum))``.
+
+    What :func:`describe` reports as ``tau_range`` / ``rms_range``, without its noise estimate
+    (the API's check of a given ``tau`` at submit).
+    """
+    from service.core.displacement import resolve_displacement
+
+    requested = params.displacement
+    phi0, weight_sum, *_ = _phi0(geometry, resolve_displacement(params, geometry), requested)
+    return phi0, weight_sum
 
 
 def _knee(

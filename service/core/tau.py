@@ -292,8 +292,11 @@ def newton_search(
             break  # bracket collapsed: tau cannot be met more closely
         new = propose(lam, tau, lo, hi) if propose is not None else None
         if new is None or new in (lo, hi):
-            slope = e * phi ** (e - 1.0) * derivative(lam) if phi > 0 else 0.0
-            new = lam - (phi**e - target) / slope if slope > 0 else math.nan
+            try:  # phi near the underflow limit (tau ~ 1e-300): the power overflows
+                slope = e * phi ** (e - 1.0) * derivative(lam) if phi > 0 else 0.0
+                new = lam - (phi**e - target) / slope if slope > 0 else math.nan
+            except (OverflowError, ZeroDivisionError):
+                new = math.nan  # the safeguard below takes a geometric bisection step
             if below is not None and phi < tau and not new > lo:
                 below()
                 below = None

@@ -82,3 +82,22 @@ def test_weld_in_json_body_and_bad_values(client: httpx.Client) -> None:
         data={"params": '{"lam": 1}', "weld": "maybe"},
     )
     assert bad.status_code == 422 and bad.json()["field"] == "weld"
+
+
+def test_stl_is_welded_unless_the_request_says_no(client: httpx.Client) -> None:
+    import trimesh
+
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    mesh.vertices = mesh.vertices + 0.02 * np.random.default_rng(5).standard_normal(
+        mesh.vertices.shape
+    )
+    stl = mesh.export(file_type="stl")  # 80 triangles, 240 corners, 42 positions
+    counts: dict[str | None, int] = {}
+    for weld in (None, "false"):
+        data = {"params": '{"lam": 1}'} | ({} if weld is None else {"weld": weld})
+        r = client.post(
+            "/v1/smooth", params={"format": "json"}, files={"file": ("s.stl", stl)}, data=data
+        )
+        assert r.status_code == 200, r.text
+        counts[weld] = r.json()["report"]["n_points"]
+    assert counts == {None: 42, "false": 240}

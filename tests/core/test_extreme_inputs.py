@@ -112,3 +112,20 @@ def test_no_non_finite_number_reaches_a_report() -> None:
         for key, value in rep.items():
             if isinstance(value, float):
                 assert np.isfinite(value), key
+
+
+@pytest.mark.parametrize("tau", [5e-324, 1e-300, 1e-200])
+@pytest.mark.parametrize("displacement", ["auto", "free"])
+def test_tau_near_the_underflow_limit_leaves_the_points_in_place(
+    tau: float, displacement: str
+) -> None:
+    # schemathesis found tau=5e-324 on a 4-point mesh (a ZeroDivisionError in the solver's
+    # step prediction, an OverflowError in Newton's slope): now the search ends at a huge
+    # lambda, X ~ P, and the report says whether tau was met
+    P = np.array([[0, 0, 0], [1, 0, 0.1], [1, 1, -0.1], [0, 1, 0.05]], float)
+    g = Geometry(P, faces=np.array([[0, 1, 2], [0, 2, 3]]))
+    params = SmoothingParams(tau=tau, displacement=displacement)
+    assert _finite_or_typed(g, params) == "ok"
+    res = smooth(g, params)
+    assert res.lam > 1e20 and res.phi <= 1e-100  # phi(lambda) ~ ||LP||^2 / lambda^2 -> 0
+    assert np.abs(res.points - P).max() <= 1e-50

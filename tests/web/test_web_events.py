@@ -136,9 +136,9 @@ class CountingQueue:
         self._queue = queue
         self.gets = 0
 
-    def get(self, job_id: str) -> Any:
+    def get(self, job_id: str, **kwargs: Any) -> Any:
         self.gets += 1
-        return self._queue.get(job_id)
+        return self._queue.get(job_id, **kwargs)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._queue, name)

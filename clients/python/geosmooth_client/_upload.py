@@ -134,7 +134,7 @@ class Upload:
         *,
         fmt: str | None = None,
         filename: str | None = None,
-        weld: bool = False,
+        weld: bool | None = None,
         webhook_url: str | None = None,
         idempotency_key: str | None = None,
     ) -> Upload:
@@ -168,8 +168,8 @@ class Upload:
             name, fmt = filename or "geometry.json", fmt or "json"
         if fmt:
             form["format"] = fmt
-        if weld:
-            form["weld"] = "true"
+        if weld is not None:  # else the service's default for the format (STL, GLB: welded)
+            form["weld"] = "true" if weld else "false"
         if webhook_url:
             form["webhook_url"] = webhook_url
         key = idempotency_key or uuid.uuid4().hex

@@ -84,7 +84,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         *,
         fmt: str | None = None,
         filename: str | None = None,
-        weld: bool = False,
+        weld: bool | None = None,
         webhook_url: str | None = None,
         idempotency_key: str | None = None,
         **param_values: Any,

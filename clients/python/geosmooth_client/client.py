@@ -107,7 +107,7 @@ class Client(ClientBase[httpx.Client]):
         *,
         fmt: str | None = None,
         filename: str | None = None,
-        weld: bool = False,
+        weld: bool | None = None,
         webhook_url: str | None = None,
         idempotency_key: str | None = None,
         **param_values: Any,
@@ -124,8 +124,9 @@ class Client(ClientBase[httpx.Client]):
             Input format, when neither the file name nor the content tells it.
         filename : str, optional
             Name sent with the file (default: the path's name).
-        weld : bool
-            Have the service weld exactly coincident vertices.
+        weld : bool, optional
+            Have the service weld exactly coincident vertices (default: the format's default,
+            yes for STL and GLB).
         webhook_url : str, optional
             URL the service POSTs the finished job to.
         idempotency_key : str, optional
