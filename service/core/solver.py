@@ -338,7 +338,7 @@ class Direct(LinearSolver):
             reduction = min(1.0, SOLVE_RTOL * size / err) if err > 0 else 1.0
         if q <= 0 or reduction >= 1:
             return 1.0
-        if not (0.0 < reduction and q < 1.0):  # lambdas decades apart (q rounds to 1): refactor
+        if not (reduction > 0.0 and q < 1.0):  # lambdas decades apart (q rounds to 1): refactor
             return math.inf
         return 1 + math.ceil(math.log(reduction) / math.log(q))
 
