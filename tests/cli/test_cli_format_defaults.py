@@ -1,4 +1,4 @@
-"""STL stores every triangle's corners separately: ``smooth`` welds them unless told not to.
+"""Defaults that follow the input: STL is welded, a PLY keeps its encoding (issue 11).
 
 Checked on the output itself: copies of one input vertex stay together (one smoothed point)
 when welded, and come apart when each triangle is smoothed on its own (``--no-weld``).
@@ -49,3 +49,15 @@ def test_stl_is_welded_by_default_and_not_with_no_weld(cli: Run, tmp_path: Path)
     res = cli(["smooth", src, "-o", split, "--lam", "1", "--no-weld"])
     assert res.returncode == 0, res.stderr
     assert _corner_spread(split, corners) > 1e-3  # every triangle on its own
+
+
+def test_ply_output_keeps_the_input_encoding_unless_told(cli: Run, tmp_path: Path) -> None:
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    src = tmp_path / "in.ply"
+    src.write_bytes(mesh.export(file_type="ply", encoding="ascii"))
+    for flag, expected in (([], b"format ascii"), (["--no-ascii"], b"format binary_little")):
+        out = tmp_path / f"out{len(flag)}.ply"
+        res = cli(["smooth", src, "-o", out, "--lam", "1", "-q", *flag])
+        assert res.returncode == 0, res.stderr
+        assert expected in out.read_bytes()[:200]
+        assert len(trimesh.load(out, process=False).vertices) == len(mesh.vertices)
