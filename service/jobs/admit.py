@@ -25,12 +25,14 @@ from service.jobs.queue import JobInput, JobSize
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
+    from service.jobs.store import NewJob
 
 __all__ = [
     "admit_size",
     "check_format",
     "check_space",
     "input_size",
+    "new_job",
     "request_hash",
     "storage_errors",
     "validate_params",
@@ -121,3 +123,43 @@ def storage_errors() -> Iterator[None]:
         if typed is None:
             raise
         raise typed from exc
+
+
+def new_job(
+    data: JobInput,
+    fmt: str,
+    params: SmoothingParams | Mapping[str, Any],
+    filename: str | None,
+    *,
+    weld: bool,
+    tenant: str | None,
+    webhook_url: str | None,
+    idempotency_key: str | None,
+    size: JobSize | None,
+    memory_limit: int | None,
+    max_attempts: int,
+) -> NewJob:
+    """The checked job of a ``submit`` (every backend's first half): format, parameters,
+    the request's fingerprint when an ``Idempotency-Key`` is given, the memory estimate.
+
+    Raises
+    ------
+    ValueError, pydantic.ValidationError, JobTooLarge
+        Unknown format, invalid parameters, an estimate above ``memory_limit``.
+    """
+    import uuid
+
+    from service.jobs.store import NewJob
+
+    fmt = check_format(fmt)
+    smoothing = validate_params(params)
+    stored = smoothing.model_dump(mode="json", exclude_none=True)
+    digest = None
+    if idempotency_key is not None:
+        digest = request_hash(data, fmt, stored, filename=filename, weld=weld,
+                              webhook_url=webhook_url)  # fmt: skip
+    admit_size(data, fmt, smoothing, weld=weld, size=size, limit=memory_limit)
+    return NewJob(
+        uuid.uuid4().hex, fmt, filename, stored, input_size(data), max_attempts, weld, tenant,
+        webhook_url, idempotency_key, digest,
+    )  # fmt: skip

@@ -42,7 +42,7 @@ from service.jobs.pool import WorkerPool, default_start_method
 from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
 from service.jobs.runner import DEFAULT_RUNNER
 from service.jobs.storage_health import StorageProbe
-from service.jobs.store import JobStore, NewJob
+from service.jobs.store import JobStore
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
@@ -243,29 +243,24 @@ class LocalQueue(Maintenance):
         See :meth:`service.jobs.queue.JobQueue.submit`. Also raises ``ValueError`` for an
         unknown format and ``pydantic.ValidationError`` for invalid ``params``.
         """
-        fmt = admit.check_format(fmt)
-        smoothing = admit.validate_params(params)
-        stored = smoothing.model_dump(mode="json", exclude_none=True)
-        digest = None
+        job = admit.new_job(
+            input, fmt, params, filename, weld=weld, tenant=tenant, webhook_url=webhook_url,
+            idempotency_key=idempotency_key, size=size, memory_limit=self.memory_limit,
+            max_attempts=self.max_attempts,
+        )
         if idempotency_key is not None:
-            digest = admit.request_hash(input, fmt, stored, filename=filename, weld=weld,
-                                        webhook_url=webhook_url)  # fmt: skip
             with admit.storage_errors():
                 earlier = self.store.find_idempotent(tenant, idempotency_key)
             if earlier is not None:
-                IdempotencyConflict.check(earlier[1], digest, idempotency_key)
+                assert job.request_hash is not None
+                IdempotencyConflict.check(earlier[1], job.request_hash, idempotency_key)
                 if isinstance(input, Path):
                     input.unlink(missing_ok=True)  # moved into the store: nothing to keep
                 return self._with_report(earlier[0])
-        admit.admit_size(input, fmt, smoothing, weld=weld, size=size, limit=self.memory_limit)
-        job = NewJob(
-            uuid.uuid4().hex, fmt, filename, stored, admit.input_size(input), self.max_attempts,
-            weld, tenant, webhook_url, idempotency_key, digest,
-        )  # fmt: skip
         with admit.storage_errors():
             admit.check_space(self.data_dir, job.input_bytes, self.min_free_bytes)
             try:
-                self.files.create(job.job_id, fmt, input)
+                self.files.create(job.job_id, job.fmt, input)
                 rec, created = self.store.insert(job)
             except BaseException:
                 self.files.remove(job.job_id)

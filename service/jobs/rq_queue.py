@@ -14,7 +14,6 @@ import contextlib
 import logging
 import threading
 import time
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,7 +25,6 @@ from service.jobs.limits import default_job_memory
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
 from service.jobs.rq_backend import Backend
-from service.jobs.store import NewJob
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
@@ -135,23 +133,16 @@ class RQQueue:
         size: JobSize | None = None,
     ) -> JobRecord:
         """See :meth:`service.jobs.queue.JobQueue.submit`."""
-        fmt = admit.check_format(fmt)
-        smoothing = admit.validate_params(params)
-        stored = smoothing.model_dump(mode="json", exclude_none=True)
-        digest = None
-        if idempotency_key is not None:
-            digest = admit.request_hash(input, fmt, stored, filename=filename, weld=weld,
-                                        webhook_url=webhook_url)  # fmt: skip
-        admit.admit_size(input, fmt, smoothing, weld=weld, size=size, limit=self.memory_limit)
-        job = NewJob(
-            uuid.uuid4().hex, fmt, filename, stored, admit.input_size(input),
-            self.settings.max_attempts, weld, tenant, webhook_url, idempotency_key, digest,
-        )  # fmt: skip
+        job = admit.new_job(
+            input, fmt, params, filename, weld=weld, tenant=tenant, webhook_url=webhook_url,
+            idempotency_key=idempotency_key, size=size, memory_limit=self.memory_limit,
+            max_attempts=self.settings.max_attempts,
+        )
         with self._errors():
             if isinstance(self.blobs, DirectoryBlobs):
                 admit.check_space(self.blobs.files.root, job.input_bytes,
                                   self.settings.min_free_bytes)  # fmt: skip
-            self.blobs.put_input(job.job_id, fmt, input)
+            self.blobs.put_input(job.job_id, job.fmt, input)
             rq_id = self.backend.new_rq_id(job.job_id)
             try:
                 rec, created = self.store.insert(
