@@ -107,15 +107,7 @@ def _find_lambda(
         lam0 = initial_lambda(_fro(system.explicit()), float(np.linalg.norm(system.d2)))
         return search_lambda(dev, tau, phi0, lam0, params.tolerance, params.max_iterations)
     lo, hi = dev.floor, max(system.lambda_ceiling(tau), dev.floor)
-    inv_d = 1.0 / np.sqrt(system.d2)[:, None]
-    lam0, _, _, _ = estimate_lambda(
-        lambda V: inv_d * dev.solver.matvec(inv_d * V),
-        inv_d * system.r,
-        tau,
-        lo,
-        hi,
-        order=dev.order,
-    )
+    lam0 = lanczos_lambda(dev, tau, lo, hi)
     if params.solver == "auto" and prefer_matrix_free(system.size, lam0, system.mu_bound()):
         dev.use_matrix_free()
         run.notes.append(
@@ -137,6 +129,18 @@ def _find_lambda(
     if not search.converged and search.phi < tau:
         check_range(dev, op, fixed, params, run)
     return search
+
+
+def lanczos_lambda(dev: Deviation, tau: float, lo: float, hi: float) -> float:
+    """The lambda of ``phi(lambda) = tau`` in ``[lo, hi]`` from Lanczos quadrature on
+    ``D^-1 M D^-1`` and ``D^-1 r`` (matrix products only, no factorization)."""
+    system = dev.system
+    inv_d = 1.0 / np.sqrt(system.d2)[:, None]
+    lam, _, _, _ = estimate_lambda(
+        lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * system.r, tau, lo, hi,
+        order=dev.order,
+    )
+    return float(lam)
 
 
 def check_range(
@@ -172,16 +176,7 @@ def gcv_search(
     try:
         tau0 = auto_tau(geometry, params, fixed).tau / run.frame.phi_factor
         if tau0 > 0:
-            hi = max(system.lambda_ceiling(tau0), lo)
-            inv_d = 1.0 / np.sqrt(system.d2)[:, None]
-            start, _, _, _ = estimate_lambda(
-                lambda V: inv_d * dev.solver.matvec(inv_d * V),
-                inv_d * system.r,
-                tau0,
-                lo,
-                hi,
-                order=dev.order,
-            )
+            start = lanczos_lambda(dev, tau0, lo, max(system.lambda_ceiling(tau0), lo))
     except ParameterError:  # no noise estimate: start from the middle of the range
         pass
     scale = float(np.sum(system.r**2 / system.d2[:, None]))  # ||D^-1 r||^2 >= phi(lambda) lambda^2
