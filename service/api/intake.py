@@ -58,7 +58,9 @@ def clean_spool(settings: Settings, max_age: float = _SPOOL_MAX_AGE) -> int:
     removed = 0
     now = time.time()
     directory = spool_dir(settings)
-    for path in directory.glob("upload-*") if directory.is_dir() else ():
+    found = directory.is_dir()
+    names = [*directory.glob("upload-*"), *directory.glob("download-*")] if found else []
+    for path in names:  # uploads, and downloads pinned by a crashed server
         try:
             if now - path.stat().st_mtime > max_age:
                 path.unlink()

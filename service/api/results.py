@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import uuid
+from pathlib import Path
 from typing import Any
 
 from fastapi import Response
@@ -13,8 +17,10 @@ from service.io import GeometryDocument, write_geometry
 from service.jobs.files import result_name
 
 __all__ = [
+    "PIN_PREFIX",
     "REPORT_HEADER",
     "REPORT_HEADER_MAX",
+    "pin_file",
     "render_geometry",
     "report_header",
     "result_name",
@@ -23,6 +29,29 @@ __all__ = [
 REPORT_HEADER = "X-Geosmooth-Report"
 REPORT_HEADER_MAX = 8192
 _KEEP_HISTORY = 20
+#: Spool names of pinned downloads (removed after the response; leftovers by the spool sweep).
+PIN_PREFIX = "download-"
+
+
+def pin_file(path: Path, spool: Path) -> Path | None:
+    """A second name in ``spool`` for the result file ``path``, ``None`` if it is gone.
+
+    A download streams the file after its headers are sent: a ``DELETE`` of the job meanwhile
+    (another client, the TTL sweep) would cut the body short. A hard link keeps the data until
+    the response is done (a copy where ``spool`` is on another file system).
+    """
+    spool.mkdir(parents=True, exist_ok=True)
+    pin = spool / f"{PIN_PREFIX}{uuid.uuid4().hex}"
+    try:
+        try:
+            os.link(path, pin)
+        except FileNotFoundError:
+            raise
+        except OSError:  # another file system, or no hard links there
+            shutil.copyfile(path, pin)
+    except FileNotFoundError:
+        return None
+    return pin
 
 
 async def render_geometry(

@@ -11,6 +11,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, Query, Request, Response
 from fastapi.responses import FileResponse, RedirectResponse
+from starlette.background import BackgroundTask
 from starlette.concurrency import run_in_threadpool
 
 from service.api.deps import (
@@ -32,9 +33,10 @@ from service.api.docs import (
 )
 from service.api.errors import ApiProblem
 from service.api.ingest import check_job
+from service.api.intake import spool_dir
 from service.api.logs import get_logger
 from service.api.problems import FiniteJSONResponse
-from service.api.results import render_geometry, result_name
+from service.api.results import pin_file, render_geometry, result_name
 from service.api.schemas import Job, JobList, JobStatusName, OutputFormat, PageLinks, Report
 from service.jobs.queue import JobQueue, JobRecord, JobSize, JobStatus, job_location
 from service.jobs.webhooks import check_webhook_url
@@ -248,6 +250,7 @@ def _require_succeeded(job: JobRecord) -> None:
 async def get_result(
     job: JobDep,
     queue: QueueDep,
+    settings: SettingsDep,
     format: Annotated[OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)] = None,
 ) -> Response:
     _require_succeeded(job)
@@ -257,8 +260,10 @@ async def get_result(
     if url is not None:
         return RedirectResponse(url, status_code=307)
     path = await run_in_threadpool(queue.result_file, job.id, fmt)
-    if path is not None:
-        return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=name)
+    pin = None if path is None else await run_in_threadpool(pin_file, path, spool_dir(settings))
+    if pin is not None:  # streamed from its own name: a concurrent DELETE cannot cut it short
+        done = BackgroundTask(pin.unlink, missing_ok=True)
+        return FileResponse(pin, media_type=MEDIA_TYPES[fmt], filename=name, background=done)
     document = await run_in_threadpool(queue.result, job.id)
     if document is None:  # purged or deleted meanwhile
         raise ApiProblem(404, f"the result of job {job.id} is gone", code="result-not-found")
