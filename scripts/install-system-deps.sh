@@ -18,8 +18,10 @@ python_pkgs=(python3-dev python3-venv)  # Debian's python3 needs these for venv 
 runtime_pkgs=(libcholmod3 libopenblas0-pthread)
 # tests/web drive chromium with Playwright and Firefox ESR over WebDriver BiDi on an Xvfb display
 # (WebGL: Mesa's software rasterizer); no browser is ever downloaded (fonts: screenshots);
-# tests/jobs start a real redis-server; scripts/check-image.sh builds Debian 12 roots.
-test_pkgs=(chromium firefox-esr xvfb libgl1-mesa-dri fonts-dejavu-core redis-server debootstrap)
+# tests/jobs start a real redis-server; scripts/check-image.sh builds Debian 12 roots; the
+# Ctrl-C tests read a socket's acknowledged bytes with `ss` (iproute2).
+test_pkgs=(chromium firefox-esr xvfb libgl1-mesa-dri fonts-dejavu-core redis-server debootstrap
+           iproute2)
 pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
 case "${1:-}" in
