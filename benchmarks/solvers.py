@@ -59,7 +59,7 @@ def available_solvers() -> dict[str, str | None]:
     """``{solver: None}`` when usable here, else ``{solver: reason}``."""
     out: dict[str, str | None] = {"superlu": None}
     try:
-        from service.core.solver import cholmod_available
+        from service.core.linalg.solver import cholmod_available
 
         out["cholmod"] = None if cholmod_available() else "scikit-sparse not importable"
     except ImportError as exc:  # pragma: no cover

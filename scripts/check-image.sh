@@ -104,7 +104,7 @@ cp -a "$BUILD/opt/geosmooth" "$RUN/opt/geosmooth"
 cp "$SRC/service/samples/"* "$RUN/tmp/" 2>/dev/null || true
 in_root "$RUN" /opt/geosmooth/bin/python - <<'EOF'
 import pathlib, subprocess, sys
-import sksparse.cholmod, service.api.app, service.jobs.rq_worker, rq, boto3  # noqa: F401
+import sksparse.cholmod, service.api.app, service.jobs.distributed.worker, rq, boto3  # noqa: F401
 import geosmooth, geosmooth_client  # noqa: F401
 import numpy as np
 from service.core.geometry import Geometry
@@ -118,7 +118,7 @@ ring = Geometry(np.c_[np.cos(t), np.sin(t), np.zeros(400)] + rng.normal(0, 0.01,
 result = smooth(ring, SmoothingParams(tau=0.01, solver="cholmod"))
 report = result.report()
 assert abs(report["phi"] - 0.01) / 0.01 <= 1e-3, report
-help_text = subprocess.run([sys.executable, "-m", "service.jobs.rq_worker", "--help"],
+help_text = subprocess.run([sys.executable, "-m", "service.jobs.distributed.worker", "--help"],
                            capture_output=True, text=True, check=True).stdout
 assert "geosmooth worker" in help_text
 print("runtime smoke test: CHOLMOD solve ok, phi =", report["phi"])

@@ -20,7 +20,7 @@ case "${1:-}" in
     ;;
   package)
     "${PIP[@]}" --no-deps .
-    "$VENV/bin/python" -c "import sksparse.cholmod, service.api.app, service.cli, service.jobs.rq_worker, rq, boto3, geosmooth, geosmooth_client"
+    "$VENV/bin/python" -c "import sksparse.cholmod, service.api.app, service.cli, service.jobs.distributed.worker, rq, boto3, geosmooth, geosmooth_client"
     ;;
   *) echo "usage: $0 deps|package" >&2; exit 2 ;;
 esac

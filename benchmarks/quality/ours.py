@@ -20,7 +20,7 @@ from benchmarks.quality.scores import Scorer
 from benchmarks.quality.sweep import lambda_oracle
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.errors import GeosmoothError
-from service.core.operator import build_operator
+from service.core.operator.build import build_operator
 
 __all__ = ["MODES", "geometry_of", "modes_for", "run_auto", "run_mode"]
 

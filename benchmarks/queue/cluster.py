@@ -54,7 +54,7 @@ class Cluster:
         self._wait(lambda: self._ping())
         log = open(self.root / "workers.log", "ab")  # noqa: SIM115 - closed with the processes
         for i in range(self.n):
-            args = [sys.executable, "-m", "service.jobs.rq_worker", "--name", f"bench{i}",
+            args = [sys.executable, "-m", "service.jobs.distributed.worker", "--name", f"bench{i}",
                     "--log-level", "WARNING"]  # fmt: skip
             self.procs.append(subprocess.Popen(args, env=self.env(), cwd=REPO, stdout=log,
                                                stderr=log))  # fmt: skip

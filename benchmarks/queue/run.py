@@ -27,8 +27,8 @@ from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 from service.io import GeometryDocument, write_geometry
 from service.jobs import JobQueue, JobRecord, LocalQueue
-from service.jobs.rq_backend import Backend
-from service.jobs.rq_queue import RQQueue
+from service.jobs.distributed.backend import Backend
+from service.jobs.distributed.queue import RQQueue
 
 __all__ = ["job_mix", "overhead", "redis_cost", "throughput"]
 

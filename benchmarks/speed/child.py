@@ -20,8 +20,9 @@ import numpy as np
 
 from benchmarks.measure import self_peak_rss_mb
 from benchmarks.speed.jobs import Job, build_input, ground_truth
-from service.core import SmoothingParams, cache, smooth
-from service.core.operator import build_operator
+from service.core import SmoothingParams, smooth
+from service.core.linalg import cache
+from service.core.operator.build import build_operator
 
 __all__ = ["main", "run_job"]
 

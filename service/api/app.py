@@ -12,14 +12,14 @@ from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from starlette.concurrency import run_in_threadpool
 
-from service.api.auth import KeyRing
-from service.api.context import REQUEST_ID_HEADER, RequestContextMiddleware
 from service.api.docs import document_common_answers
-from service.api.guards import AuthGate, HostGuard, InFlightLimit, OriginGuard, allowed_hosts
-from service.api.intake import Intake, clean_spool
+from service.api.http.auth import KeyRing
+from service.api.http.context import REQUEST_ID_HEADER, RequestContextMiddleware
+from service.api.http.guards import AuthGate, HostGuard, InFlightLimit, OriginGuard, allowed_hosts
+from service.api.http.limits import BodyLimitMiddleware
+from service.api.http.metrics import Metrics
+from service.api.intake.request import Intake, clean_spool
 from service.api.job_events import JobEventLog
-from service.api.limits import BodyLimitMiddleware
-from service.api.metrics import Metrics
 from service.api.problems import PROBLEM_MEDIA_TYPE, FiniteJSONResponse, install_problem_handlers
 from service.api.routers import events, health, info, jobs, smooth, web
 from service.api.schemas import (
@@ -144,7 +144,7 @@ def _document_security(spec: dict[str, Any]) -> None:
 
 
 def _add_guards(app: FastAPI, settings: Settings, keys: KeyRing) -> None:
-    """The middleware stack, innermost first (see :mod:`service.api.guards`)."""
+    """The middleware stack, innermost first (see :mod:`service.api.http.guards`)."""
     origins = [o.strip() for o in settings.cors_origins.split(",") if o.strip()]
     app.add_middleware(
         BodyLimitMiddleware,
@@ -187,7 +187,8 @@ def create_app(settings: Settings | None = None, queue: JobQueue | None = None) 
     settings : Settings, optional
         Default: read from the environment (``GEOSMOOTH_*``).
     queue : JobQueue, optional
-        Default: a :class:`~service.jobs.local.LocalQueue` on ``settings.data_dir``, created when
+        Default: a :class:`~service.jobs.embedded.queue.LocalQueue` on ``settings.data_dir``,
+        created when
         the app starts. Either way the app's lifespan starts and stops the queue.
 
     Returns

@@ -7,10 +7,10 @@ from typing import Annotated
 from fastapi import Depends, Path, Request
 from starlette.concurrency import run_in_threadpool
 
-from service.api.auth import Principal
 from service.api.errors import ApiProblem
-from service.api.intake import Intake
-from service.api.metrics import Metrics
+from service.api.http.auth import Principal
+from service.api.http.metrics import Metrics
+from service.api.intake.request import Intake
 from service.jobs.queue import JobQueue, JobRecord
 from service.settings import Settings
 
@@ -55,7 +55,7 @@ async def get_metrics(request: Request) -> Metrics:
 
 
 async def get_principal(request: Request) -> Principal:
-    """Who sent the request (set by :class:`service.api.guards.AuthGate`)."""
+    """Who sent the request (set by :class:`service.api.http.guards.AuthGate`)."""
     principal = request.scope.get("state", {}).get("principal")
     if principal is None:  # an app mounted without its guards: nobody is trusted
         keys = request.app.state.keys

@@ -1,7 +1,8 @@
 """Problem details without a web framework: :class:`ApiProblem` and the typed-error mapping.
 
 Kept free of FastAPI/Starlette imports so the processes that parse uploads and run
-``POST /v1/smooth`` (:mod:`service.api.ingest`) can turn their errors into problem details too.
+``POST /v1/smooth`` (:mod:`service.api.intake.ingest`) can turn their errors into problem details
+too.
 
 Every typed error of the project (core, io, jobs, settings) has class attributes ``status``,
 ``title`` and ``code`` and instance attributes ``field``, ``message`` and ``to_dict()``;

@@ -26,7 +26,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
-from service.api.logs import get_logger
+from service.api.http.logs import get_logger
 from service.jobs.queue import JobQueue, JobRecord
 
 __all__ = ["JobEventLog"]

@@ -6,7 +6,7 @@ project (core, io, jobs: any exception with class attributes ``status``/``title`
 request validation errors, Starlette's HTTP errors (404 for unknown routes, 405, 413 ...) and, as
 a last resort, unexpected exceptions (500, without internals). :func:`problem_from_exception` is
 the single mapping; :func:`install_problem_handlers` wires it into an app (the catch-all for
-unexpected exceptions is :class:`service.api.context.RequestContextMiddleware`, which answers
+unexpected exceptions is :class:`service.api.http.context.RequestContextMiddleware`, which answers
 without closing the connection).
 """
 

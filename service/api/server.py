@@ -24,9 +24,9 @@ from typing import Any, ClassVar
 
 import uvicorn
 
-from service.api.auth import KeyRing
-from service.api.logs import configure_logging, get_logger
-from service.api.protocol import guarded_protocol
+from service.api.http.auth import KeyRing
+from service.api.http.logs import configure_logging, get_logger
+from service.api.http.protocol import guarded_protocol
 from service.exit_codes import EXIT_ADDRESS
 from service.settings import ConfigError, Settings, load_settings
 

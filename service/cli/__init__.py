@@ -11,13 +11,12 @@ the file writer, the report), :mod:`.progress` (progress line, summary), and one
 command (:mod:`.smooth`, :mod:`.serve`, :mod:`.submit`), imported only when it runs.
 """
 
+from service.cli.errors import CliError
+from service.cli.main import main
+from service.cli.params import params_from_args
+from service.cli.parser import build_parser
+from service.cli.smooth import read_fixed_indices
 from service.exit_codes import EXIT_CODES, SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
-
-from .errors import CliError
-from .main import main
-from .params import params_from_args
-from .parser import build_parser
-from .smooth import read_fixed_indices
 
 __all__ = [
     "EXIT_CODES",

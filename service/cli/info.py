@@ -11,12 +11,11 @@ import argparse
 import json
 from typing import TextIO
 
+from service.cli.errors import CliError
+from service.cli.output import check_format
+from service.cli.params import params_from_args
+from service.cli.smooth import read_input
 from service.exit_codes import EXIT_OK, EXIT_USAGE
-
-from .errors import CliError
-from .output import check_format
-from .params import params_from_args
-from .smooth import read_input
 
 __all__ = ["run"]
 

@@ -17,12 +17,11 @@ import traceback
 from collections.abc import Sequence
 from typing import TextIO
 
+from service.cli.errors import CliError, exit_code_of, fail, message_of
+from service.cli.params import option_name
+from service.cli.parser import build_parser
 from service.core.params import SmoothingParams
 from service.exit_codes import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE
-
-from .errors import CliError, exit_code_of, fail, message_of
-from .params import option_name
-from .parser import build_parser
 
 __all__ = ["main"]
 

@@ -24,10 +24,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from service.cli.errors import CliError, os_reason
+from service.cli.params import literal_names
 from service.exit_codes import EXIT_OUTPUT, EXIT_USAGE
-
-from .errors import CliError, os_reason
-from .params import literal_names
 
 __all__ = [
     "check_format",

@@ -18,10 +18,9 @@ from pydantic import ValidationError
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticUndefined
 
+from service.cli.errors import CliError
 from service.core.params import SmoothingParams
 from service.exit_codes import EXIT_USAGE
-
-from .errors import CliError
 
 __all__ = [
     "TARGET_FIELDS",

@@ -12,11 +12,10 @@ import textwrap
 from collections.abc import Mapping
 from typing import NoReturn
 
+from service.cli.errors import CliError
+from service.cli.output import writer_options
+from service.cli.params import add_smoothing_options
 from service.exit_codes import EXIT_CODES, EXIT_USAGE, SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
-
-from .errors import CliError
-from .output import writer_options
-from .params import add_smoothing_options
 
 __all__ = ["build_parser", "version"]
 

@@ -12,9 +12,8 @@ from __future__ import annotations
 import argparse
 from typing import TextIO
 
+from service.cli.errors import CliError
 from service.exit_codes import EXIT_ADDRESS, EXIT_OK, EXIT_USAGE
-
-from .errors import CliError
 
 __all__ = ["run"]
 

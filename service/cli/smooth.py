@@ -19,11 +19,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from service.core.params import SmoothingParams
-from service.exit_codes import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE
-
-from .errors import CliError, os_reason
-from .output import (
+from service.cli.errors import CliError, os_reason
+from service.cli.output import (
     check_format,
     check_writable,
     given_writer_options,
@@ -31,9 +28,11 @@ from .output import (
     write_json_report,
     write_output,
 )
-from .params import params_from_args
-from .parser import version
-from .progress import ProgressDisplay, show_summary
+from service.cli.params import params_from_args
+from service.cli.parser import version
+from service.cli.progress import ProgressDisplay, show_summary
+from service.core.params import SmoothingParams
+from service.exit_codes import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE
 
 if TYPE_CHECKING:
     from service.core.errors import TauOutOfRange

@@ -14,6 +14,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from service.cli.errors import CliError, os_reason
+from service.cli.output import check_writable, output_format, write_json_report, write_output
+from service.cli.params import params_from_args
+from service.cli.progress import ProgressDisplay, show_summary
 from service.exit_codes import (
     EXIT_CANCELLED,
     EXIT_INPUT,
@@ -24,11 +28,6 @@ from service.exit_codes import (
     EXIT_SERVER,
     EXIT_UNREACHABLE,
 )
-
-from .errors import CliError, os_reason
-from .output import check_writable, output_format, write_json_report, write_output
-from .params import params_from_args
-from .progress import ProgressDisplay, show_summary
 
 if TYPE_CHECKING:
     from geosmooth_client import Job

@@ -26,8 +26,8 @@ _EXPORTS = {
     "ProgressCallback": "progress",
     "ProgressEvent": "progress",
     "smooth": "pipeline",
-    "build_operator": "operator",
-    "SmoothingOperator": "operator",
+    "build_operator": "operator.build",
+    "SmoothingOperator": "operator.build",
 }
 
 __all__ = [
@@ -64,7 +64,7 @@ if TYPE_CHECKING:  # pragma: no cover
         TauOutOfRange,
     )
     from service.core.geometry import Geometry
-    from service.core.operator import SmoothingOperator, build_operator
+    from service.core.operator.build import SmoothingOperator, build_operator
     from service.core.params import SmoothingParams
     from service.core.pipeline import smooth
     from service.core.progress import ProgressCallback, ProgressEvent

@@ -3,7 +3,7 @@
 Used by ``geosmooth info``, the API's ``POST /v1/info`` and the web page. It builds the
 neighbourhoods and the Laplacian once (as ``smooth`` would) to get ``phi(0)`` of eq. (14), the
 upper end of the valid range of ``tau`` (section 6.1), and estimates the noise level (see
-:mod:`service.core.noise`) to suggest a smoothing factor.
+:mod:`service.core.search.noise`) to suggest a smoothing factor.
 """
 
 from __future__ import annotations
@@ -50,11 +50,11 @@ def _phi0(
     fixed points and the neighbourhood graph."""
     import scipy.sparse as sp
 
-    from service.core.displacement import auto_system
-    from service.core.operator import build_operator
+    from service.core.operator.build import build_operator
     from service.core.pipeline import free_set, smoothing_system
-    from service.core.system import Deviation
-    from service.core.target import phi_at_zero_of
+    from service.core.search.target import phi_at_zero_of
+    from service.core.system.deviation import Deviation
+    from service.core.system.displacement import auto_system
 
     op = build_operator(geometry, params)
     adj = op.neighborhoods.adjacency
@@ -84,7 +84,7 @@ def valid_range(geometry: Geometry, params: SmoothingParams) -> tuple[float, flo
     What :func:`describe` reports as ``tau_range`` / ``rms_range``, without its noise estimate
     (the API's check of a given ``tau`` at submit).
     """
-    from service.core.displacement import resolve_displacement
+    from service.core.system.displacement import resolve_displacement
 
     requested = params.displacement
     phi0, weight_sum, *_ = _phi0(geometry, resolve_displacement(params, geometry), requested)
@@ -96,10 +96,10 @@ def _knee(
 ) -> float:
     """The automatic tau as :func:`~service.core.pipeline.smooth` chooses it: the knee of
     ``phi(lambda)`` near the discrepancy estimate ``tau0`` (Lanczos, no factorization)."""
-    from service.core.autotau import knee_tau
-    from service.core.operator import build_operator
+    from service.core.operator.build import build_operator
     from service.core.pipeline import smoothing_system
-    from service.core.system import Deviation
+    from service.core.search.autotau import knee_tau
+    from service.core.system.deviation import Deviation
 
     op = build_operator(geometry, params)
     frame = op.frame.weighted(geometry.omega()[~fixed])
@@ -128,13 +128,13 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         where ``r = sqrt(phi0 / sum omega_i^2)`` over the points that can move and ``n_edges``
         counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs).
         ``sigma_estimate`` is the noise level across the shape
-        (:func:`~service.core.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
-        rule would choose with ``params`` (:func:`~service.core.autotau.auto_tau`) and
+        (:func:`~service.core.search.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
+        rule would choose with ``params`` (:func:`~service.core.search.autotau.auto_tau`) and
         ``suggested_rms`` the same budget as an RMS displacement; ``None`` when no estimate
         can be made (too few or degenerate points) or when it falls outside ``(0, phi0)``.
     """
-    from service.core.autotau import auto_tau
-    from service.core.displacement import resolve_displacement
+    from service.core.search.autotau import auto_tau
+    from service.core.system.displacement import resolve_displacement
 
     if params is None:
         params = SmoothingParams.model_construct()

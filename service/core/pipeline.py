@@ -14,30 +14,30 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.cache import analysis_of
-from service.core.diagnostics import diagnostics
-from service.core.displacement import auto_system, normal_mode, resolve_displacement
-from service.core.elimination import laplacian_system
+from service.core.checks.diagnostics import diagnostics
+from service.core.checks.shrinkage import check_preservable, preserve_measure
 from service.core.errors import ParameterError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
-from service.core.maxnorm import bound_deviation, clip_points
-from service.core.operator import (
+from service.core.linalg.cache import analysis_of
+from service.core.linalg.resources import choose_solver
+from service.core.operator.build import (
     SmoothingOperator,
     build_laplacian,
     build_operator,
     operator_key,
 )
 from service.core.params import SmoothingParams
-from service.core.polyfilter import filter_system
 from service.core.progress import ProgressCallback
-from service.core.resources import choose_solver
 from service.core.result import SmoothResult
 from service.core.run import Run
-from service.core.shrinkage import check_preservable, preserve_measure
-from service.core.system import Deviation, SmoothingSystem
-from service.core.target import check_range, find_lambda, gcv_search, knee, resolve_tau
-from service.core.tau import LambdaSearch
+from service.core.search.maxnorm import bound_deviation, clip_points
+from service.core.search.polyfilter import filter_system
+from service.core.search.roots import LambdaSearch
+from service.core.search.target import check_range, find_lambda, gcv_search, knee, resolve_tau
+from service.core.system.deviation import Deviation, SmoothingSystem
+from service.core.system.displacement import auto_system, normal_mode, resolve_displacement
+from service.core.system.elimination import laplacian_system
 
 __all__ = ["ProgressCallback", "build_laplacian", "build_operator", "smooth"]
 
@@ -176,8 +176,8 @@ def smoothing_system(
     the map from its solution ``U`` to the free points.
 
     ``free`` displacement: eq. (4) with the fixed points eliminated
-    (:func:`~service.core.elimination.laplacian_system`); ``normal``: one unknown per normal
-    direction of each point (:func:`~service.core.displacement.normal_mode`).
+    (:func:`~service.core.system.elimination.laplacian_system`); ``normal``: one unknown per normal
+    direction of each point (:func:`~service.core.system.displacement.normal_mode`).
     """
     P = frame.points(geometry.points)
     omega = geometry.omega() / frame.weight_scale
@@ -226,7 +226,7 @@ def _filtered(
     fixed: NDArray[np.bool_],
     n_fixed: int,
 ) -> SmoothResult:
-    """``method="windowed-sinc"`` (:func:`~service.core.polyfilter.filter_system`)."""
+    """``method="windowed-sinc"`` (:func:`~service.core.search.polyfilter.filter_system`)."""
     assert run.frame is not None
     frame = run.frame
     dev = Deviation(system, solver="cg")  # products with M (counted), no solve

@@ -90,11 +90,11 @@ class SmoothResult:
     tau_rule : str
         How lambda was set: ``"lam"``, ``"tau"``, ``"rms"``, ``"auto"`` or ``"gcv"``.
     sigma_estimate : float or None
-        Estimated noise level (automatic tau, ``service.core.noise``).
+        Estimated noise level (automatic tau, ``service.core.search.noise``).
     tau_how : str or None
         How the automatic tau was chosen, in words.
     checks : dict
-        Guard-rail measurements (``service.core.guards``): ``flipped_faces``,
+        Guard-rail measurements (``service.core.checks.guards``): ``flipped_faces``,
         ``volume_change``, ``area_change``, ``moved_far``.
     bound : dict or None
         ``max_deviation`` bound: ``{"max_deviation", "rounds", "clipped"}``.

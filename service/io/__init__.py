@@ -12,17 +12,17 @@ docstring states exactly what is read and written. Writers receive the plain doc
 :mod:`.plain` (un-welded once, normals recomputed once).
 """
 
-from service.io.document import GeometryDocument, Polyline, Precision, WeldMap
-from service.io.errors import FormatError, UnsupportedFormat
-from service.io.formats import (
+from service.io.dispatch import (
     detect_format,
     read_geometry,
     save_geometry,
     sniff_format,
     write_geometry,
 )
-from service.io.json_schema import GEOMETRY_JSON_SCHEMA
-from service.io.jsonfmt import document_to_json_obj, geometry_from_json_obj
+from service.io.document import GeometryDocument, Polyline, Precision, WeldMap
+from service.io.errors import FormatError, UnsupportedFormat
+from service.io.formats.json.codec import document_to_json_obj, geometry_from_json_obj
+from service.io.formats.json.schema import GEOMETRY_JSON_SCHEMA
 from service.io.registry import FORMATS, Format, get_format
 
 __all__ = [

@@ -9,7 +9,8 @@ everything needed to write the result back in the input's shape:
   ``geometry.edges`` is these followed by the polyline edges.
 * ``weld``: set when the file was read with ``weld=True``. The geometry then holds one vertex per
   distinct position and :attr:`WeldMap.index` maps every vertex of the file to its welded vertex.
-  Writers never see it: :func:`service.io.plain.plain_document` expands the document back to the
+  Writers never see it: :func:`service.io._shared.plain.plain_document` expands the document back
+  to the
   file's vertices once, before writing.
 * ``attributes``: every per-vertex value of the file other than the coordinates and normals
   (colours, alpha, confidence, intensity, labels, LAS dimensions, XYZ extra columns ...), in file
@@ -109,7 +110,7 @@ class Precision:
         ``"float32"`` or ``"float64"`` (numpy names): what ``precision="input"`` writes.
     text : tuple of str, optional
         Text formats: one printf spec per coordinate reproducing the input's digits (see
-        :mod:`service.io.numfmt`); ``None``: shortest round-trip form of ``dtype``.
+        :mod:`service.io._shared.numfmt`); ``None``: shortest round-trip form of ``dtype``.
     attribute_text : mapping of str to str
         Text formats: printf spec of each attribute column, likewise.
     """

@@ -4,7 +4,8 @@ The API's media types and enums, the CLI's ``--format`` choices, the jobs' forma
 extension and content detection all come from :data:`FORMATS`; a new format is one entry here
 plus its reader/writer module. Readers take a :class:`~service.io.source.Source` and return a
 :class:`~service.io.document.GeometryDocument`; writers take the plain (un-welded) document of
-:mod:`service.io.plain` and a binary stream. Modules are imported on first use, so the CLI does
+:mod:`service.io._shared.plain` and a binary stream. Modules are imported on first use, so the CLI
+does
 not pay for laspy, trimesh or ezdxf when it reads a PLY.
 """
 
@@ -177,36 +178,37 @@ _TABLE: dict[str, Format] = {
     for f in (
         _f(
             "ply",
-            "ply",
+            "formats.ply.read",
             _OCTET,
             ("ply",),
             "PLY",
-            writer=("ply_write", "write_ply"),
+            writer=("formats.ply.write", "write_ply"),
             sniff=lambda h, s: h.startswith((b"ply\n", b"ply\r\n")),
             binary=True,
         ),
         _f(
             "obj",
-            "obj",
+            "formats.obj.read",
             "model/obj",
             ("obj",),
             "OBJ",
-            writer=("obj_write", "write_obj"),
+            writer=("formats.obj.write", "write_obj"),
             sniff=_obj,
         ),
         _f(
             "xyz",
-            "xyz",
+            "formats.xyz",
             "text/plain; charset=utf-8",
             ("xyz", "txt", "csv", "pts"),
             "XYZ",
             options=("xyz_dims",),
             sniff=_xyz,
         ),
-        _f("json", "jsonfmt", "application/json", ("json",), "geosmooth JSON", sniff=_json),
+        _f("json", "formats.json.codec", "application/json", ("json",), "geosmooth JSON",
+        sniff=_json),
         _f(
             "stl",
-            "stl",
+            "formats.stl",
             "model/stl",
             ("stl",),
             "STL",
@@ -216,7 +218,7 @@ _TABLE: dict[str, Format] = {
         ),
         _f(
             "off",
-            "off",
+            "formats.off",
             "text/plain; charset=utf-8",
             ("off",),
             "OFF",
@@ -224,7 +226,7 @@ _TABLE: dict[str, Format] = {
         ),
         _f(
             "glb",
-            "glb",
+            "formats.glb",
             "model/gltf-binary",
             ("glb",),
             "glTF binary",
@@ -232,11 +234,12 @@ _TABLE: dict[str, Format] = {
             sniff=lambda h, s: h[:4] == b"glTF",
             binary=True,
         ),
-        _f("las", "las", "application/vnd.las", ("las",), "LAS", sniff=_las, binary=True),
-        _f("laz", "las", "application/vnd.laszip", ("laz",), "LAZ", sniff=_laz, binary=True),
+        _f("las", "formats.las", "application/vnd.las", ("las",), "LAS", sniff=_las, binary=True),
+        _f("laz", "formats.las", "application/vnd.laszip", ("laz",), "LAZ", sniff=_laz,
+        binary=True),
         _f(
             "pcd",
-            "pcd",
+            "formats.pcd",
             _OCTET,
             ("pcd",),
             "PCD",
@@ -245,7 +248,7 @@ _TABLE: dict[str, Format] = {
         ),
         _f(
             "e57",
-            "e57",
+            "formats.e57",
             "model/e57",
             ("e57",),
             "E57",
@@ -254,7 +257,7 @@ _TABLE: dict[str, Format] = {
         ),
         _f(
             "gpx",
-            "gpx",
+            "formats.gpx",
             "application/gpx+xml",
             ("gpx",),
             "GPX",
@@ -263,7 +266,7 @@ _TABLE: dict[str, Format] = {
         ),
         _f(
             "geojson",
-            "geojson",
+            "formats.geojson",
             "application/geo+json",
             ("geojson",),
             "GeoJSON",
@@ -272,7 +275,7 @@ _TABLE: dict[str, Format] = {
         ),
         _f(
             "dxf",
-            "dxf",
+            "formats.dxf",
             "image/vnd.dxf",
             ("dxf",),
             "DXF",

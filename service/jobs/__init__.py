@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from service.jobs.local import LocalQueue
+from service.jobs.embedded.queue import LocalQueue
 from service.jobs.queue import FINISHED, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ __all__ = [
 def make_queue(settings: Settings) -> JobQueue:
     """The backend named by ``settings.queue``: ``local`` (default) or ``rq``."""
     if settings.queue == "rq":
-        from service.jobs.rq_queue import RQQueue
+        from service.jobs.distributed.queue import RQQueue
 
         return RQQueue.from_settings(settings)
     return LocalQueue.from_settings(settings)

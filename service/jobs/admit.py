@@ -25,7 +25,7 @@ from service.jobs.queue import JobInput, JobSize
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
-    from service.jobs.store import NewJob
+    from service.jobs.embedded.store import NewJob
 
 __all__ = [
     "admit_size",
@@ -149,7 +149,7 @@ def new_job(
     """
     import uuid
 
-    from service.jobs.store import NewJob
+    from service.jobs.embedded.store import NewJob
 
     fmt = check_format(fmt)
     smoothing = validate_params(params)

@@ -38,11 +38,11 @@ from pathlib import Path
 from typing import Any
 
 from service.jobs import problems
+from service.jobs.embedded.store import JobStore
 from service.jobs.files import JobFiles
 from service.jobs.limits import limit_memory
 from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
-from service.jobs.store import JobStore
 
 __all__ = ["RunSpec", "load_runner", "main", "set_parent_death_signal"]
 

@@ -3,7 +3,7 @@
 ::
 
     data_dir/
-      jobs.sqlite3            metadata (see service.jobs.store)
+      jobs.sqlite3            metadata (see service.jobs.embedded.store)
       jobs/<id>/input.<fmt>   the uploaded file, fsynced before submit returns
       jobs/<id>/result.npy    smoothed points, shape (n, s), same order as the input geometry
       jobs/<id>/result.<fmt>  the smoothed document written back in the input's format

@@ -1,7 +1,8 @@
 """Resource limits of a job: the per-job memory limit and its enforcement.
 
 * **Admission** (:func:`check_admission`): before a job is accepted its peak memory is estimated
-  by the engine (``service.core.resources.estimate_resources``); above the per-job limit the job
+  by the engine (``service.core.linalg.resources.estimate_resources``); above the per-job limit the
+  job
   is refused with :class:`~service.jobs.errors.JobTooLarge` (422, estimate and limit stated).
 * **Enforcement** (:func:`limit_memory`): every job process runs under ``RLIMIT_AS`` = its
   address space when the job starts + the per-job limit. An estimate that was wrong makes that one
@@ -10,7 +11,7 @@
   (cgroups would need a delegated hierarchy); it counts address space, not resident memory, so
   the limit is generous by what allocators reserve but do not touch.
 * **Threads**: BLAS/OpenMP threads per job process come from the engine's thread budget
-  (``service.core.threads``), applied once in the process that forks the job processes.
+  (``service.core.linalg.threads``), applied once in the process that forks the job processes.
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ def check_admission(size: JobSize, params: SmoothingParams, limit: int | None) -
     """
     if limit is None:
         return
-    from service.core.resources import estimate_resources
+    from service.core.linalg.resources import estimate_resources
 
     est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces,
                              memory_limit=limit)  # fmt: skip

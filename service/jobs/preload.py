@@ -15,9 +15,9 @@ import os
 import numpy as np
 
 from service.core.geometry import Geometry
+from service.core.linalg.threads import limit_threads
 from service.core.params import SmoothingParams
 from service.core.pipeline import smooth
-from service.core.threads import limit_threads
 from service.io import GeometryDocument, read_geometry, write_geometry
 
 __all__ = ["apply_thread_limit", "warm_up"]

@@ -1,8 +1,9 @@
 """The job queue contract: job states, the job record and the :class:`JobQueue` protocol.
 
 The HTTP layer only talks to a :class:`JobQueue`; the embedded default is
-:class:`service.jobs.local.LocalQueue` (SQLite + worker processes), the distributed one
-:class:`service.jobs.rq_queue.RQQueue` (Redis + RQ workers + a shared blob store). Arrays never
+:class:`service.jobs.embedded.queue.LocalQueue` (SQLite + worker processes), the distributed one
+:class:`service.jobs.distributed.queue.RQQueue` (Redis + RQ workers + a shared blob store). Arrays
+never
 travel through a queue: only job ids and small metadata do; inputs and results live in the blob
 store.
 """

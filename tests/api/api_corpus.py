@@ -13,7 +13,8 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from api_helpers import icosphere, noisy_plane_cloud, obj_bytes, ply_bytes, xyz_bytes
+
+from tests.api.api_helpers import icosphere, noisy_plane_cloud, obj_bytes, ply_bytes, xyz_bytes
 
 OK, BAD = frozenset({"ok"}), frozenset({"400"})
 ANY_4XX = frozenset({"400", "413", "415", "422"})

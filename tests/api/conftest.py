@@ -9,7 +9,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from api_helpers import KEYS, TIGHT_ENV, LiveServer
+
+from tests.api.api_helpers import KEYS, TIGHT_ENV, LiveServer
 
 # Small limits so that the 413 paths are cheap to exercise.
 SERVER_ENV = {

@@ -15,9 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "api"))
-
-from api_helpers import (
+from service.exit_codes import (
+    EXIT_CANCELLED,
+    EXIT_JOB_FAILED,
+    EXIT_REJECTED,
+    EXIT_UNREACHABLE,
+)
+from tests.api.api_helpers import (
     LiveServer,
     encode,
     free_port,
@@ -25,13 +29,6 @@ from api_helpers import (
     noisy_sphere,
     parse_points,
     phi,
-)
-
-from service.exit_codes import (
-    EXIT_CANCELLED,
-    EXIT_JOB_FAILED,
-    EXIT_REJECTED,
-    EXIT_UNREACHABLE,
 )
 
 GEOSMOOTH = Path(sys.executable).with_name("geosmooth")

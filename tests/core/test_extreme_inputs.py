@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import noisy_icosphere
 
 from service.core import Geometry, GeosmoothError, SmoothingParams, smooth
+from tests.core.core_fixtures import noisy_icosphere
 
 
 def _finite_or_typed(g: Geometry, params: SmoothingParams) -> str:

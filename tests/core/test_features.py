@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import polyline_edges
 
 from service.core import Geometry, SmoothingParams, smooth
+from tests.core.core_fixtures import polyline_edges
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from core_fixtures import noisy_icosphere, polyline_edges
 
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.info import describe
+from tests.core.core_fixtures import noisy_icosphere, polyline_edges
 
 
 def test_mesh_phi0_is_centroid_deviation() -> None:

@@ -7,11 +7,11 @@ import itertools
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from core_fixtures import grid_mesh, noisy_icosphere, polyline_edges, random_rotation
 from scipy.spatial import Delaunay
 
 from service.core import Geometry, ParameterError, SmoothingParams, TauOutOfRange, smooth
 from service.core.pipeline import build_laplacian
+from tests.core.core_fixtures import grid_mesh, noisy_icosphere, polyline_edges, random_rotation
 
 
 def _curve_network(seed: int = 0) -> Geometry:
@@ -318,7 +318,7 @@ def test_superlu_matches_cholmod_and_fallback(monkeypatch: pytest.MonkeyPatch) -
     b = smooth(g, SmoothingParams(tau=0.05, solver="superlu"))
     assert (a.solver, b.solver) == ("cholmod", "superlu")
     np.testing.assert_allclose(a.points, b.points, atol=1e-10)
-    from service.core import solver
+    from service.core.linalg import solver
 
     monkeypatch.setattr(solver, "_cholmod", None)
     c = smooth(g, SmoothingParams(tau=0.05))
@@ -330,7 +330,7 @@ def test_superlu_matches_cholmod_and_fallback(monkeypatch: pytest.MonkeyPatch) -
 def test_one_analysis_and_one_factorization_per_lambda(monkeypatch: pytest.MonkeyPatch) -> None:
     """The report's search (rational, section 6.3): one numeric factorization per lambda tried
     and one symbolic analysis per run (the analysis cache is emptied first)."""
-    from service.core import cache, solver
+    from service.core.linalg import cache, solver
 
     cache.clear()
 

@@ -65,7 +65,7 @@ def _corner(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def test_network_junction_is_a_corner() -> None:
-    from service.core.operator import build_laplacian
+    from service.core.operator.build import build_laplacian
 
     clean, noisy, E = _corner(0)
     g = Geometry(noisy, edges=E)

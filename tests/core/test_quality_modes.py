@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_fixtures import noisy_icosphere, polyline_edges
 
 from service.core import Geometry, SmoothingParams, smooth
-from service.core.displacement import normal_frames
-from service.core.operator import build_laplacian
+from service.core.operator.build import build_laplacian
+from service.core.system.displacement import normal_frames
+from tests.core.core_fixtures import noisy_icosphere, polyline_edges
 
 
 def _cloud(n: int = 600, seed: int = 0) -> Geometry:
@@ -131,7 +131,7 @@ def test_auto_displacement_falls_back_to_free_where_normals_cannot_move() -> Non
     flat = np.column_stack([rng.uniform(size=(200, 2)), np.full(200, 0.5)])
     res = smooth(Geometry(flat), SmoothingParams(rms=0.01))
     assert res.displacement == "free" and res.converged
-    from core_fixtures import grid_mesh
+    from tests.core.core_fixtures import grid_mesh
 
     P, F = grid_mesh(8, 7, jitter=0.3)
     res2 = smooth(Geometry(P[:, :2], faces=F), SmoothingParams(lam=0.1))

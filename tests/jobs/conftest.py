@@ -7,9 +7,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from jobs_helpers import FAKE
 
 from service.jobs import LocalQueue
+from tests.jobs.jobs_helpers import FAKE
 
 
 @pytest.fixture

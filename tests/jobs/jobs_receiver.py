@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jobs_helpers import REPO
+from tests.jobs.jobs_helpers import REPO
 
 
 @dataclass

@@ -15,9 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jobs_helpers import HERE, REPO, wait_for
-
 from service.settings import Settings
+from tests.jobs.jobs_helpers import HERE, REPO, wait_for
 
 PYTHON = sys.executable
 WEBHOOK_SECRET = "whsec-rq-7d2e"

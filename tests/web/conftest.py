@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from web_helpers import (
+
+from tests.web.web_helpers import (
     CHROMIUM,
     CHROMIUM_ARGS,
     Browsing,

@@ -14,8 +14,8 @@ from starlette.concurrency import run_in_threadpool
 from service.api.deps import MetricsDep, SettingsDep
 from service.api.docs import problem_responses
 from service.api.errors import ApiProblem
-from service.api.intake import spool_dir
-from service.api.logs import get_logger
+from service.api.http.logs import get_logger
+from service.api.intake.request import spool_dir
 from service.settings import Settings
 
 __all__ = ["Health", "Readiness", "router"]

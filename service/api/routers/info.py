@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from service.api.deps import IntakeDep, PrincipalDep
 from service.api.docs import JOB_SUBMIT_OPENAPI, problem_responses
-from service.api.ingest import describe_input
+from service.api.intake.ingest import describe_input
 from service.api.schemas import GEOMETRY_EXAMPLE
 
 __all__ = ["Info", "Preview", "router"]
@@ -161,7 +161,7 @@ async def info(
         bool, Query(description="Include the geometry for display (base64 arrays).")
     ] = False,
 ) -> dict[str, Any]:
-    # parsed and described in a worker process, like every upload (see service.api.intake)
+    # parsed and described in a worker process, like every upload (see service.api.intake.request)
     upload = await intake.receive(request)
     try:
         answer = await intake.run(

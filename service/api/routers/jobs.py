@@ -32,9 +32,9 @@ from service.api.docs import (
     problem_responses,
 )
 from service.api.errors import ApiProblem
-from service.api.ingest import check_job
-from service.api.intake import spool_dir
-from service.api.logs import get_logger
+from service.api.http.logs import get_logger
+from service.api.intake.ingest import check_job
+from service.api.intake.request import spool_dir
 from service.api.problems import FiniteJSONResponse
 from service.api.results import pin_file, render_geometry, result_name
 from service.api.schemas import Job, JobList, JobStatusName, OutputFormat, PageLinks, Report

@@ -18,7 +18,7 @@ from service.api.docs import (
     SMOOTH_OPENAPI,
     problem_responses,
 )
-from service.api.ingest import smooth_input
+from service.api.intake.ingest import smooth_input
 from service.api.results import REPORT_HEADER, report_header, result_name
 from service.api.schemas import OutputFormat
 

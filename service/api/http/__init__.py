@@ -1,0 +1,1 @@
+"""What every request meets first: protocol, limits, guards, auth, logs, metrics."""

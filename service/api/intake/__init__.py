@@ -1,0 +1,1 @@
+"""Upload -> one typed checked input, parsed once in a killable process."""

@@ -1,0 +1,1 @@
+"""After the solve: shape guards, volume/area rescaling, spectrum, the report's diagnostics."""

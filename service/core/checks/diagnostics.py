@@ -1,0 +1,121 @@
+"""The :class:`~service.core.result.SmoothResult` of a run: input-frame numbers, the shape
+checks and warnings of :mod:`.guards`, timings, work counters and the optional spectrum
+(eq. 12)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.core.checks.guards import guard_warnings, noise_ratio, shape_checks
+from service.core.checks.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
+from service.core.errors import SolverError
+from service.core.frame import Frame
+from service.core.geometry import Geometry
+from service.core.operator.build import SmoothingOperator
+from service.core.params import SmoothingParams
+from service.core.result import SmoothResult, Spectrum
+from service.core.run import Run
+from service.core.search.roots import LambdaSearch
+from service.core.system.deviation import Deviation
+
+__all__ = ["diagnostics"]
+
+Array = NDArray[np.float64]
+
+
+def diagnostics(
+    geometry: Geometry,
+    params: SmoothingParams,
+    op: SmoothingOperator,
+    run: Run,
+    X: Array,
+    dev: Deviation | None,
+    search: LambdaSearch,
+    n_fixed: int,
+    volume_scale: float | None = None,
+) -> SmoothResult:
+    """The :class:`SmoothResult` of a run: input-frame numbers, timings and work counters."""
+    frame = run.frame if run.frame is not None else op.frame
+    moved = X - geometry.points
+    dev_pt = np.linalg.norm(moved, axis=1)
+    # phi of the solution (before any volume rescaling), as recorded in the history
+    phi = search.phi * frame.phi_factor if dev is not None else 0.0
+    if not (np.isfinite(phi) and np.isfinite(search.lam) and np.isfinite(X).all()):
+        raise SolverError(  # never report a non-finite number (issue 15)
+            "the solution is not finite at this scale (lambda, phi or the points overflowed)",
+            field="params",
+        )
+    stats = dev.stats if dev is not None else None
+    timings = dict(op.timings)
+    if stats is not None:
+        timings.update(
+            analysis=stats.analysis,
+            factorization=stats.factorization,
+            solve=stats.solve,
+            matvec=stats.matvec,
+        )
+    checks = shape_checks(geometry, X)
+    ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
+    run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
+    timings["search"] = run.search_seconds
+    timings["total"] = time.perf_counter() - run.t0
+    tau = run.tau
+    spectrum = None
+    if params.spectrum:
+        spectrum = _spectrum(op, geometry, frame, search.lam, n_fixed, run.notes)
+    return SmoothResult(
+        points=X,
+        lam=params.lam if params.lam is not None else frame.lam_out(search.lam),
+        phi=phi,
+        tau=tau,
+        relative_error=None if tau is None else abs(phi - tau) / tau,
+        converged=search.converged,
+        iterations=len(search.history),
+        factorizations=stats.factorizations if stats else 0,
+        solves=stats.solves if stats else 0,
+        matvecs=stats.matvecs if stats else 0,
+        history=[(frame.lam_out(lam), p * frame.phi_factor) for lam, p in search.history],
+        deviation=dev_pt,
+        rms_deviation=float(np.sqrt(np.mean(dev_pt**2))),
+        max_deviation=float(dev_pt.max()),
+        timings=timings,
+        solver=dev.solver.name if dev is not None and params.method == "tikhonov" else "none",
+        method=params.method,
+        search="none" if params.lam is not None else params.search,
+        order=params.order,
+        laplacian=params.laplacian,
+        weights=op.scheme,
+        kind=geometry.kind,
+        n_fixed=n_fixed,
+        volume_scale=volume_scale,
+        warnings=[*run.notes, *(stats.warnings if stats else [])],
+        spectrum=spectrum,
+        displacement=params.displacement,
+        tau_rule=params.tau_rule,
+        sigma_estimate=run.sigma,
+        tau_how=run.tau_how,
+        checks=checks.to_dict(),
+        bound=run.bound,
+    )
+
+
+def _spectrum(
+    op: SmoothingOperator,
+    geometry: Geometry,
+    frame: Frame,
+    lam: float,
+    n_fixed: int,
+    notes: list[str],
+) -> Spectrum | None:
+    if n_fixed:
+        notes.append("spectrum: not available with fixed points (eq. 12 assumes none)")
+        return None
+    if geometry.n > SPECTRUM_MAX_POINTS:
+        notes.append(f"spectrum: only computed for inputs up to {SPECTRUM_MAX_POINTS} points")
+        return None
+    L = op.L * op.frame.scale ** (-op.frame.power)
+    sigma, _ = singular_values(L, geometry.omega())
+    return Spectrum(sigma=sigma, gamma=filter_factors(sigma, frame.lam_out(lam)))

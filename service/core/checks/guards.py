@@ -1,0 +1,196 @@
+"""Guard rails: did smoothing keep the shape, or destroy it?
+
+Smoothing with too large a budget ``tau`` melts a shape (the report's section 5.2 limit is the
+centroid): faces turn over, the enclosed volume and the area shrink, and a few points travel
+far. :func:`shape_checks` measures this on every result and :func:`guard_warnings` turns the
+measurements into warnings that name the parameter to change.
+
+Thresholds (chosen on the quality benchmark, ``benchmarks/quality``, where no case smoothed at
+its oracle tau comes near them while the README's former ``tau 0.5`` on the bunny exceeds all):
+
+* more than 1 % of the faces flipped (normal reversed against the input's);
+* enclosed volume (closed meshes) or area (closed 2-D polygons) changed by more than 10 %;
+* surface area (meshes) or total length (curves) lost beyond what the noise explains: noise of
+  standard deviation ``sigma`` on a shape sampled at spacing ``h`` inflates them by up to
+  ``NOISE_AREA (sigma / h)^2`` (at most 5.6 on the benchmark, 1.2 - 5.6 depending on how much
+  of the noise is tangential), so a loss of more than ``10 % + NOISE_AREA (sigma / h)^2`` is
+  not noise removal. Without a noise estimate the allowance is zero.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.core.checks.shrinkage import enclosed_measure, is_closed_curve_set, is_closed_mesh
+from service.core.geometry import Geometry
+
+__all__ = [
+    "FAR_FACTOR",
+    "FLIP_FRACTION",
+    "MEASURE_CHANGE",
+    "NOISE_AREA",
+    "ShapeChecks",
+    "guard_warnings",
+    "noise_ratio",
+    "shape_checks",
+]
+
+FLIP_FRACTION = 0.01
+MEASURE_CHANGE = 0.10
+FAR_FACTOR = 5.0
+NOISE_AREA = 6.0
+
+
+@dataclass(frozen=True)
+class ShapeChecks:
+    """What smoothing did to the shape.
+
+    Attributes
+    ----------
+    flipped_faces : int or None
+        Faces whose normal points against the input's (triangle meshes in 3-D).
+    n_faces : int
+        Faces compared (non-degenerate in the input).
+    volume_change : float or None
+        Relative change of the enclosed volume (closed meshes in 3-D) or area (closed polygons
+        in 2-D).
+    area_change : float or None
+        Relative change of the surface area (meshes) or of the total length (curves).
+    moved_far : int
+        Points that moved more than ``FAR_FACTOR`` times the RMS deviation.
+    """
+
+    flipped_faces: int | None
+    n_faces: int
+    volume_change: float | None
+    area_change: float | None
+    moved_far: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "flipped_faces": self.flipped_faces,
+            "volume_change": self.volume_change,
+            "area_change": self.area_change,
+            "moved_far": self.moved_far,
+        }
+
+
+def _face_normals(P: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
+    a, b, c = (P[F[:, i]] for i in range(3))
+    return np.cross(b - a, c - a)
+
+
+def _relative(after: float, before: float) -> float | None:
+    return (after - before) / before if before > 0 and np.isfinite(after) else None
+
+
+def shape_checks(geometry: Geometry, X: NDArray[np.float64]) -> ShapeChecks:
+    """Compare the smoothed points ``X`` with the input ``geometry``.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    X : ndarray, shape (n, s)
+
+    Returns
+    -------
+    ShapeChecks
+    """
+    P = geometry.points
+    dev = np.linalg.norm(X - P, axis=1)
+    rms = float(np.sqrt(np.mean(dev**2)))
+    moved_far = int(np.sum(dev > FAR_FACTOR * rms)) if rms > 0 else 0
+    flipped: int | None = None
+    n_faces = 0
+    volume = area = None
+    F, E = geometry.faces, geometry.edges
+    if F is not None and geometry.dim == 3:
+        n0 = _face_normals(P, F)
+        ok = np.linalg.norm(n0, axis=1) > 0
+        n_faces = int(ok.sum())
+        n1 = _face_normals(X, F)
+        flipped = int(np.sum(np.einsum("ij,ij->i", n0[ok], n1[ok]) < 0))
+        area = _relative(
+            float(np.linalg.norm(n1, axis=1).sum()), float(np.linalg.norm(n0, axis=1).sum())
+        )
+        if is_closed_mesh(F):
+            volume = _relative(enclosed_measure(X, F), enclosed_measure(P, F))
+    elif F is None and E is not None:
+        length = float(np.linalg.norm(P[E[:, 0]] - P[E[:, 1]], axis=1).sum())
+        area = _relative(float(np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1).sum()), length)
+        if geometry.dim == 2 and is_closed_curve_set(E, geometry.n):
+            volume = _relative(enclosed_measure(X, None, E), enclosed_measure(P, None, E))
+    return ShapeChecks(flipped, n_faces, volume, area, moved_far)
+
+
+def guard_warnings(
+    checks: ShapeChecks, target: str, ratio: Callable[[], float | None] | None = None
+) -> list[str]:
+    """Warnings when the shape was destroyed rather than smoothed.
+
+    Parameters
+    ----------
+    checks : ShapeChecks
+    target : str
+        How the amount of smoothing was set, e.g. ``"tau"``, ``"rms"``, ``"lam"``,
+        ``"automatic tau"``: the parameter the warning tells the user to change.
+    ratio : callable, optional
+        Returns the estimated noise over the mean spacing, ``sigma / h`` (see the module
+        docstring); called only when the area loss exceeds 10 %.
+
+    Returns
+    -------
+    list of str
+        Empty when the shape looks smoothed, not destroyed.
+    """
+    fix = {
+        "lam": "increase lam",
+        "tau": "lower tau",
+        "rms": "lower rms",
+    }.get(target, "give a smaller tau or rms")
+    out = []
+    if checks.flipped_faces and checks.flipped_faces > FLIP_FRACTION * max(checks.n_faces, 1):
+        pct = 100.0 * checks.flipped_faces / checks.n_faces
+        out.append(
+            f"{checks.flipped_faces} faces ({pct:.1f} %) turned over: the shape was destroyed "
+            f"rather than smoothed; {fix}"
+        )
+    if checks.volume_change is not None and abs(checks.volume_change) > MEASURE_CHANGE:
+        out.append(
+            f"the enclosed volume changed by {100 * checks.volume_change:+.1f} %: the shape "
+            f"shrank rather than smoothed; {fix} (or set preserve_volume)"
+        )
+    loss = -checks.area_change if checks.area_change is not None else 0.0
+    allowance = MEASURE_CHANGE
+    if loss > allowance and ratio is not None:
+        allowance += NOISE_AREA * (ratio() or 0.0) ** 2
+    if loss > allowance:
+        what = "surface area" if checks.flipped_faces is not None else "length"
+        out.append(
+            f"the {what} changed by {-100 * loss:+.1f} %, more than the noise "
+            f"explains ({-100 * allowance:+.1f} %): the shape was flattened; {fix}"
+        )
+    return out
+
+
+def noise_ratio(geometry: Geometry, sigma: float | None = None) -> float | None:
+    """``sigma / h``: the estimated noise (``sigma``, or estimated here for meshes and curves)
+    over the mean edge length; ``None`` for point clouds or when no estimate can be made."""
+    if geometry.faces is None and geometry.edges is None:
+        return None
+    if sigma is None:
+        from service.core.search.noise import estimate_noise
+
+        est = estimate_noise(geometry)
+        if est is None:
+            return None
+        sigma = est.sigma
+    from service.core.info import mean_spacing
+
+    h = mean_spacing(geometry)
+    return sigma / h if h > 0 else None

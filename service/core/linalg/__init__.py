@@ -1,0 +1,1 @@
+"""The CHOLMOD wrapper, CG, Lanczos, symbolic factor size, caches, memory and threads."""

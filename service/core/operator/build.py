@@ -1,0 +1,180 @@
+"""``build_operator()``: neighbourhoods, weights, curvature and the Laplacian (report section 4).
+
+The operator is everything about an input that does not depend on tau: it can be built once
+and smoothed at several tau (``smooth(geometry, params, operator=op)``), and it is cached per
+geometry and build parameters in the process (:mod:`service.core.linalg.cache`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from service.core.errors import ParameterError
+from service.core.frame import Frame
+from service.core.geometry import Geometry
+from service.core.linalg import cache
+from service.core.operator.curvature import curvature
+from service.core.operator.laplacian import laplacian, presmooth, without_junction_rows
+from service.core.operator.neighborhoods import (
+    Neighborhoods,
+    cloud_delaunay_neighborhoods,
+    cloud_knn_neighborhoods,
+    curve_neighborhoods,
+    mesh_neighborhoods,
+)
+from service.core.operator.weights import ResolvedScheme, neighbor_weights
+from service.core.params import SmoothingParams
+
+__all__ = [
+    "BUILD_FIELDS",
+    "SmoothingOperator",
+    "build_laplacian",
+    "build_operator",
+    "operator_key",
+    "resolve_weights",
+]
+
+#: The parameters an operator depends on.
+BUILD_FIELDS = (
+    "laplacian", "weights", "neighborhood", "k", "sigma_h", "sigma_f", "presmooth", "junctions"
+)
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothingOperator:
+    """The Laplacian of one geometry, in the internal frame (:mod:`service.core.frame`).
+
+    Attributes
+    ----------
+    L : scipy.sparse.csr_matrix, shape (n, n)
+        ``L^(n)``, ``L^(kappa)`` or ``L^(f)`` of the internal points.
+    neighborhoods : Neighborhoods
+    scheme : str
+        Resolved weight scheme.
+    frame : Frame
+    key : str
+        Digest of the geometry and the build parameters it was built for.
+    timings : dict
+        Seconds for ``neighborhoods`` and ``laplacian``.
+    """
+
+    L: sp.csr_matrix
+    neighborhoods: Neighborhoods
+    scheme: ResolvedScheme
+    frame: Frame
+    key: str
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def resolve_weights(params: SmoothingParams, geometry: Geometry) -> ResolvedScheme:
+    """The weight scheme actually used: ``auto`` resolved as in the report.
+
+    Reciprocal distance for curves (section 4.2) and k-NN neighbourhoods; mean value for meshes
+    (4.3) and Delaunay neighbourhoods (4.4).
+
+    Raises
+    ------
+    ParameterError
+        For triangle-based weights without triangles (curves, k-NN neighbourhoods).
+    """
+    kind = geometry.kind
+    triangles = kind == "mesh" or (kind == "cloud" and params.neighborhood == "delaunay")
+    if params.weights == "auto":
+        return "mean-value" if triangles else "reciprocal"
+    if params.weights in ("mean-value", "cotangent") and not triangles:
+        where = "a curve" if kind == "curve" else "k-NN neighbourhoods"
+        raise ParameterError(
+            f"weights '{params.weights}' need triangles, which {where} do not have: use "
+            "'reciprocal' or 'uniform'"
+            + (", or neighborhood 'delaunay'" if kind == "cloud" else ""),
+            field="params.weights",
+        )
+    return params.weights
+
+
+def _neighborhoods(geometry: Geometry, P: np.ndarray, params: SmoothingParams) -> Neighborhoods:
+    if geometry.faces is not None:
+        return mesh_neighborhoods(geometry.faces, geometry.n, geometry.edges)
+    if geometry.edges is not None:
+        return curve_neighborhoods(geometry.edges, geometry.n)
+    if params.neighborhood == "delaunay":
+        return cloud_delaunay_neighborhoods(P, params.k)
+    return cloud_knn_neighborhoods(P, params.k)
+
+
+def operator_key(geometry: Geometry, params: SmoothingParams) -> str:
+    """Digest of what an operator depends on: points, connectivity, :data:`BUILD_FIELDS`."""
+    return cache.digest(
+        geometry.points,
+        geometry.faces if geometry.faces is not None else 0,
+        geometry.edges if geometry.edges is not None else 0,
+        *(getattr(params, name) for name in BUILD_FIELDS),
+    )
+
+
+def build_operator(geometry: Geometry, params: SmoothingParams) -> SmoothingOperator:
+    """Neighbourhoods, weights, curvature and the Laplacian variant (cached per input).
+
+    Parameters
+    ----------
+    geometry : Geometry
+    params : SmoothingParams
+        Only :data:`BUILD_FIELDS` matter.
+
+    Returns
+    -------
+    SmoothingOperator
+
+    Raises
+    ------
+    ParameterError
+        Triangle weights without triangles.
+    """
+    scheme = resolve_weights(params, geometry)
+    key = operator_key(geometry, params)
+    return cache.operators.get_or_make(key, lambda: _build(geometry, params, scheme, key))
+
+
+def _build(
+    geometry: Geometry, params: SmoothingParams, scheme: ResolvedScheme, key: str
+) -> SmoothingOperator:
+    frame = Frame.of(geometry.points, params.laplacian)
+    P = frame.points(geometry.points)
+    t0 = time.perf_counter()
+    nb = _neighborhoods(geometry, P, params)
+    curv_nb = nb
+    if params.laplacian != "normalized" and nb.source == "knn":
+        curv_nb = cloud_delaunay_neighborhoods(P, params.k)  # curvature from Delaunay fans
+    t1 = time.perf_counter()
+    W = neighbor_weights(P, nb, scheme)
+    ref = P  # curvature and row scales of L(kappa)/L(f) from the pre-smoothed input (quality)
+    if params.laplacian != "normalized" and params.presmooth:
+        ref = presmooth(P, nb.adjacency, params.presmooth)
+    kappa = curvature(ref, curv_nb) if params.laplacian != "normalized" else None
+    L = laplacian(W, ref, params.laplacian, kappa, params.sigma_h / frame.scale, params.sigma_f)
+    if nb.source == "curve" and params.junctions == "corner":
+        L = without_junction_rows(L, nb.adjacency)
+    t2 = time.perf_counter()
+    timings = {"neighborhoods": t1 - t0, "laplacian": t2 - t1}
+    return SmoothingOperator(L, nb, scheme, frame, key, timings)
+
+
+def build_laplacian(
+    geometry: Geometry, params: SmoothingParams
+) -> tuple[sp.csr_matrix, Neighborhoods, ResolvedScheme, dict[str, float]]:
+    """The Laplacian of ``geometry`` in the input's frame (``L = s^-p L'``), for tests and tools.
+
+    Returns
+    -------
+    L : scipy.sparse.csr_matrix, shape (n, n)
+    nb : Neighborhoods
+    scheme : str
+    timings : dict
+    """
+    op = build_operator(geometry, params)
+    L = op.L * op.frame.scale ** (-op.frame.power) if op.frame.power else op.L
+    return sp.csr_matrix(L), op.neighborhoods, op.scheme, dict(op.timings)

@@ -1,0 +1,207 @@
+"""Format dispatch: :func:`read_geometry`, :func:`write_geometry`, :func:`save_geometry`.
+
+Every format is an entry of :data:`~service.io.registry.FORMATS`; the format of an input comes
+from the explicit name, else the file name's extension, else the content (magic numbers, then
+the text formats' first lines). Writers get the plain document of :mod:`service.io._shared.plain`.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from numpy.typing import ArrayLike
+
+from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
+from service.io.document import GeometryDocument
+from service.io.errors import FormatError, UnsupportedFormat
+from service.io.registry import FORMATS, format_for_name, get_format, sniff, supported_text
+from service.io.source import Source
+
+__all__ = [
+    "FORMATS",
+    "detect_format",
+    "read_geometry",
+    "save_geometry",
+    "sniff_format",
+    "write_geometry",
+]
+
+SourceLike = bytes | bytearray | memoryview | str | os.PathLike[str] | Source
+
+
+def detect_format(filename: str) -> str:
+    """The format of a file from its name's extension (case-insensitive).
+
+    Raises
+    ------
+    UnsupportedFormat
+        For unknown extensions and names without one.
+    """
+    name = Path(str(filename)).name
+    suffix = Path(name).suffix.lower().lstrip(".")
+    if not suffix:
+        raise UnsupportedFormat(
+            f"cannot tell the format of {name!r} (no file extension): {supported_text()};"
+            " pass the format explicitly"
+        )
+    known = format_for_name(name)
+    if known is None:
+        raise UnsupportedFormat(
+            f"unsupported file extension '.{suffix}' ({name!r}): {supported_text()}", fmt=suffix
+        )
+    return known.name
+
+
+def sniff_format(data: bytes, size: int | None = None) -> str | None:
+    """Guess the format from the content (the first bytes suffice), or ``None``."""
+    return sniff(bytes(data[:4096]), len(data) if size is None else size)
+
+
+def _resolve(source: Source, fmt: str | None, filename: str | None) -> str:
+    name = str(filename or source.name or "")
+    if fmt is not None:
+        return get_format(fmt).name
+    if Path(name).suffix:
+        return detect_format(name)
+    head = source.head(4096)
+    sniffed = sniff(head, source.size)
+    if sniffed is None:
+        if not head.strip():
+            raise FormatError("the file is empty")
+        raise UnsupportedFormat(f"cannot tell the format of the data: {supported_text()}")
+    return sniffed
+
+
+def read_geometry(
+    source: SourceLike,
+    fmt: str | None = None,
+    *,
+    filename: str | None = None,
+    weld: bool | None = None,
+    **options: Any,
+) -> GeometryDocument:
+    """Read a geometry file.
+
+    Parameters
+    ----------
+    source : bytes or str or path-like
+        File content (e.g. an upload) or a path (big files are then streamed where the format
+        allows it).
+    fmt : str, optional
+        A name of :data:`FORMATS`. Default: from the extension of ``filename`` (or the path's
+        name); without one, from the content.
+    filename : str, optional
+        Name used to detect the format of bytes.
+    weld : bool, optional
+        Merge exactly coincident vertices (see :mod:`service.io._shared.weld`); writers still write
+        the
+        file's vertex count and order. Default: the format's (STL and GLB: yes, others: no).
+    **options
+        Reader options of the format (``xyz_dims`` for XYZ, ``geographic`` for GPX/GeoJSON);
+        options given as ``None`` are ignored.
+
+    Raises
+    ------
+    UnsupportedFormat
+        A format geosmooth does not read.
+    FormatError
+        A malformed file (one-line message; the line number for text formats).
+    GeometryError
+        Content with no meaning as smoothing input (e.g. non-finite coordinates).
+    ValueError
+        A reader option the format does not understand.
+    """
+    src = Source.of(source)
+    spec = FORMATS[_resolve(src, fmt, filename)]
+    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
+        raise FormatError("the file is empty", fmt=spec.name)
+    given = {k: v for k, v in options.items() if v is not None}
+    for key in given:
+        if key not in spec.options:
+            users = [f.title for f in FORMATS.values() if key in f.options] or ["no"]
+            raise ValueError(f"{key} applies to {' and '.join(users)} files only")
+    do_weld = spec.weld_default if weld is None else bool(weld)
+    doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+    return doc
+
+
+def _plain(
+    doc: GeometryDocument,
+    points: ArrayLike | None,
+    normals: NormalsMode,
+    precision: PrecisionMode,
+    ply_ascii: bool | None,
+) -> Any:
+    options = WriteOptions(normals=normals, precision=precision, ply_ascii=ply_ascii)
+    return plain_document(doc, points, options)
+
+
+def write_geometry(
+    doc: GeometryDocument,
+    fmt: str,
+    points: ArrayLike | None = None,
+    *,
+    ply_ascii: bool | None = None,
+    normals: NormalsMode = "recompute",
+    precision: PrecisionMode = "input",
+) -> bytes:
+    """Write a document (optionally with new points) in one of :data:`FORMATS`.
+
+    Parameters
+    ----------
+    doc : GeometryDocument
+        From :func:`read_geometry` (or built from a geometry).
+    fmt : str
+        Output format.
+    points : array_like, optional
+        The smoothed points, shaped like ``doc.geometry.points`` (default: the doc's own). A
+        welded document is written with the input's vertex count, order and connectivity.
+    ply_ascii : bool, optional
+        PLY: ASCII (True), binary little-endian (False), the input's encoding (None).
+    normals : {"recompute", "drop"}
+        Input normals recomputed from the written geometry, or left out.
+    precision : {"input", "float32", "float64"}
+        Coordinates as the input stored them (dtype; digits for text formats) or forced.
+
+    Raises
+    ------
+    FormatError
+        The format cannot hold the data (e.g. PLY and OBJ: 2 or 3 coordinates).
+    UnsupportedFormat
+        ``fmt`` is not one of :data:`FORMATS`.
+    ValueError
+        ``points`` has the wrong shape, or a bad option.
+    """
+    out = io.BytesIO()
+    save_geometry(doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision)
+    return out.getvalue()
+
+
+def save_geometry(
+    doc: GeometryDocument,
+    dest: str | os.PathLike[str] | BinaryIO,
+    fmt: str | None = None,
+    points: ArrayLike | None = None,
+    *,
+    ply_ascii: bool | None = None,
+    normals: NormalsMode = "recompute",
+    precision: PrecisionMode = "input",
+) -> None:
+    """Like :func:`write_geometry`, streamed to a path or binary file (no whole-file copy).
+
+    ``fmt`` defaults to the path's extension, else the document's source format. A path is
+    written in place (atomic replacement is the caller's business).
+    """
+    if fmt is None:
+        named = format_for_name(str(dest)) if isinstance(dest, str | os.PathLike) else None
+        fmt = named.name if named is not None else doc.source_format
+    spec = get_format(fmt)
+    plain = _plain(doc, points, normals, precision, ply_ascii)
+    if isinstance(dest, str | os.PathLike):
+        with open(dest, "wb") as fh:
+            spec.write_to(plain, fh)
+    else:
+        spec.write_to(plain, dest)

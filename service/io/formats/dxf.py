@@ -1,0 +1,222 @@
+"""DXF outlines via ezdxf: polylines, lines, arcs, circles, ellipses and splines in modelspace.
+
+Reading
+-------
+``ezdxf.recover`` reads the drawing (ASCII or binary DXF, any version). Every LWPOLYLINE,
+POLYLINE (2D and 3D; not polyface meshes), LINE, ARC, CIRCLE, ELLIPSE and SPLINE of the
+modelspace becomes a point sequence (``ezdxf.path``; curves and bulges flattened to a sagitta of
+1e-3 of the drawing's extent), and sequences whose ends meet (within 1e-9 of the extent) are
+chained into polylines: ``wrench.dxf``'s 35 lines and 4 arcs become its two closed outlines.
+Other entities (text, dimensions, hatches, block references) are kept as they are.
+
+Writing
+-------
+The input drawing with each chain replaced: a chain that was one LWPOLYLINE or POLYLINE without
+arcs keeps its entity (and all its attributes) with new vertices; other chains become one
+LWPOLYLINE (2D, at the chain's elevation) or 3D POLYLINE on the first source entity's layer,
+colour and linetype, and their source entities are deleted. Unchanged points give back the
+input file byte for byte.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+from typing import Any, BinaryIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.io._shared.assemble import assemble
+from service.io._shared.plain import PlainDocument
+from service.io.document import GeometryDocument, Precision
+from service.io.errors import FormatError
+from service.io.source import Source
+
+__all__ = ["DxfLayout", "read_dxf", "write_dxf"]
+
+_KINDS = ("LWPOLYLINE", "POLYLINE", "LINE", "ARC", "CIRCLE", "ELLIPSE", "SPLINE")
+
+
+@dataclass(frozen=True, eq=False)
+class DxfLayout:
+    """The input's bytes and, per chain, its source entity handles and whether it is closed."""
+
+    data: bytes
+    chains: list[tuple[list[str], bool]]
+    simple: list[bool]
+
+
+def _load(data: bytes) -> Any:
+    from ezdxf import recover
+    from ezdxf.lldxf.const import DXFError
+
+    try:
+        doc, _ = recover.read(io.BytesIO(data))
+    except (DXFError, ValueError, UnicodeDecodeError, IndexError, KeyError, TypeError) as exc:
+        raise FormatError(f"DXF: {' '.join(str(exc).split())[:200]}", fmt="dxf") from None
+    return doc
+
+
+def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, bool]], float]:
+    """(handle, points, closed, simple) of every supported entity, and the drawing's extent."""
+    from ezdxf import path as ezpath
+
+    entities = [e for e in doc.modelspace() if e.dxftype() in _KINDS]
+    entities = [e for e in entities if not (e.dxftype() == "POLYLINE" and not _plain_polyline(e))]
+    paths = []
+    for e in entities:
+        try:
+            paths.append((e, ezpath.make_path(e)))
+        except (TypeError, ValueError):
+            continue
+    if not paths:
+        raise FormatError("DXF modelspace has no lines, arcs or polylines", fmt="dxf")
+    corners = np.array([v for _, p in paths for v in p.control_vertices()], dtype=np.float64)
+    extent = float(np.max(np.ptp(corners, axis=0))) or 1.0
+    out = []
+    for e, p in paths:
+        pts = np.array([tuple(v) for v in p.flattening(1e-3 * extent)], dtype=np.float64)
+        closed = _closed(e, p)
+        if closed and len(pts) > 2 and np.allclose(pts[0], pts[-1], atol=1e-9 * extent):
+            pts = pts[:-1]
+        simple = e.dxftype() in ("LWPOLYLINE", "POLYLINE") and not _has_arcs(e)
+        out.append((e.dxf.handle, pts, closed, simple))
+    return out, extent
+
+
+def _closed(e: Any, p: Any) -> bool:
+    kind = e.dxftype()
+    if kind == "LWPOLYLINE":
+        return bool(e.closed)
+    if kind == "POLYLINE":
+        return bool(e.is_closed)
+    return kind == "CIRCLE" or (kind in ("ELLIPSE", "SPLINE") and bool(p.is_closed))
+
+
+def _plain_polyline(e: Any) -> bool:
+    return bool(e.is_2d_polyline or e.is_3d_polyline)
+
+
+def _has_arcs(e: Any) -> bool:
+    if e.dxftype() == "LWPOLYLINE":
+        return any(abs(row[0]) > 0 for row in e.get_points("b"))
+    return any(abs(v.dxf.get("bulge", 0)) > 0 for v in e.vertices)
+
+
+def _chains(
+    seqs: list[tuple[str, NDArray[np.float64], bool, bool]], tol: float
+) -> list[tuple[list[str], NDArray[np.float64], bool, bool]]:
+    """Join open sequences whose ends meet; closed ones stay as they are."""
+    out = [([h], p, True, s) for h, p, c, s in seqs if c]
+    open_ = [(h, p) for h, p, c, _ in seqs if not c and len(p) >= 2]
+    used = [False] * len(open_)
+
+    def key(v: NDArray[np.float64]) -> tuple[int, ...]:
+        return tuple(np.round(v / tol).astype(np.int64).tolist())
+
+    ends: dict[tuple[int, ...], list[tuple[int, int]]] = {}
+    for i, (_, p) in enumerate(open_):
+        ends.setdefault(key(p[0]), []).append((i, 0))
+        ends.setdefault(key(p[-1]), []).append((i, 1))
+    for i in range(len(open_)):
+        if used[i]:
+            continue
+        used[i] = True
+        handles, pts = [open_[i][0]], open_[i][1]
+        for forward in (True, False):
+            while True:
+                tip = pts[-1] if forward else pts[0]
+                nxt = next(((j, end) for j, end in ends.get(key(tip), []) if not used[j]), None)
+                if nxt is None:
+                    break
+                j, end = nxt
+                used[j] = True
+                q = open_[j][1] if (end == 0) == forward else open_[j][1][::-1]
+                pts = np.vstack([pts, q[1:]]) if forward else np.vstack([q[:-1], pts])
+                handles = [*handles, open_[j][0]] if forward else [open_[j][0], *handles]
+        closed = len(pts) > 2 and key(pts[0]) == key(pts[-1])
+        simple = len(handles) == 1 and any(h == handles[0] and s for h, _, _, s in seqs)
+        out.append((handles, pts[:-1] if closed else pts, closed, simple))
+    return out
+
+
+def read_dxf(source: Source, *, weld: bool = False) -> GeometryDocument:
+    """Read the outlines of a DXF drawing (see the module docstring)."""
+    data = source.data()
+    if not data.strip():
+        raise FormatError("the file is empty", fmt="dxf")
+    doc = _load(data)
+    seqs, extent = _sequences(doc)
+    chains = _chains(seqs, 1e-9 * extent)
+    pts = np.concatenate([c[1] for c in chains])
+    flat = pts[:, 2] if np.all(pts[:, 2] == pts[0, 2]) else None
+    points = pts[:, :2] if flat is not None else pts
+    polylines = []
+    at = 0
+    for _, p, closed, _ in chains:
+        polylines.append((np.arange(at, at + len(p)), closed))
+        at += len(p)
+    notes = [f"{len(seqs)} DXF entities chained into {len(chains)} polylines"]
+    layout = DxfLayout(data, [(h, c) for h, _, c, _ in chains], [c[3] for c in chains])
+    result = assemble(points, fmt="dxf", polylines=polylines, notes=notes, weld=weld)
+    return result.with_extras(layout=layout, precision=Precision("float64"))
+
+
+def write_dxf(plain: PlainDocument, out: BinaryIO) -> None:
+    """Write a plain document as DXF (see the module docstring)."""
+    layout = plain.layout
+    if isinstance(layout, DxfLayout) and not plain.moved:
+        out.write(layout.data)
+        return
+    if isinstance(layout, DxfLayout):
+        doc = _load(layout.data)
+        chains = layout.chains
+        simple = layout.simple
+    else:
+        import ezdxf
+
+        doc = ezdxf.new("R2010")
+        chains = [([], pl.closed) for pl in plain.polylines] or [([], False)]
+        simple = [False] * len(chains)
+    msp = doc.modelspace()
+    pts = plain.points if plain.dim == 3 else np.column_stack([plain.points, np.zeros(plain.n)])
+    groups = [pl.indices for pl in plain.polylines] or [np.arange(plain.n)]
+    for (handles, closed), idx, keep in zip(chains, groups, simple, strict=True):
+        _replace(doc, msp, handles, pts[idx], closed, keep)
+    text = io.StringIO()
+    doc.write(text)
+    out.write(text.getvalue().encode(doc.output_encoding, errors="replace"))
+
+
+def _replace(
+    doc: Any, msp: Any, handles: list[str], p: NDArray[np.float64], closed: bool, keep: bool
+) -> None:
+    first = doc.entitydb.get(handles[0]) if handles else None
+    flat = bool(np.all(p[:, 2] == p[0, 2]))
+    if keep and first is not None and first.dxftype() == "LWPOLYLINE":
+        rows = list(first.get_points("xyseb"))
+        first.set_points(
+            [(x, y, *rest[2:]) for (x, y), rest in zip(p[:, :2].tolist(), rows, strict=True)],
+            format="xyseb",
+        )
+        return
+    if keep and first is not None and first.dxftype() == "POLYLINE":
+        for v, q in zip(first.vertices, p.tolist(), strict=True):
+            v.dxf.location = q if first.is_3d_polyline else (q[0], q[1], v.dxf.location.z)
+        return
+    attribs = {}
+    if first is not None:
+        attribs = {
+            k: first.dxf.get(k) for k in ("layer", "color", "linetype") if first.dxf.hasattr(k)
+        }
+    if flat:
+        msp.add_lwpolyline(
+            p[:, :2].tolist(), close=closed, dxfattribs={**attribs, "elevation": float(p[0, 2])}
+        )
+    else:
+        msp.add_polyline3d(p.tolist(), close=closed, dxfattribs=attribs)
+    for h in handles:
+        e = doc.entitydb.get(h)
+        if e is not None:
+            msp.delete_entity(e)

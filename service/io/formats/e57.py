@@ -1,0 +1,178 @@
+"""E57 (ASTM E2807) scans via pye57 (libE57Format; manylinux wheels for CPython 3.11).
+
+Reading
+-------
+Every scan's points with the fields pye57 supports (``cartesianX/Y/Z`` or spherical
+coordinates, ``intensity``, ``colorRed/Green/Blue``, ``rowIndex``, ``columnIndex``, the invalid
+state), placed in world coordinates with the scan's pose and concatenated. Points flagged
+invalid (or with NaN coordinates) are left out of the geometry and written back as they were.
+Intensity, colours and row/column indices are attributes when every scan has them. Images and
+fields pye57 cannot read are not kept (noted).
+
+Writing
+-------
+A document read from E57 is written as the same scans (names, poses, fields) with each valid
+point moved back into its scan's frame; spherical scans are written as cartesian ones. Other
+documents become one scan (``intensity``, ``red green blue`` attributes as E57 fields). pye57
+writes coordinates as single-precision floats (``E57_SINGLE``), so E57 output is float32 in each
+scan's frame whatever ``precision`` says.
+libE57 needs a real file, so bytes go through a temporary file.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from typing import Any, BinaryIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.io._shared.assemble import assemble
+from service.io._shared.coords import as_xyz
+from service.io._shared.plain import PlainDocument
+from service.io.document import GeometryDocument, Precision
+from service.io.errors import FormatError
+from service.io.source import Source
+
+__all__ = ["E57Layout", "read_e57", "write_e57"]
+
+_XYZ = ("cartesianX", "cartesianY", "cartesianZ")
+_ATTRS = ("intensity", "colorRed", "colorGreen", "colorBlue", "rowIndex", "columnIndex")
+
+
+@dataclass(frozen=True, eq=False)
+class E57Layout:
+    """Per scan: name, rotation (w, x, y, z), translation, raw fields, valid mask."""
+
+    scans: list[
+        tuple[str, NDArray[np.float64], NDArray[np.float64], dict[str, Any], NDArray[np.bool_]]
+    ]
+
+
+def _matrix(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    w, x, y, z = (q / np.linalg.norm(q)).tolist()
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])  # fmt: skip
+
+
+def _name(header: Any, i: int) -> str:
+    try:
+        return str(header["name"].value())
+    except Exception:  # the name is optional in E57
+        return f"scan {i}"
+
+
+def _scan(e57: Any, i: int) -> tuple[Any, dict[str, Any], NDArray[np.float64]]:
+    from pye57.utils import convert_spherical_to_cartesian
+
+    header = e57.get_header(i)
+    raw = e57.read_scan_raw(i, ignore_unsupported_fields=True)
+    if all(c in raw for c in _XYZ):
+        xyz = np.column_stack([raw[c] for c in _XYZ]).astype(np.float64)
+    elif "sphericalRange" in raw:
+        rae = np.column_stack(
+            [raw["sphericalRange"], raw["sphericalAzimuth"], raw["sphericalElevation"]]
+        )
+        xyz = convert_spherical_to_cartesian(rae)
+        for c in ("sphericalRange", "sphericalAzimuth", "sphericalElevation"):
+            raw.pop(c)
+        if "sphericalInvalidState" in raw:
+            raw["cartesianInvalidState"] = raw.pop("sphericalInvalidState")
+        for j, c in enumerate(_XYZ):
+            raw[c] = xyz[:, j].copy()
+    else:
+        raise FormatError(f"E57 scan {i} has no cartesian or spherical coordinates", fmt="e57")
+    return header, raw, xyz
+
+
+def read_e57(source: Source, *, weld: bool = False) -> GeometryDocument:
+    """Read every scan of an E57 file (see the module docstring)."""
+    import pye57
+
+    scans = []
+    parts: list[NDArray[np.float64]] = []
+    with source.as_path(".e57") as path:
+        try:
+            e57 = pye57.E57(str(path))
+            count = e57.scan_count
+            for i in range(count):
+                header, raw, xyz = _scan(e57, i)
+                rot = np.asarray(header.rotation, dtype=np.float64)
+                trans = np.asarray(header.translation, dtype=np.float64)
+                valid: NDArray[np.bool_] = np.asarray(np.isfinite(xyz).all(axis=1))
+                if "cartesianInvalidState" in raw:
+                    valid &= np.asarray(raw["cartesianInvalidState"]) == 0
+                world = xyz[valid] @ _matrix(rot).T + trans
+                parts.append(world)
+                scans.append((_name(header, i), rot, trans, raw, valid))
+            e57.close()
+        except FormatError:
+            raise
+        except Exception as exc:  # libE57 raises its own exception types on bad files
+            text = re.sub(r"fileName=\S*|/\S+", "", " ".join(str(exc).split()))
+            text = " ".join(text.split())[:200] or type(exc).__name__
+            raise FormatError(f"E57: {text}", fmt="e57") from None
+    if not parts or not sum(len(p) for p in parts):
+        raise FormatError("the file holds no points", fmt="e57")
+    common = [a for a in _ATTRS if all(a in raw for _, _, _, raw, _ in scans)]
+    attributes = {
+        a: np.concatenate([np.asarray(raw[a])[valid] for _, _, _, raw, valid in scans])
+        for a in common
+    }
+    notes = [f"{len(scans)} E57 scans, {sum(len(p) for p in parts)} valid points"]
+    doc = assemble(np.concatenate(parts), fmt="e57", notes=notes, weld=weld)
+    return doc.with_extras(
+        attributes=attributes, precision=Precision("float32"), layout=E57Layout(scans)
+    )
+
+
+def _scans_of(plain: PlainDocument) -> list[tuple[str, Any, Any, dict[str, Any]]]:
+    layout = plain.layout
+    if isinstance(layout, E57Layout) and sum(int(v.sum()) for *_, v in layout.scans) == plain.n:
+        out = []
+        at = 0
+        for name, rot, trans, raw, valid in layout.scans:
+            k = int(valid.sum())
+            data = {key: np.array(value) for key, value in raw.items()}
+            local = (plain.points[at : at + k] - trans) @ _matrix(rot)
+            for j, c in enumerate(_XYZ):
+                data[c] = data[c].astype(np.float64)
+                data[c][valid] = local[:, j]
+            out.append((name, rot, trans, data))
+            at += k
+        return out
+    pts = as_xyz(plain.points, "e57")
+    data = {c: np.ascontiguousarray(pts[:, j]) for j, c in enumerate(_XYZ)}
+    names = {"intensity": "intensity", "red": "colorRed", "green": "colorGreen",
+             "blue": "colorBlue", "colorRed": "colorRed", "colorGreen": "colorGreen",
+             "colorBlue": "colorBlue"}  # fmt: skip
+    for key, field in names.items():
+        if key in plain.attributes and plain.attributes[key].ndim == 1:
+            data[field] = np.asarray(plain.attributes[key])
+    return [("geosmooth", np.array([1.0, 0, 0, 0]), np.zeros(3), data)]
+
+
+def write_e57(plain: PlainDocument, out: BinaryIO) -> None:
+    """Write a plain document as E57 (see the module docstring)."""
+    import pye57
+
+    fd, name = tempfile.mkstemp(suffix=".e57", prefix="geosmooth-")
+    os.close(fd)
+    os.unlink(name)
+    try:
+        e57 = pye57.E57(name, mode="w")
+        for scan_name, rot, trans, data in _scans_of(plain):
+            e57.write_scan_raw(data, name=scan_name, rotation=rot, translation=trans)
+        e57.close()
+        with open(name, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                out.write(chunk)
+    finally:
+        if os.path.exists(name):
+            os.unlink(name)

@@ -1,0 +1,1 @@
+"""geosmooth JSON: the codec and the schema shared with the HTTP API."""

@@ -1,0 +1,1 @@
+"""PLY: header, ASCII and binary bodies, writing."""

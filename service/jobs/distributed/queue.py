@@ -1,0 +1,338 @@
+"""The distributed backend: job records in Redis, runs on RQ workers, files in a blob store.
+
+``GEOSMOOTH_QUEUE=rq``. The API process holds an :class:`RQQueue`; ``geosmooth worker``
+processes (:mod:`service.jobs.distributed.worker`) run the jobs on any number of machines. Same
+semantics
+as the embedded :class:`~service.jobs.embedded.queue.LocalQueue` (statuses, progress while running,
+cancel kills the run wherever it runs, time limit, TTL, retries of interrupted runs only,
+idempotency, tenants, webhooks); see ``service/jobs/README.md`` for the guarantees.
+"""
+
+from __future__ import annotations
+
+import builtins
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from service.jobs import admit
+from service.jobs.distributed.backend import Backend
+from service.jobs.distributed.blobs import DirectoryBlobs
+from service.jobs.files import is_job_id
+from service.jobs.limits import default_job_memory
+from service.jobs.notify import Notifier
+from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
+
+if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
+    from service.io import GeometryDocument
+    from service.settings import Settings
+
+__all__ = ["RQQueue"]
+
+log = logging.getLogger("geosmooth.jobs")
+
+_CACHE_AGE = 3600.0
+_CANCEL_WAIT = 15.0
+_PRUNE_INTERVAL = 600.0
+
+
+class RQQueue:
+    """The API side of the Redis/RQ backend.
+
+    Parameters
+    ----------
+    backend : Backend
+        Connections (Redis, blob store, RQ queue) and settings.
+    memory_limit : int or None
+        Per-job memory limit for admission (bytes); ``None``: none.
+    sweep_interval : float
+        Seconds between sweeps (lost runs, due retries, TTL, webhooks).
+    reconcile_interval : float
+        Seconds between checks for queued jobs whose RQ job was lost.
+    """
+
+    def __init__(
+        self,
+        backend: Backend,
+        *,
+        memory_limit: int | None = None,
+        sweep_interval: float = 1.0,
+        reconcile_interval: float = 60.0,
+    ) -> None:
+        self.backend = backend
+        self.settings = backend.settings
+        self.store = backend.store
+        self.blobs = backend.blobs
+        self.memory_limit = memory_limit
+        self.sweep_interval = sweep_interval
+        self.reconcile_interval = reconcile_interval
+        self.notifier = Notifier(self.settings, backend.webhook_payload, self.store.claim_webhook,
+                                 self.store.webhook_state)  # fmt: skip
+        self._stop = threading.Event()
+        self._sweeper: threading.Thread | None = None
+        self._started = False
+        self._last_reconcile = 0.0
+        self._last_prune = 0.0
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> RQQueue:
+        """The queue the API runs with these settings."""
+        limit = settings.job_memory_limit
+        if limit is None:
+            limit = default_job_memory(settings.workers)
+        return cls(Backend.connect(settings), memory_limit=limit or None)
+
+    # -- life cycle ----------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the sweeper and the webhook deliveries (Redis may still be down: the sweeper
+        keeps trying; reads answer 503 meanwhile)."""
+        if self._started:
+            return
+        self._started = True
+        self._stop.clear()
+        self.notifier.start()
+        with contextlib.suppress(Exception):
+            self.backend.remove_orphans()
+        self._sweeper = threading.Thread(target=self._sweep_loop, name="geosmooth-rq-sweep",
+                                         daemon=True)  # fmt: skip
+        self._sweeper.start()
+
+    def stop(self) -> None:
+        """Stop the sweeper (jobs keep running on the workers)."""
+        if not self._started:
+            return
+        self._stop.set()
+        if self._sweeper is not None:
+            self._sweeper.join(10.0)
+        self.notifier.stop()
+        self._started = False
+
+    def __enter__(self) -> RQQueue:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- the JobQueue protocol -----------------------------------------------------------
+    def submit(
+        self,
+        input: JobInput,
+        fmt: str,
+        params: SmoothingParams | Mapping[str, Any],
+        filename: str | None = None,
+        *,
+        weld: bool = False,
+        tenant: str | None = None,
+        webhook_url: str | None = None,
+        idempotency_key: str | None = None,
+        size: JobSize | None = None,
+    ) -> JobRecord:
+        """See :meth:`service.jobs.queue.JobQueue.submit`."""
+        job = admit.new_job(
+            input, fmt, params, filename, weld=weld, tenant=tenant, webhook_url=webhook_url,
+            idempotency_key=idempotency_key, size=size, memory_limit=self.memory_limit,
+            max_attempts=self.settings.max_attempts,
+        )
+        with self._errors():
+            if isinstance(self.blobs, DirectoryBlobs):
+                admit.check_space(self.blobs.files.root, job.input_bytes,
+                                  self.settings.min_free_bytes)  # fmt: skip
+            self.blobs.put_input(job.job_id, job.fmt, input)
+            rq_id = self.backend.new_rq_id(job.job_id)
+            try:
+                rec, created = self.store.insert(
+                    job, rq_id, lambda pipe: self.backend.enqueue(job.job_id, rq_id, pipe))
+            except BaseException:
+                self.blobs.remove(job.job_id)
+                raise
+        if not created:
+            self.blobs.remove(job.job_id)
+            return self.get(rec.id) or rec
+        return rec
+
+    def get(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
+        """The job's record (with its report once succeeded), ``None`` if unknown."""
+        if not is_job_id(job_id):
+            return None
+        with self._errors():
+            rec = self.backend.get(job_id)
+        if rec is None or (tenant is not None and rec.tenant != tenant):
+            return None
+        return rec
+
+    def list(
+        self,
+        offset: int = 0,
+        limit: int = 50,
+        status: JobStatus | str | None = None,
+        *,
+        tenant: str | None = None,
+    ) -> tuple[builtins.list[JobRecord], int]:
+        """A page of jobs, newest first (without reports), and the total count."""
+        with self._errors():
+            return self.store.list(offset, limit, JobStatus(status) if status else None, tenant)
+
+    def cancel(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
+        """Cancel a queued or running job; a running job's work horse is gone on return."""
+        if self.get(job_id, tenant=tenant) is None:
+            return None
+        with self._errors():
+            raw = self.store.raw(job_id) or {}
+            previous = self.store.update(
+                job_id, expect=(JobStatus.QUEUED, JobStatus.RUNNING), status=JobStatus.CANCELLED,
+                finished_at=time.time(), lease_until=None,
+            )  # fmt: skip
+            if previous is not None:
+                self._stop_rq_job(raw.get("rq_job"), running=previous is JobStatus.RUNNING)
+                if raw.get("webhook_url"):
+                    self.notifier.enqueue(job_id)
+        return self.get(job_id)
+
+    def _stop_rq_job(self, rq_id: str | None, running: bool) -> None:
+        """Drop a queued RQ job, or have its worker kill the horse and wait until it is gone."""
+        if rq_id is None:
+            return
+        from rq.command import send_stop_job_command
+        from rq.exceptions import InvalidJobOperation, NoSuchJobError
+        from rq.job import Job
+
+        redis = self.backend.redis
+        try:
+            job = Job.fetch(rq_id, connection=redis)
+        except NoSuchJobError:
+            return
+        if not running:
+            with contextlib.suppress(InvalidJobOperation):
+                job.cancel()
+            return
+        with contextlib.suppress(InvalidJobOperation):
+            send_stop_job_command(redis, rq_id)
+        deadline = time.monotonic() + _CANCEL_WAIT
+        while time.monotonic() < deadline:  # the worker reaps the horse, then marks the job
+            if str(getattr(job.get_status(refresh=True), "value", "")) != "started":
+                return
+            time.sleep(0.05)
+        log.warning("job run %s did not stop within %.0f s", rq_id, _CANCEL_WAIT)
+
+    def delete(self, job_id: str, *, tenant: str | None = None) -> bool:
+        """Delete a finished job's record and files; ``False`` if unknown or not finished."""
+        if self.get(job_id, tenant=tenant) is None:
+            return False
+        with self._errors():
+            if not self.store.delete_finished(job_id):
+                return False
+            self.blobs.remove(job_id)
+        return True
+
+    def result(self, job_id: str) -> GeometryDocument | None:
+        """The input document with the smoothed points (``None`` unless succeeded)."""
+        rec = self.get(job_id)
+        if rec is None or rec.status is not JobStatus.SUCCEEDED:
+            return None
+        from service.jobs.results import load_result
+
+        with self._errors():
+            points = self.blobs.local_file(job_id, "result.npy")
+            source = self.blobs.local_file(job_id, f"input.{rec.fmt}")
+        if points is None or source is None:
+            return None
+        return load_result(source, points, rec.fmt, rec.weld)
+
+    def result_file(self, job_id: str, fmt: str) -> Path | None:
+        """A local copy of the stored result in the input's format (``None`` otherwise)."""
+        rec = self.get(job_id)
+        if rec is None or rec.status is not JobStatus.SUCCEEDED or fmt != rec.fmt:
+            return None
+        with self._errors():
+            return self.blobs.local_file(job_id, f"result.{fmt}")
+
+    def result_url(self, job_id: str, fmt: str) -> str | None:
+        """A presigned URL of the stored result (S3 with ``presign_seconds`` > 0)."""
+        seconds = self.settings.presign_seconds
+        rec = self.get(job_id)
+        if not seconds or rec is None or rec.status is not JobStatus.SUCCEEDED or fmt != rec.fmt:
+            return None
+        from service.jobs.files import result_name
+
+        name = f"{result_name(rec.filename, rec.id)}.{fmt}"
+        return self.blobs.presign(job_id, f"result.{fmt}", seconds, name)
+
+    def stats(self) -> dict[str, Any]:
+        """Counts, queue depth and workers from Redis; the run-time histogram of every worker."""
+        from rq import Worker
+
+        with self._errors():
+            counts = self.store.counts()
+            workers = Worker.all(queue=self.backend.queue)
+            busy = sum(1 for w in workers if w.get_state() == "busy")
+            shared = self.store.histogram()
+        return {
+            "counts": counts,
+            "queue_depth": counts[JobStatus.QUEUED.value],
+            "running": counts[JobStatus.RUNNING.value],
+            "workers": len(workers),
+            "busy_workers": busy,
+            **shared,
+        }
+
+    def health(self) -> QueueHealth:
+        """Redis reachable, blob store writable; the worker count as information."""
+        checks = {"broker": "ok", "storage": self.blobs.health(), "workers": "ok"}
+        try:
+            self.backend.redis.ping()
+            from rq import Worker
+
+            if not Worker.count(queue=self.backend.queue):
+                checks["workers"] = "none"  # jobs wait; the API itself is fine
+        except Exception:
+            checks["broker"] = "unreachable"
+        if not self._started:
+            checks["queue"] = "stopped"
+        bad = [f"{k} {v}" for k, v in checks.items() if v != "ok" and k != "workers"]
+        return QueueHealth(not bad, checks, ", ".join(bad) or None)
+
+    # -- maintenance ---------------------------------------------------------------------
+    def sweep(self) -> None:
+        """One maintenance pass (see :mod:`service.jobs.distributed.backend`)."""
+        backend = self.backend
+        backend.recover()
+        backend.enqueue_due()
+        if time.monotonic() - self._last_reconcile >= self.reconcile_interval:
+            self._last_reconcile = time.monotonic()
+            backend.reconcile(min_age=self.reconcile_interval)
+        backend.expire()
+        for job_id in self.store.webhooks_due():
+            self.notifier.enqueue(job_id)
+        if time.monotonic() - self._last_prune >= _PRUNE_INTERVAL:  # a walk of the blob tree
+            self._last_prune = time.monotonic()
+            self.blobs.prune_cache(_CACHE_AGE)
+
+    def _sweep_loop(self) -> None:
+        while not self._stop.wait(self.sweep_interval):
+            try:
+                self.sweep()
+            except Exception as exc:
+                log.warning("RQ queue sweep failed: %s", exc)
+
+    @staticmethod
+    @contextlib.contextmanager
+    def _errors() -> Any:
+        """Redis or blob-store failures -> ``StorageUnavailable``/``StorageFull`` (503/507)."""
+        from redis.exceptions import RedisError
+
+        from service.jobs.errors import StorageUnavailable
+
+        try:
+            with admit.storage_errors():
+                yield
+        except RedisError as exc:
+            raise StorageUnavailable("the job broker (Redis) cannot be reached") from exc
+
+
+_: type[JobQueue] = RQQueue

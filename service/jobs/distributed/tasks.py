@@ -1,0 +1,132 @@
+"""The RQ task: one run of one job, inside the work horse RQ forked for it.
+
+:func:`run_job` is what the RQ queue carries (only the job id travels through Redis). It
+
+1. dies with its worker (``PR_SET_PDEATHSIG``): a worker killed with SIGKILL leaves no orphan
+   run, so when the lease expires and the job runs elsewhere it never runs twice at once;
+2. claims the job for this very RQ job (a stale duplicate, a cancelled job: nothing to do);
+3. arms its time limit as a *kernel* timer with the default SIGALRM action, so a job stuck in C
+   code (a CHOLMOD factorization holding the GIL) is killed on time; the worker records the
+   timeout when it reaps the horse;
+4. caps its address space (``RLIMIT_AS``) and BLAS threads, runs the job function in a
+   workspace of the blob store, stores the outputs, and records the outcome. Input errors fail
+   the job (never retried); an unreachable Redis or object store puts it back in the queue.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from typing import TYPE_CHECKING, Any
+
+from service.jobs import problems
+from service.jobs.child import load_runner, set_parent_death_signal
+from service.jobs.distributed.backend import HOST
+from service.jobs.errors import StorageUnavailable
+from service.jobs.limits import limit_memory
+from service.jobs.progress import final_progress
+from service.jobs.queue import JobStatus
+from service.jobs.runner import DEFAULT_RUNNER, JobContext, RunLost
+
+if TYPE_CHECKING:
+    from service.jobs.distributed.backend import Backend
+
+__all__ = ["configure", "run_job"]
+
+
+class _Config:
+    backend: Backend | None = None
+    runner: str = DEFAULT_RUNNER
+    memory_limit: int | None = None
+
+
+def configure(backend: Backend, runner: str, memory_limit: int | None) -> None:
+    """Set what the work horses of this worker use (called in the worker before it forks)."""
+    _Config.backend = backend
+    _Config.runner = runner
+    _Config.memory_limit = memory_limit
+
+
+def _infrastructure(exc: BaseException) -> bool:
+    """Whether a failure is the platform's, not the job's (the job is run again)."""
+    from redis.exceptions import ConnectionError as RedisConnectionError
+    from redis.exceptions import TimeoutError as RedisTimeoutError
+
+    return isinstance(exc, StorageUnavailable | RedisConnectionError | RedisTimeoutError)
+
+
+def run_job(job_id: str) -> None:
+    """Run one job (the RQ task; executed in the work horse)."""
+    from rq import get_current_job
+
+    set_parent_death_signal()
+    worker_pid = int(os.environ.get("GEOSMOOTH_WORKER_PID", "0"))
+    if worker_pid and os.getppid() != worker_pid:  # the worker died before the signal was armed
+        os._exit(0)
+    backend = _Config.backend
+    assert backend is not None, (
+        "run_job runs in a geosmooth worker (service.jobs.distributed.worker)"
+    )
+    rq_job = get_current_job()
+    assert rq_job is not None
+    owner = str(rq_job.worker_name)
+    attempt = backend.store.claim(job_id, rq_job.id, owner, backend.settings.worker_lease,
+                                  os.getpid(), HOST)  # fmt: skip
+    if attempt is None:
+        return
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the kernel kills the horse at the limit
+    signal.setitimer(signal.ITIMER_REAL, float(backend.settings.job_timeout))
+    try:
+        _run(backend, job_id, owner, attempt)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+
+
+def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
+    store, blobs = backend.store, backend.blobs
+    when = {"owner": owner, "attempts": attempt}
+    started = time.perf_counter()
+    try:
+        from service.core.params import SmoothingParams
+
+        rec = store.get(job_id)
+        if rec is None or rec.status is not JobStatus.RUNNING:
+            return
+        limit_memory(_Config.memory_limit)  # threads: limited in the worker, inherited
+        with blobs.workspace(job_id, rec.fmt) as workdir:
+            ctx = JobContext(
+                job_id=job_id,
+                job_dir=workdir,
+                input_path=workdir / f"input.{rec.fmt}",
+                fmt=rec.fmt,
+                params=SmoothingParams.model_validate(rec.params),
+                report_progress=lambda p: store.run_update(job_id, owner, attempt, progress=p),
+                progress_interval=0.2,
+                weld=rec.weld,
+                memory_limit=_Config.memory_limit,
+            )
+            report = load_runner(_Config.runner)(ctx)
+            ctx.flush_progress()
+            ctx.write("report.json", json.dumps(report, indent=1, allow_nan=False).encode())
+            blobs.commit(job_id, workdir, ctx.written)
+        _succeed(backend, job_id, owner, attempt, report, time.perf_counter() - started)
+    except RunLost:
+        return
+    except BaseException as exc:
+        if _infrastructure(exc):
+            backend.requeue(job_id, when, attempt, count=True)
+        else:
+            backend.fail(job_id, when, problems.from_exception(exc))
+
+
+def _succeed(
+    backend: Backend, job_id: str, owner: str, attempt: int, report: dict[str, Any], elapsed: float
+) -> None:
+    done = backend.store.run_update(
+        job_id, owner, attempt, status=JobStatus.SUCCEEDED, finished_at=time.time(),
+        run_seconds=elapsed, progress=final_progress(report, elapsed), lease_until=None,
+    )  # fmt: skip
+    if done:
+        backend.store.observe(elapsed)

@@ -1,0 +1,1 @@
+"""GEOSMOOTH_QUEUE=local: SQLite store, worker pool, maintenance (compose profile 'embedded')."""

@@ -1,0 +1,100 @@
+"""Neighbourhoods: mesh 1-rings, curve graphs, k-NN and Delaunay neighbourhoods (section 4.4)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import Delaunay, cKDTree
+
+from service.core.operator.neighborhoods import (
+    cloud_delaunay_neighborhoods,
+    cloud_knn_neighborhoods,
+    curve_neighborhoods,
+    mesh_neighborhoods,
+)
+from tests.core.core_fixtures import random_rotation
+
+
+def _nbrs(adj, i: int) -> set[int]:
+    return set(adj.indices[adj.indptr[i] : adj.indptr[i + 1]].tolist())
+
+
+def test_delaunay_neighbourhoods_match_a_triangulation() -> None:
+    """For planar samples, the 1-ring equals scipy's Delaunay 1-ring whenever the whole ring is
+    among the k nearest neighbours (the report's definition triangulates only those)."""
+    rng = np.random.default_rng(0)
+    Q = rng.random((1500, 2))
+    P = np.c_[Q, np.zeros(len(Q))] @ random_rotation(3, seed=1)
+    k = 20
+    nb = cloud_delaunay_neighborhoods(P, k)
+    tri = Delaunay(Q)
+    indptr, ind = tri.vertex_neighbor_vertices
+    _, knn = cKDTree(Q).query(Q, k + 1)
+    checked = 0
+    for i in range(len(Q)):
+        ring = set(ind[indptr[i] : indptr[i + 1]].tolist())
+        if ring <= set(knn[i].tolist()) and not nb.boundary[i]:
+            assert _nbrs(nb.adjacency, i) == ring, i
+            checked += 1
+    assert checked > 1300
+    # hull points of the sample have open fans
+    hull = set(np.unique(tri.convex_hull).tolist())
+    assert hull <= set(np.flatnonzero(nb.boundary).tolist())
+
+
+def test_delaunay_on_curve_samples_gives_line_neighbours() -> None:
+    # jittered even sampling: each point has samples on both sides among its 8 nearest
+    t = np.linspace(0, 3, 200) + np.random.default_rng(2).uniform(-0.005, 0.005, 200)
+    P = np.c_[t, np.sin(t), 0.5 * t]
+    nb = cloud_delaunay_neighborhoods(P, 8)
+    assert len(nb.wedges) == 0
+    for i in range(1, 199):
+        assert _nbrs(nb.adjacency, i) == {i - 1, i + 1}
+    assert np.flatnonzero(nb.boundary).tolist() == [0, 199]
+
+
+def test_knn_excludes_self_even_with_duplicates() -> None:
+    P = np.array([[0.0, 0, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
+    nb = cloud_knn_neighborhoods(P, 2)
+    for i in range(5):
+        assert i not in _nbrs(nb.adjacency, i)
+        assert len(_nbrs(nb.adjacency, i)) == 2
+
+
+def test_mesh_boundary_nonmanifold_and_duplicates() -> None:
+    F = np.array([[0, 1, 2], [0, 2, 3], [2, 1, 0], [0, 1, 4]])  # duplicate + third face on 0-1
+    nb = mesh_neighborhoods(F, 6)
+    assert _nbrs(nb.adjacency, 0) == {1, 2, 3, 4}
+    assert nb.degree()[5] == 0
+    # edges 0-2 is shared; 1-2, 2-3, 0-3, 1-4, 0-4 are single: boundary is all of 0..4
+    assert nb.boundary.tolist() == [True] * 5 + [False]
+    assert len(nb.wedges) == 9
+
+
+def test_curve_network_junctions() -> None:
+    E = np.array([[0, 1], [0, 2], [0, 3], [3, 4]])
+    nb = curve_neighborhoods(E, 5)
+    assert _nbrs(nb.adjacency, 0) == {1, 2, 3}
+    assert nb.boundary.tolist() == [False, True, True, False, True]
+    assert sorted(map(tuple, nb.chains[nb.chains[:, 0] == 0][:, 1:].tolist())) == [
+        (1, 2),
+        (1, 3),
+        (2, 3),
+    ]
+
+
+def test_delaunay_small_k_matches_local_triangulations() -> None:
+    """Regression (issues 9, 15): k = 3..8 crashed in _polar_hull_fans (IndexError). The ring
+    is the Delaunay 1-ring of the point among its k nearest neighbours (planar sample)."""
+    rng = np.random.default_rng(4)
+    Q = rng.random((300, 2))
+    P = np.c_[Q, np.zeros(len(Q))] @ random_rotation(3, seed=5)
+    for k in range(3, 9):
+        nb = cloud_delaunay_neighborhoods(P, k)
+        _, knn = cKDTree(Q).query(Q, k + 1)
+        for i in range(0, len(Q), 7):
+            local = knn[i]  # i itself first
+            tri = Delaunay(Q[local])
+            indptr, ind = tri.vertex_neighbor_vertices
+            first = int(np.flatnonzero(local == i)[0])
+            ring = set(local[ind[indptr[first] : indptr[first + 1]]].tolist())
+            assert _nbrs(nb.adjacency, i) == ring, (k, i)

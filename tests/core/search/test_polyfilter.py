@@ -1,0 +1,79 @@
+"""method="windowed-sinc" (service/core/search/polyfilter.py) against dense eigendecompositions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.polynomial import chebyshev as cheb
+
+from service.core import Geometry, ParameterError, SmoothingParams, smooth
+from service.core.operator.build import build_laplacian
+from service.core.search.polyfilter import SincFilter, chebyshev_moments, sinc_deviation
+from tests.core.core_fixtures import noisy_icosphere
+
+
+def _dense_case(seed: int = 0):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(120, 120))
+    Mt = A @ A.T / 120
+    mu, V = np.linalg.eigh(Mt)
+    return Mt, np.clip(mu, 0, None), V, rng.normal(size=(120, 3))
+
+
+def test_moments_and_filter_match_the_eigendecomposition() -> None:
+    Mt, mu, V, c = _dense_case()
+    mu_max = 1.05 * mu.max()
+    x = np.clip(2 * mu / mu_max - 1, -1, 1)
+    w = ((V.T @ c) ** 2).sum(axis=1)
+    m, products = chebyshev_moments(lambda X: Mt @ X, c, mu_max, 9)
+    assert products == 9
+    np.testing.assert_allclose(
+        m, [np.sum(w * np.cos(j * np.arccos(x))) for j in range(19)], rtol=1e-12, atol=1e-12 * m[0]
+    )
+    flt = SincFilter(-0.3, mu_max, 10)
+    g, q = flt.kept(), flt.q()
+    assert cheb.chebval(-1.0, g) == pytest.approx(1.0)  # smooth shapes kept exactly
+    np.testing.assert_allclose(cheb.chebval(x, q) * mu, 1 - cheb.chebval(x, g), atol=1e-12)
+    dense = V @ (cheb.chebval(x, q)[:, None] * (V.T @ c))
+    np.testing.assert_allclose(sinc_deviation(lambda X: Mt @ X, c, flt), dense, atol=1e-12)
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_windowed_sinc_meets_tau_without_factorization(fixed: bool) -> None:
+    P, F = noisy_icosphere(3, 0.03)
+    g = Geometry(P, faces=F, fixed=np.arange(0, len(P), 30) if fixed else None)
+    for rms in (0.003, 0.02):
+        res = smooth(g, SmoothingParams(rms=rms, method="windowed-sinc"))
+        assert res.converged and res.relative_error <= 1e-3
+        assert res.factorizations == 0 and res.solves == 0 and res.matvecs > 0
+        assert res.solver == "none" and res.report()["method"] == "windowed-sinc"
+        phi = float(np.sum((res.points - P) ** 2))
+        assert phi == pytest.approx(res.phi, rel=1e-8)
+        if fixed:
+            assert np.array_equal(res.points[g.fixed], P[g.fixed])
+
+
+def test_windowed_sinc_is_the_dense_filter_of_the_same_operator() -> None:
+    """X = P + D^-1 q(M_t) c with the pass band the result reports (no fixed points)."""
+    P, F = noisy_icosphere(2, 0.03)
+    g = Geometry(P, faces=F)
+    res = smooth(g, SmoothingParams(rms=0.01, method="windowed-sinc"))
+    L = build_laplacian(g, SmoothingParams(lam=1.0))[0].toarray()
+    Mt = L.T @ L
+    mu_max = 1.01 * (np.abs(L).T @ (np.abs(L) @ np.ones(len(P)))).max()  # Gershgorin of |L|^T|L|
+    flt = SincFilter(2 * res.lam / mu_max - 1, mu_max, 24)  # the starting degree suffices here
+    mu, V = np.linalg.eigh(Mt)
+    x = np.clip(2 * np.clip(mu, 0, None) / mu_max - 1, -1, 1)
+    kept = cheb.chebval(x, flt.kept())
+    X = V @ (kept[:, None] * (V.T @ P))
+    np.testing.assert_allclose(res.points, X, atol=1e-8)
+
+
+def test_windowed_sinc_needs_the_normalized_laplacian() -> None:
+    P, F = noisy_icosphere(1, 0.03)
+    with pytest.raises(ParameterError) as info:
+        smooth(
+            Geometry(P, faces=F),
+            SmoothingParams(rms=0.01, method="windowed-sinc", laplacian="feature"),
+        )
+    assert info.value.field == "params.method"
