@@ -1,0 +1,226 @@
+"""Every command the documentation shows is run, so that README.md and docs/*.md cannot go stale.
+
+The convention (also stated in docs/development.md):
+
+* a fenced block marked ``sh`` is a shell script and ``python`` a Python program: both are run;
+* ``text``, ``json``, ``yaml`` and ``console`` blocks show output, formats or a session: not run;
+* an HTML comment on the line before a block changes that: ``<!-- not-run: REASON -->`` skips a
+  block, with the reason written down (Docker, Redis, a command that installs or runs for
+  minutes), and ``<!-- own-server -->`` says that the block starts and stops its own server
+  (it gets a free port of its own). Other comments are labels (``<!-- webhook-verify -->``).
+
+Each document's blocks run in order, in one scratch directory per document laid out like a
+checkout: the project's files are symlinked into it, ``.venv`` is the environment running the
+tests (``PYTHONPATH`` points at this tree), and ``../shared/data`` is the shared real data when it
+exists (blocks that read it are skipped otherwise). ``PATH`` is the system's only, so a bare
+``geosmooth`` fails as it would after ``make run``. A real server (``python -m
+service.api.server``, one worker) listens on a free loopback port; ``127.0.0.1:8000`` and
+``--port 8000`` in a block are rewritten to it. A block fails on its first failing command
+(``bash -e -o pipefail``) and after ``BLOCK_TIMEOUT`` seconds; whatever it leaves running is
+killed with its process group.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.api.api_helpers import LiveServer, free_port
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+RUN = {"sh", "python"}
+SHOWN = {"text", "json", "yaml", "console"}
+BLOCK_TIMEOUT = 120.0
+README_MAX_LINES = 300
+
+_FENCE = re.compile(r"^```\s*([\w-]*)\s*$")
+_COMMENT = re.compile(r"^<!--\s*(.*?)\s*-->\s*$")
+_LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+
+
+@dataclass(frozen=True)
+class Block:
+    """One fenced code block of a document."""
+
+    path: Path
+    line: int  # 1-based line of the opening fence
+    lang: str
+    text: str
+    marker: str  # the HTML comment on the line before the fence ('' if none)
+
+    @property
+    def name(self) -> str:
+        return f"{self.path.relative_to(ROOT)}:{self.line}"
+
+    @property
+    def not_run(self) -> str | None:
+        """The reason given for not running the block, or None."""
+        if self.marker.startswith("not-run"):
+            return self.marker.partition(":")[2].strip()
+        return None
+
+
+def blocks_of(path: Path) -> list[Block]:
+    out: list[Block] = []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    i = 0
+    while i < len(lines):
+        fence = _FENCE.match(lines[i])
+        if not fence:
+            i += 1
+            continue
+        start = i
+        i += 1
+        while i < len(lines) and lines[i].rstrip() != "```":
+            i += 1
+        previous = next((ln for ln in reversed(lines[:start]) if ln.strip()), "")
+        comment = _COMMENT.match(previous)
+        text = "\n".join(lines[start + 1 : i]) + "\n"
+        out.append(Block(path, start + 1, fence.group(1), text, comment.group(1) if comment else ""))
+        i += 1
+    return out
+
+
+ALL = [block for path in DOCUMENTS for block in blocks_of(path)]
+RUNNABLE = [b for b in ALL if b.lang in RUN and b.not_run is None]
+
+
+# --------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    base = tmp_path_factory.mktemp("docs-server")
+    live = LiveServer(base / "data", workers=1)
+    live.start()
+    try:
+        yield live
+    finally:
+        live.stop()
+
+
+def _shared_data() -> Path:
+    env = os.environ.get("GEOSMOOTH_SHARED_DATA")
+    return Path(env) if env else ROOT.parent / "shared" / "data"
+
+
+_CHECKOUTS: dict[Path, Path] = {}
+
+
+def checkout(doc: Path, base: Path) -> Path:
+    """The scratch directory of one document, laid out like a checkout (made once)."""
+    if doc not in _CHECKOUTS:
+        work = base / doc.stem
+        project = work / "project"
+        project.mkdir(parents=True)
+        for entry in ROOT.iterdir():
+            if entry.name not in {".git", ".venv", "data"}:
+                (project / entry.name).symlink_to(entry)
+        (project / ".venv").symlink_to(Path(sys.prefix))
+        if _shared_data().is_dir():
+            (work / "shared").mkdir()
+            (work / "shared" / "data").symlink_to(_shared_data().resolve())
+        _CHECKOUTS[doc] = project
+    return _CHECKOUTS[doc]
+
+
+def block_env(home: Path) -> dict[str, str]:
+    return {
+        "PATH": "/usr/local/bin:/usr/bin:/bin",
+        "HOME": str(home),
+        "LANG": "C.UTF-8",
+        "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "clients" / "python")]),
+        "PYTHONDONTWRITEBYTECODE": "1",
+        "TMPDIR": str(home),
+    }
+
+
+def localize(text: str, port: int) -> str:
+    """Point the documented address (127.0.0.1:8000) at the test's server."""
+    text = re.sub(r"\b(127\.0\.0\.1|localhost):8000\b", rf"\g<1>:{port}", text)
+    return re.sub(r"--port 8000\b", f"--port {port}", text)
+
+
+def run_block(block: Block, cwd: Path, port: int) -> subprocess.CompletedProcess[str]:
+    home = cwd.parent / "home"
+    home.mkdir(exist_ok=True)
+    text = localize(block.text, port)
+    if block.lang == "sh":
+        cmd = ["bash", "-e", "-o", "pipefail", "-c", text]
+    else:
+        script = home / f"block-{block.line}.py"
+        script.write_text(text, encoding="utf-8")
+        cmd = [sys.executable, str(script)]
+    proc = subprocess.Popen(cmd, cwd=cwd, env=block_env(home), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)  # fmt: skip
+    try:
+        out, _ = proc.communicate(timeout=BLOCK_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        out = ""
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # whatever the block left running
+        except ProcessLookupError:
+            pass
+        proc.wait()
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, "")
+
+
+# --------------------------------------------------------------------------- tests
+
+
+@pytest.mark.parametrize("block", RUNNABLE, ids=[b.name for b in RUNNABLE])
+def test_documented_block_runs(
+    block: Block, server: LiveServer, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    if "../shared/data" in block.text and not _shared_data().is_dir():
+        pytest.skip(f"shared data not found at {_shared_data()} (set GEOSMOOTH_SHARED_DATA)")
+    base = tmp_path_factory.getbasetemp() / "docs-checkouts"
+    base.mkdir(exist_ok=True)
+    cwd = checkout(block.path, base)
+    port = free_port() if block.marker == "own-server" else server.port
+    done = run_block(block, cwd, port)
+    assert done.returncode == 0, (
+        f"{block.name} ({block.lang}) exited with {done.returncode}:\n{done.stdout[-4000:]}"
+    )
+
+
+def test_every_block_says_whether_it_runs() -> None:
+    unknown = [f"{b.name}: ```{b.lang}" for b in ALL if b.lang not in RUN | SHOWN]
+    assert not unknown, f"use ```sh or ```python (run) or ```text / json (shown): {unknown}"
+    unexplained = [b.name for b in ALL if b.not_run is not None and len(b.not_run) < 10]
+    assert not unexplained, f"a not-run block needs its reason: {unexplained}"
+    assert len(RUNNABLE) >= 15
+
+
+def test_documents_do_not_call_a_bare_geosmooth() -> None:
+    """The command is .venv/bin/geosmooth after `make run` (not on PATH); inside containers
+    (not-run Docker blocks) `geosmooth` is on PATH."""
+    bare = re.compile(r"(^|[;&|(]\s*|\$\(\s*)geosmooth\s", re.M)
+    found = [b.name for b in ALL if b.lang == "sh" and b.not_run is None and bare.search(b.text)]
+    assert not found, found
+
+
+def test_relative_links_resolve() -> None:
+    broken = []
+    for doc in DOCUMENTS:
+        for target in _LINK.findall(doc.read_text(encoding="utf-8")):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            if not (doc.parent / target).exists():
+                broken.append(f"{doc.relative_to(ROOT)} -> {target}")
+    assert not broken, broken
+
+
+def test_readme_is_short() -> None:
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").count("\n")
+    assert lines <= README_MAX_LINES, f"README.md has {lines} lines; move sections to docs/"
