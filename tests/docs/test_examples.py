@@ -22,6 +22,7 @@ killed with its process group.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -85,7 +86,8 @@ def blocks_of(path: Path) -> list[Block]:
         previous = next((ln for ln in reversed(lines[:start]) if ln.strip()), "")
         comment = _COMMENT.match(previous)
         text = "\n".join(lines[start + 1 : i]) + "\n"
-        out.append(Block(path, start + 1, fence.group(1), text, comment.group(1) if comment else ""))
+        marker = comment.group(1) if comment else ""
+        out.append(Block(path, start + 1, fence.group(1), text, marker))
         i += 1
     return out
 
@@ -160,17 +162,17 @@ def run_block(block: Block, cwd: Path, port: int) -> subprocess.CompletedProcess
         script = home / f"block-{block.line}.py"
         script.write_text(text, encoding="utf-8")
         cmd = [sys.executable, str(script)]
-    proc = subprocess.Popen(cmd, cwd=cwd, env=block_env(home), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        cmd, cwd=cwd, env=block_env(home), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        text=True, start_new_session=True,
+    )  # fmt: skip
     try:
         out, _ = proc.communicate(timeout=BLOCK_TIMEOUT)
     except subprocess.TimeoutExpired:
         out = ""
     finally:
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)  # whatever the block left running
-        except ProcessLookupError:
-            pass
         proc.wait()
     return subprocess.CompletedProcess(cmd, proc.returncode, out, "")
 
@@ -224,3 +226,17 @@ def test_relative_links_resolve() -> None:
 def test_readme_is_short() -> None:
     lines = (ROOT / "README.md").read_text(encoding="utf-8").count("\n")
     assert lines <= README_MAX_LINES, f"README.md has {lines} lines; move sections to docs/"
+
+
+def test_formats_page_lists_every_format_of_the_registry() -> None:
+    from service.io.registry import FORMATS
+
+    text = (ROOT / "docs" / "formats.md").read_text(encoding="utf-8")
+    lines = [line for line in text.splitlines() if line.startswith("| **")]
+    rows = {line.split("|")[1].strip(): line for line in lines}
+    for fmt in FORMATS.values():
+        row = next((r for cell, r in rows.items() if cell.endswith(f"`{fmt.name}`")), None)
+        assert row is not None, f"docs/formats.md lacks {fmt.name}"
+        exts = ", ".join(f"`.{ext}`" for ext in fmt.extensions)
+        assert f"| {exts} | `{fmt.media_type.split(';')[0]}` |" in row, (fmt.name, row)
+    assert len(rows) == len(FORMATS)
