@@ -240,3 +240,22 @@ def test_formats_page_lists_every_format_of_the_registry() -> None:
         exts = ", ".join(f"`.{ext}`" for ext in fmt.extensions)
         assert f"| {exts} | `{fmt.media_type.split(';')[0]}` |" in row, (fmt.name, row)
     assert len(rows) == len(FORMATS)
+
+
+def test_settings_table_is_generated_from_the_settings() -> None:
+    from tests.docs.settings_table import PAGE, render
+
+    text = PAGE.read_text(encoding="utf-8")
+    assert text == render(text), "stale: run python -m tests.docs.settings_table and commit"
+
+
+def test_every_setting_named_in_the_documents_exists() -> None:
+    from service.settings import Settings
+
+    known = {f"GEOSMOOTH_{name.upper()}" for name in Settings.model_fields}
+    # read by the CLI (debug, submit's key) and the test suite, not by the service's settings
+    known |= {"GEOSMOOTH_DEBUG", "GEOSMOOTH_API_KEY", "GEOSMOOTH_SHARED_DATA",
+              "GEOSMOOTH_SCREENSHOTS"}  # fmt: skip
+    pattern = re.compile(r"GEOSMOOTH_[A-Z0-9_]*[A-Z0-9]")
+    named = {name for doc in DOCUMENTS for name in pattern.findall(doc.read_text())}
+    assert named <= known, sorted(named - known)
