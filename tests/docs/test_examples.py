@@ -7,7 +7,10 @@ The convention (also stated in docs/development.md):
 * an HTML comment on the line before a block changes that: ``<!-- not-run: REASON -->`` skips a
   block, with the reason written down (Docker, Redis, a command that installs or runs for
   minutes), and ``<!-- own-server -->`` says that the block starts and stops its own server
-  (it gets a free port of its own). Other comments are labels (``<!-- webhook-verify -->``).
+  (it gets a free port of its own). Other comments are labels (``<!-- webhook-verify -->``);
+* ``<!-- output -->`` before a ``text`` block says it shows the output of the block run just
+  before it: every line shown must be in that output (timings and residuals below 1e-6,
+  which vary from run to run, are masked).
 
 Each document's blocks run in order, in one scratch directory per document laid out like a
 checkout: the project's files are symlinked into it, ``.venv`` is the environment running the
@@ -23,6 +26,7 @@ killed with its process group.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import re
 import signal
@@ -93,6 +97,16 @@ def blocks_of(path: Path) -> list[Block]:
 
 
 ALL = [block for path in DOCUMENTS for block in blocks_of(path)]
+_NEXT = {a: b for a, b in itertools.pairwise(ALL) if a.path == b.path}
+_NOISE = re.compile(r"\d\.\d+e-(0[6-9]|[1-9]\d)")
+
+
+def masked(text: str) -> list[str]:
+    """Lines of program output without what varies between runs (timings, tiny residuals)."""
+    lines = (line.rstrip() for line in text.splitlines())
+    return [_NOISE.sub("#", line) for line in lines if line and not line.startswith("  time ")]
+
+
 RUNNABLE = [b for b in ALL if b.lang in RUN and b.not_run is None]
 
 
@@ -194,6 +208,11 @@ def test_documented_block_runs(
     assert done.returncode == 0, (
         f"{block.name} ({block.lang}) exited with {done.returncode}:\n{done.stdout[-4000:]}"
     )
+    shown = _NEXT.get(block)
+    if shown is not None and shown.marker == "output":
+        actual = set(masked(done.stdout))
+        stale = [line for line in masked(shown.text) if line not in actual]
+        assert not stale, f"{shown.name} is stale; the output now is:\n{done.stdout}"
 
 
 def test_every_block_says_whether_it_runs() -> None:
