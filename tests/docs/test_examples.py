@@ -278,3 +278,30 @@ def test_every_setting_named_in_the_documents_exists() -> None:
     pattern = re.compile(r"GEOSMOOTH_[A-Z0-9_]*[A-Z0-9]")
     named = {name for doc in DOCUMENTS for name in pattern.findall(doc.read_text())}
     assert named <= known, sorted(named - known)
+
+
+def _quoted(doc: str) -> str:
+    return (ROOT / doc).read_text(encoding="utf-8")
+
+
+def test_budgets_quoted_from_info_are_current() -> None:
+    """The τ ranges and noise estimates the documents quote are what `info` says today."""
+    import geosmooth
+
+    sphere = geosmooth.describe(geosmooth.read(ROOT / "service/samples/noisy-sphere.ply"))
+    readme, method = _quoted("README.md"), _quoted("docs/method.md")
+    assert f'"tau_range": [0.0, {sphere["tau_range"][1]:.2f}]' in readme
+    assert f'"sigma_estimate": {sphere["sigma_estimate"]:.4f}' in readme
+    assert f'"suggested_tau": {sphere["suggested_tau"]:.4f}' in readme
+    assert f"`(0, {sphere['phi0']:.1f})`" in method
+    assert f"(0, {sphere['phi0']:.3f})" in _quoted("docs/http-api.md")  # the problem's detail
+    bunny_file = _shared_data() / "bunny.ply"
+    if not bunny_file.is_file():
+        pytest.skip(f"{bunny_file} not found: the bunny's figures are not checked")
+    bunny = geosmooth.describe(geosmooth.read(bunny_file))
+    cli = _quoted("docs/cli.md")
+    assert f'`"tau_range": [0.0, {bunny["tau_range"][1]:.4f}]`' in cli
+    assert f'`"rms_range": [0.0, {bunny["rms_range"][1]:.6f}]`' in cli
+    assert f'`"sigma_estimate": {bunny["sigma_estimate"]:.2e}`' in cli
+    assert f'`"suggested_tau": {bunny["suggested_tau"]:.2e}`' in cli
+    assert f"`(0, {bunny['phi0']:.3f})`" in method
