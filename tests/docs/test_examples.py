@@ -305,3 +305,21 @@ def test_budgets_quoted_from_info_are_current() -> None:
     assert f'`"sigma_estimate": {bunny["sigma_estimate"]:.2e}`' in cli
     assert f'`"suggested_tau": {bunny["suggested_tau"]:.2e}`' in cli
     assert f"`(0, {bunny['phi0']:.3f})`" in method
+
+
+def test_cli_page_documents_every_option_of_every_command() -> None:
+    import argparse
+
+    from service.cli.parser import build_parser
+
+    text = _quoted("docs/cli.md")
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    missing = []
+    for name, sub in commands.choices.items():
+        assert f"`geosmooth {name}" in text, f"docs/cli.md lacks the command {name}"
+        for action in sub._actions:
+            options = [o for o in action.option_strings if o not in ("-h", "--help")]
+            if options and not any(re.search(rf"(?<![\w-]){o}(?![\w-])", text) for o in options):
+                missing.append(f"{name} {options[-1]}")
+    assert not missing, missing
