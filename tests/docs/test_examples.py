@@ -323,3 +323,17 @@ def test_cli_page_documents_every_option_of_every_command() -> None:
             if options and not any(re.search(rf"(?<![\w-]){o}(?![\w-])", text) for o in options):
                 missing.append(f"{name} {options[-1]}")
     assert not missing, missing
+
+
+def test_http_page_documents_every_operation_of_the_openapi_document() -> None:
+    import json
+
+    spec = json.loads(_quoted("openapi/openapi.json"))
+    text = re.sub(r"\{[^}]+\}", "{}", _quoted("docs/http-api.md"))
+    missing = [
+        f"{method.upper()} {path}"
+        for path, operations in spec["paths"].items()
+        for method in operations
+        if f"{method.upper()} {re.sub(r'{[^}]+}', '{}', path)}" not in text
+    ]
+    assert not missing, f"docs/http-api.md lacks {missing}"
