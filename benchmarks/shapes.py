@@ -86,13 +86,14 @@ def data_dir() -> Path:
     """Directory of the shared real data.
 
     ``GEOSMOOTH_SHARED_DATA`` if set (as for the tests), else ``shared/data`` beside the
-    repository, else ``/work/shared/data``.
+    repository, else beside the directory that holds it (a git worktree one level down).
     """
     env = os.environ.get("GEOSMOOTH_SHARED_DATA")
     if env:
         return Path(env)
-    beside = Path(__file__).resolve().parents[2] / "shared" / "data"
-    return beside if beside.is_dir() else Path("/work/shared/data")
+    repo = Path(__file__).resolve().parents[1]
+    beside = repo.parent / "shared" / "data"
+    return beside if beside.is_dir() else repo.parent.parent / "shared" / "data"
 
 
 def load_mesh(name: str, weld: bool = False) -> tuple[FloatArray, IntArray]:

@@ -129,8 +129,9 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
         "params": {
             "type": "string",
             "description": "SmoothingParams as a JSON object, sent as a text field or as a JSON "
-            "file part. Exactly one of tau, rms or lam; lam (no search) is scale-free, tau and "
-            "rms are in the input's units (see the README's 'Choosing tau').",
+            "file part. At most one of tau, rms or lam (none: tau from the estimated noise); lam "
+            "(no search) is scale-free, tau and rms are in the input's units (docs/method.md, "
+            "'Choosing tau').",
             "example": PARAMS_EXAMPLE,
         },
         "format": {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from collections.abc import Sequence
@@ -31,14 +32,30 @@ def render(spec: dict[str, Any]) -> str:
     return json.dumps(spec, indent=2, ensure_ascii=False) + "\n"
 
 
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m service.api.openapi_export",
+        description="Write the OpenAPI document of the geosmooth HTTP API (built with default "
+        "settings, independent of the environment).",
+    )
+    parser.add_argument(
+        "path",
+        nargs="?",
+        default="-",
+        metavar="PATH",
+        help="file to write, e.g. openapi/openapi.json ('-' or nothing: stdout)",
+    )
+    return parser
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Write the spec to the path given (``-`` or nothing: stdout)."""
-    args = list(sys.argv[1:] if argv is None else argv)
+    """Write the spec to the path given (``-`` or nothing: stdout); ``--help`` prints usage."""
+    args = _parser().parse_args(sys.argv[1:] if argv is None else list(argv))
     text = render(openapi_spec())
-    if not args or args[0] == "-":
+    if args.path == "-":
         sys.stdout.write(text)
     else:
-        Path(args[0]).write_text(text, encoding="utf-8")
+        Path(args.path).write_text(text, encoding="utf-8")
     return 0
 
 

@@ -1,6 +1,6 @@
 """File formats <-> :class:`~service.core.geometry.Geometry`, keeping everything else of the file.
 
-Public API (see ``/work/notes/CONTRACTS.md`` and ``service/io/README.md``)::
+Public API (see ``docs/CONTRACTS.md`` and ``service/io/README.md``)::
 
     doc = read_geometry("bunny.ply")                  # -> GeometryDocument
     doc.geometry                                      # validated Geometry for the engine

@@ -1,6 +1,6 @@
 """The job queue: a small protocol, the embedded local backend and the Redis/RQ backend.
 
-See ``/work/notes/CONTRACTS.md`` (Jobs) and ``service/jobs/README.md``. Only job ids and small
+See ``docs/CONTRACTS.md`` (Jobs) and ``service/jobs/README.md``. Only job ids and small
 metadata travel through a queue; inputs and results live in the blob store.
 """
 

@@ -5,7 +5,8 @@ Signature (Stripe-style, so existing verification code carries over)::
     Geosmooth-Signature: t=<unix seconds>,v1=<hex HMAC-SHA256(secret, "<t>.<raw body>")>
 
 with the secret of ``GEOSMOOTH_WEBHOOK_SECRET`` (no secret configured: no header). Verify it
-on the receiving side with :func:`verify_signature` (the README shows the same ten lines to copy).
+on the receiving side with :func:`verify_signature` (docs/http-api.md shows the same ten lines
+to copy).
 
 SSRF guard: a target whose host resolves to a loopback, private, link-local, multicast, reserved
 or unspecified address is refused (:func:`check_webhook_url`, at submit and again at every
@@ -126,7 +127,7 @@ def verify_signature(
 ) -> bool:
     """Whether ``header`` signs ``body`` with ``secret`` within ``tolerance`` seconds.
 
-    The receiving side's check (the README has a dependency-free copy of it).
+    The receiving side's check (docs/http-api.md has a dependency-free copy of it).
     """
     fields = dict(part.split("=", 1) for part in header.split(",") if "=" in part)
     try:

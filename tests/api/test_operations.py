@@ -79,7 +79,7 @@ def _sample(text: str, name: str, labels: str = "") -> float:
     return float(match.group(1))
 
 
-def test_metrics(client: httpx.Client, server: LiveServer) -> None:
+def test_metrics_agree_with_the_job_list(client: httpx.Client, server: LiveServer) -> None:
     wait_done(client, _submit(client))
     r = client.post(
         "/v1/smooth", json={"geometry": json_geometry(PTS, FACES), "params": {"tau": 0.05}}

@@ -1,5 +1,5 @@
 """In-process tests of the CLI's pieces: options <-> SmoothingParams, --fixed files, progress,
-summary, exit paths that cannot be provoked from outside, and the README's parameter table."""
+summary, exit paths that cannot be provoked from outside, and the parameter table of docs/cli.md."""
 
 from __future__ import annotations
 
@@ -332,14 +332,14 @@ def test_smooth_does_not_import_the_http_stack(tmp_path: Path):
     assert res.stdout.strip() == "0 []", res.stderr
 
 
-def test_readme_lists_every_parameter_with_its_default():
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
+def test_cli_docs_list_every_parameter_with_its_default():
+    readme = (REPO / "docs" / "cli.md").read_text(encoding="utf-8")
     rows = [ln for ln in readme.splitlines() if ln.startswith("|")]
     for name, info in SmoothingParams.model_fields.items():
         option = "--" + name.replace("_", "-")
         first_cell = re.compile(rf"^\|\s*`{option}[` ]")
         row = next((r for r in rows if first_cell.match(r)), None)
-        assert row is not None, f"README parameter table lacks {option}"
+        assert row is not None, f"docs/cli.md parameter table lacks {option}"
         default = info.default
         if default is None:
             assert "—" in row, (option, row)  # lam / tau / rms: no default

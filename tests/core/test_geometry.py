@@ -75,7 +75,7 @@ def test_elements_repeating_a_vertex(kw: dict, field: str) -> None:
         {"points": np.zeros((3, 3)), "fixed": [0.5]},
     ],
 )
-def test_bad_shapes(kw: dict) -> None:
+def test_malformed_arrays_are_rejected_as_invalid_shape(kw: dict) -> None:
     with pytest.raises(InvalidShape):
         Geometry(**kw)
 

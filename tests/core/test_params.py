@@ -8,7 +8,7 @@ from pydantic import ValidationError
 from service.core import SmoothingParams
 
 
-def test_defaults() -> None:
+def test_defaults_are_the_benchmark_s_and_preset_report_restores_the_report_s() -> None:
     p = SmoothingParams(tau=1.0)
     assert (p.laplacian, p.weights, p.neighborhood) == ("normalized", "uniform", "delaunay")
     assert p.k == 20
@@ -35,7 +35,7 @@ def test_defaults() -> None:
         {"tau": 1, "unknown": 3},
     ],
 )
-def test_rejected(kw: dict) -> None:
+def test_invalid_values_are_rejected(kw: dict) -> None:
     with pytest.raises(ValidationError):
         SmoothingParams(**kw)
 
@@ -50,7 +50,7 @@ def test_json_schema_has_descriptions() -> None:
     [({}, "auto"), ({"tau": "auto"}, "auto"), ({"tau": "gcv"}, "gcv"), ({"tau": "0.5"}, "tau"),
      ({"rms": 1}, "rms"), ({"lam": 1}, "lam")],
 )
-def test_target_rule(kw: dict, rule: str) -> None:
+def test_tau_rule_names_the_target_given(kw: dict, rule: str) -> None:
     p = SmoothingParams(**kw)
     assert p.tau_rule == rule
     assert p.tau is None or p.tau in ("auto", "gcv") or p.tau == 0.5

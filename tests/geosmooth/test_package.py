@@ -136,7 +136,7 @@ def test_read_smooth_write_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.points, expected[doc.weld.index])  # type: ignore[union-attr]
 
 
-def test_errors() -> None:
+def test_invalid_input_raises_typed_errors() -> None:
     with pytest.raises(ValidationError):
         geosmooth.smooth(np.zeros((5, 3)), tau=-1)
     with pytest.raises(geosmooth.TauOutOfRange) as info:

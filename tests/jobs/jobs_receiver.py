@@ -59,10 +59,10 @@ class Receiver:
 
 
 def documented_verifier() -> Any:
-    """The ``verify`` function of the README's webhook section (executed as documented)."""
-    text = (Path(REPO) / "README.md").read_text()
+    """The ``verify`` function of docs/http-api.md's webhook section (executed as documented)."""
+    text = (Path(REPO) / "docs" / "http-api.md").read_text()
     match = re.search(r"<!-- webhook-verify -->\s*```python\n(.*?)```", text, re.S)
-    assert match, "README.md has no webhook verification snippet"
+    assert match, "docs/http-api.md has no webhook verification snippet"
     namespace: dict[str, Any] = {}
-    exec(compile(match.group(1), "README.md#webhook-verify", "exec"), namespace)
+    exec(compile(match.group(1), "docs/http-api.md#webhook-verify", "exec"), namespace)
     return namespace["verify"]

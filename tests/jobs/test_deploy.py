@@ -37,7 +37,7 @@ def test_compose_profiles_embedded_and_distributed() -> None:
     profiles = {name: tuple(s.get("profiles") or ()) for name, s in services.items()}
     assert profiles == {"geosmooth": ("embedded",), "redis": ("distributed",),
                         "api": ("distributed",), "worker": ("distributed",)}  # fmt: skip
-    dotenv = (Path(REPO) / ".env").read_text()
+    dotenv = (Path(REPO) / ".env.example").read_text()
     assert re.search(r"^COMPOSE_PROFILES=embedded$", dotenv, re.M)
     worker, api = services["worker"], services["api"]
     assert "ports" not in worker  # scalable: --scale worker=N needs no host port

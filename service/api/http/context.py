@@ -23,16 +23,11 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from service.api.http.logs import get_logger
 from service.api.problems import problem_from_exception, problem_response
 
-__all__ = ["REQUEST_ID_HEADER", "RequestContextMiddleware", "request_id_of"]
+__all__ = ["REQUEST_ID_HEADER", "RequestContextMiddleware"]
 
 REQUEST_ID_HEADER = "X-Request-ID"
 _SANE_ID = re.compile(r"[A-Za-z0-9._:-]{1,128}")
 log = get_logger("geosmooth.api")
-
-
-def request_id_of(scope: Scope) -> str:
-    """The request id of ``scope`` (set by :class:`RequestContextMiddleware`)."""
-    return str(scope.get("state", {}).get("request_id", ""))
 
 
 def _incoming_id(scope: Scope) -> str:

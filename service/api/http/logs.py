@@ -25,7 +25,7 @@ import structlog
 
 from service.api.errors import finite
 
-__all__ = ["bind_request", "configure_logging", "get_logger"]
+__all__ = ["configure_logging", "get_logger"]
 
 _LEVELS = {
     "debug": logging.DEBUG,
@@ -116,7 +116,3 @@ def get_logger(name: str = "geosmooth.api") -> Any:
     """A structlog logger (``log.info("event", key=value)``)."""
     return structlog.get_logger(name)
 
-
-def bind_request(**values: Any) -> None:
-    """Bind ``values`` to every log line of the current request (context variables)."""
-    structlog.contextvars.bind_contextvars(**values)
