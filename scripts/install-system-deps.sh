@@ -19,9 +19,10 @@ runtime_pkgs=(libcholmod3 libopenblas0-pthread)
 # tests/web drive chromium with Playwright and Firefox ESR over WebDriver BiDi on an Xvfb display
 # (WebGL: Mesa's software rasterizer); no browser is ever downloaded (fonts: screenshots);
 # tests/jobs start a real redis-server; scripts/check-image.sh builds Debian 12 roots; the
-# Ctrl-C tests read a socket's acknowledged bytes with `ss` (iproute2).
+# Ctrl-C tests read a socket's acknowledged bytes with `ss` (iproute2); tests/docs run the
+# documentation's curl recipes.
 test_pkgs=(chromium firefox-esr xvfb libgl1-mesa-dri fonts-dejavu-core redis-server debootstrap
-           iproute2)
+           iproute2 curl)
 pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
 case "${1:-}" in
