@@ -14,8 +14,6 @@ from typing import Any, ClassVar, Literal
 from pydantic import Field, SecretStr, ValidationError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.exit_codes import EXIT_USAGE
-
 __all__ = ["ConfigError", "Settings", "get_settings", "load_settings"]
 
 
@@ -281,7 +279,7 @@ class ConfigError(Exception):
     code: ClassVar[str] = "invalid-configuration"
     title: ClassVar[str] = "Invalid configuration"
     status: ClassVar[int] = 500
-    exit_code: ClassVar[int] = EXIT_USAGE
+    exit_code: ClassVar[int] = 2  # see the CLI's table, service/exit_codes.py
 
     def __init__(self, message: str, *, field: str) -> None:
         super().__init__(message)

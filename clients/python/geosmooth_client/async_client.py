@@ -25,7 +25,7 @@ from geosmooth_client._protocol import (
     transport_error,
 )
 from geosmooth_client._upload import Upload, params_dict
-from geosmooth_client.errors import ConnectionFailed, NotFound
+from geosmooth_client.errors import ConnectionFailed, NotFound, raise_for_status
 from geosmooth_client.models import Job, JobList, Report
 from geosmooth_client.result import AsyncResult
 
@@ -263,4 +263,4 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         except BaseException:  # cancelled, timed out, unreachable: leave no job running
             await asyncio.shield(self._cancel_quietly(job.id))
             raise
-        return AsyncResult(self, job.raise_for_status())
+        return AsyncResult(self, raise_for_status(job))

@@ -32,7 +32,7 @@ from geosmooth_client._protocol import (
     transport_error,
 )
 from geosmooth_client._upload import Upload, params_dict
-from geosmooth_client.errors import ConnectionFailed, JobInterrupted, NotFound
+from geosmooth_client.errors import ConnectionFailed, JobInterrupted, NotFound, raise_for_status
 from geosmooth_client.models import Job, JobList, Report
 from geosmooth_client.result import Result
 
@@ -366,4 +366,4 @@ class Client(ClientBase[httpx.Client]):
         except BaseException:  # timed out, unreachable: leave no job running
             self._cancel_quietly(job.id)
             raise
-        return Result(self, job.raise_for_status())
+        return Result(self, raise_for_status(job))

@@ -245,16 +245,6 @@ class Job:
         status: JobStatus = "running" if self.status == "queued" else self.status
         return dataclasses.replace(self, status=status, progress=progress)
 
-    def raise_for_status(self) -> Job:
-        """Raise :class:`JobFailed` / :class:`JobCancelled` for those statuses; else ``self``."""
-        from geosmooth_client.errors import JobCancelled, JobFailed
-
-        if self.status == "failed":
-            raise JobFailed(self)
-        if self.status == "cancelled":
-            raise JobCancelled(self)
-        return self
-
 
 @dataclasses.dataclass(frozen=True)
 class PageLinks:
