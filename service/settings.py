@@ -14,7 +14,9 @@ from typing import Any, ClassVar, Literal
 from pydantic import Field, SecretStr, ValidationError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["ConfigError", "Settings", "get_settings", "load_settings"]
+from service.core.params import MAX_ITERATIONS_BOUND, MAX_K, SPECTRUM_MAX_POINTS
+
+__all__ = ["ConfigError", "Settings", "default", "get_settings", "load_settings"]
 
 
 def _default_workers() -> int:
@@ -186,12 +188,17 @@ class Settings(BaseSettings):
         default=2, ge=1, description="Concurrent POST /v1/smooth solves per key; more get 429."
     )
     max_faces: int = Field(default=4_000_000, ge=1, description="Largest mesh (faces) accepted.")
-    max_k: int = Field(default=64, ge=3, le=64, description="Largest ``params.k`` accepted.")
+    max_k: int = Field(default=MAX_K, ge=3, le=MAX_K, description="Largest ``params.k`` accepted.")
     max_iterations: int = Field(
-        default=200, ge=1, le=500, description="Largest ``params.max_iterations`` accepted."
+        default=200,
+        ge=1,
+        le=MAX_ITERATIONS_BOUND,
+        description="Largest ``params.max_iterations`` accepted.",
     )
     max_spectrum_points: int = Field(
-        default=3000, ge=0, description="Largest input for which ``params.spectrum`` is accepted."
+        default=SPECTRUM_MAX_POINTS,
+        ge=0,
+        description="Largest input for which ``params.spectrum`` is accepted.",
     )
     submit_exact_tau_points: int = Field(
         default=50_000,
@@ -257,6 +264,12 @@ class Settings(BaseSettings):
         gt=0,
         description="Interval of the keep-alive ``: ping`` comments of the events stream.",
     )
+
+
+def default(name: str) -> Any:
+    """The default of setting ``name``: the one place a default is written (the embedded
+    queue's keyword defaults and the API's documented models read it from here)."""
+    return Settings.model_fields[name].get_default(call_default_factory=True)
 
 
 @lru_cache(maxsize=1)

@@ -52,32 +52,34 @@ def check_format(fmt: str | None, option: str) -> str | None:
 
 
 def output_format(output: str, explicit: str | None) -> str | None:
-    """The format to write: the output's extension, else ``--format``, else ``None``.
+    """The format to write: the output's extension, else ``--output-format``, else ``None``.
 
     ``None`` means "the input's format" (``-o -``, or a name without an extension).
 
     Raises
     ------
     CliError
-        Exit status 2 when ``--format`` contradicts the extension, or the extension is not a
-        format geosmooth writes and no ``--format`` says otherwise.
+        Exit status 2 when ``--output-format`` contradicts the extension, or the extension is
+        not a format geosmooth writes and no ``--output-format`` says otherwise.
     """
     from service.io import UnsupportedFormat, detect_format
 
-    check_format(explicit, "--format")
+    check_format(explicit, "--output-format")
     by_ext: str | None = None
     if output != "-":
         with contextlib.suppress(UnsupportedFormat):
             by_ext = detect_format(output)
     if by_ext and explicit and by_ext != explicit:
         raise CliError(
-            f"--format {explicit} contradicts the output file name {output!r} ({by_ext})",
+            f"--output-format {explicit} contradicts the output file name {output!r} ({by_ext})",
             EXIT_USAGE,
         )
     if by_ext or explicit:
         return by_ext or explicit
     if output != "-" and Path(output).suffix:
-        raise CliError(f"cannot tell the output format from {output!r}; give --format", EXIT_USAGE)
+        raise CliError(
+            f"cannot tell the output format from {output!r}; give --output-format", EXIT_USAGE
+        )
     return None
 
 

@@ -89,7 +89,8 @@ def test_pydantic_errors_become_one_line(args: list[str], message: str):
         (["--tau", "1", "--no-such-option"], "unrecognized arguments: --no-such-option"),
         (["--rms", "1", "--xyz-dims", "0"], "--xyz-dims: must be at least 1"),
         (["--rms", "1", "--xyz-dims", "4"], "--xyz-dims applies to XYZ input only, not ply"),
-        (["--rms", "1", "--format", "xyz"], "--format xyz contradicts the output file name"),
+        (["--rms", "1", "--format", "xyz"], "--output-format xyz contradicts the output file"),
+        (["--rms", "1", "--output-format", "xyz"], "--output-format xyz contradicts the output"),
         (["--tau"], "argument --tau: expected one argument"),
     ],
 )

@@ -157,7 +157,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
 
     async def download(self, job_id: str, fmt: str | None = None) -> bytes:
         """See :meth:`Client.download`."""
-        query = {"format": fmt} if fmt else None
+        query = {"output_format": fmt} if fmt else None
         return (await self._send("GET", job_path(job_id, "/result"), params=query)).content
 
     async def cancel(self, job_id: str) -> Job:

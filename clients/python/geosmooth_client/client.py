@@ -222,7 +222,7 @@ class Client(ClientBase[httpx.Client]):
 
     def download(self, job_id: str, fmt: str | None = None) -> bytes:
         """The smoothed geometry, in ``fmt`` (default: the input's format)."""
-        query = {"format": fmt} if fmt else None
+        query = {"output_format": fmt} if fmt else None
         return self._send("GET", job_path(job_id, "/result"), params=query).content
 
     def cancel(self, job_id: str) -> Job:

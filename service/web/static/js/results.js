@@ -11,7 +11,7 @@ export function showReport(report) {
     ["τ", fmt(report.tau, 6), "relative error |φ − τ| / τ", fmt(report.relative_error, 3)],
     ["converged", String(report.converged), "iterations", fmt(report.iterations)],
     ["factorizations", fmt(report.factorizations), "solver", report.solver || "–"],
-    ["RMS deviation", fmt(report.rms_deviation), "max deviation", fmt(report.max_deviation)],
+    ["RMS displacement", fmt(report.rms_displacement), "max displacement", fmt(report.max_displacement)],
     ["points", fmt(report.n_points), "kind / dimension", `${report.kind} / ${report.dimension}-D`],
     ["Laplacian", report.laplacian || "–", "weights", report.weights || "–"],
     ["fixed points", fmt(report.n_fixed), "volume scale", fmt(report.volume_scale)],
