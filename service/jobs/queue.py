@@ -77,19 +77,9 @@ def job_location(job_id: str) -> str:
 
 @dataclass(frozen=True)
 class JobSize:
-    """What the resource estimate of a job needs (known to the API once it parsed the input).
-
-    Attributes
-    ----------
-    n : int
-        Points.
-    dim : int
-        Coordinates per point.
-    kind : str
-        ``"mesh"``, ``"polyline"`` or ``"cloud"``.
-    n_faces : int or None
-        Faces of a mesh.
-    """
+    """What the resource estimate of a job needs (known to the API once it parsed the input):
+    points ``n``, coordinates per point ``dim``, ``kind`` (``"mesh"``, ``"curve"``, ``"cloud"``)
+    and the faces of a mesh."""
 
     n: int
     dim: int
@@ -112,18 +102,10 @@ class JobSize:
 class NewJob:
     """A checked request to run a job: what the API's intake produces and ``submit`` stores.
 
-    ``fmt`` is a known format name and ``params`` validated :class:`SmoothingParams`; the
-    intake also checked the file, the key's bounds and ``tau``. ``submit`` checks only what
-    needs the queue: the memory estimate against its limit, free space, the idempotency key.
-
-    Attributes
-    ----------
-    input : bytes or Path
-        The file's bytes, or a spooled file that is moved into the store.
-    size : JobSize or None
-        From the parsed input; ``None``: the queue reads the input if it has a memory limit.
-    filename, weld, tenant, webhook_url, idempotency_key
-        As in :class:`JobRecord`; ``idempotency_key`` binds retries to this request.
+    ``input``: the file's bytes, or a spooled file moved into the store; ``fmt`` a known format
+    and ``params`` validated (the intake also checked the file, the key's bounds and ``tau``);
+    ``size`` from the parsed input (``None``: the queue reads the input if it has a memory
+    limit); the rest as in :class:`JobRecord`. ``submit`` checks only what needs the queue.
     """
 
     input: JobInput
@@ -140,14 +122,8 @@ class NewJob:
     def check(
         cls, input: JobInput, fmt: str, params: SmoothingParams | Mapping[str, Any], **members: Any
     ) -> NewJob:
-        """A :class:`NewJob` from unchecked values (callers without the API's intake: library
-        use, tests, benchmarks); ``members`` are the other attributes.
-
-        Raises
-        ------
-        ValueError, pydantic.ValidationError
-            An unknown format, invalid parameters.
-        """
+        """A :class:`NewJob` from unchecked values (callers without the API's intake); raises
+        ``ValueError`` for an unknown format, ``pydantic.ValidationError`` for bad params."""
         from service.core.params import SmoothingParams
         from service.io import FORMATS
 

@@ -160,7 +160,7 @@ def test_summary_paragraph():
         "lambda": 0.0123, "phi": 0.4999, "tau": 0.5, "relative_error": 2e-4,
         "converged": True, "iterations": 5, "factorizations": 5, "n_points": 10,
         "dimension": 3, "kind": "mesh", "laplacian": "normalized", "weights": "mean-value",
-        "n_fixed": 2, "rms_deviation": 0.01, "max_deviation": 0.03, "volume_scale": None,
+        "n_fixed": 2, "rms_displacement": 0.01, "max_displacement": 0.03, "volume_scale": None,
         "timings": {"laplacian": 0.01, "total": 0.05}, "solver": "cholmod",
         "warnings": ["something to know"],
     }  # fmt: skip

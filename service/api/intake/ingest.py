@@ -380,7 +380,8 @@ def describe_input(req: IngestRequest) -> dict[str, Any]:
     parsed = parse_request(req)
     info = describe(parsed.document.geometry, parsed.params)
     info.update(
-        format=parsed.fmt,
+        input_format=parsed.fmt,
+        format=parsed.fmt,  # deprecated name of input_format
         filename=req.filename,
         n_polylines=len(parsed.document.polylines),
         notes=list(parsed.document.notes),

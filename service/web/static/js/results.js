@@ -40,12 +40,13 @@ export function clearReport() {
 /** Enable the download buttons for `job` (a succeeded Job). */
 export function enableDownloads(job) {
   const select = $("#download-format");
-  if (job.format && [...select.options].some((o) => o.value === job.format)) select.value = job.format;
+  const input = job.input_format ?? job.format;
+  if (input && [...select.options].some((o) => o.value === input)) select.value = input;
   $("#download-result").disabled = false;
   $("#download-report").disabled = false;
   $("#download-result").onclick = async () => {
     const fmtName = select.value;
-    const response = await apiFetch(`${job.links.result}?format=${encodeURIComponent(fmtName)}`);
+    const response = await apiFetch(`${job.links.result}?output_format=${encodeURIComponent(fmtName)}`);
     saveBlob(await response.blob(), filenameFrom(response, `result.${fmtName}`));
   };
   $("#download-report").onclick = async () => {
