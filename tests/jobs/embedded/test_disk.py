@@ -89,13 +89,14 @@ def test_full_disk_fails_running_jobs_refuses_submits_and_recovers(
 def test_read_only_store_is_unavailable_then_recovers(
     make_queue: MakeQueue, small_fs: Path
 ) -> None:
-    first_queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0)
+    # a 4 MiB store: no free-space floor (the default, 64 MiB, is the whole disk here)
+    first_queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0, min_free_bytes=0)
     first = first_queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     assert wait_finished(first_queue, first.id).status is JobStatus.SUCCEEDED
     first_queue.stop()  # (a remount needs no file open for writing)
     subprocess.run(["mount", "-o", "remount,ro", str(small_fs)], check=True)
     try:
-        queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0)  # starts read-only
+        queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0, min_free_bytes=0)
         with pytest.raises(StorageUnavailable) as err:
             queue.submit(NewJob.check(script("ok"), "json", PARAMS))
         assert err.value.status == 503
