@@ -152,8 +152,8 @@ def write(
     :func:`service.io.write_geometry` (e.g. ``ply_ascii=True``). A document from :func:`read`
     is written back with everything the file held (comments, welded vertices, polylines).
     """
-    from service.cli.output import write_file
     from service.io import detect_format, write_geometry
+    from service.io.atomic import write_file
 
     doc, _ = adapt(geometry)
     data = write_geometry(doc, fmt or detect_format(os.fspath(path)), **options)

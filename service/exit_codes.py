@@ -1,4 +1,12 @@
-"""Exit statuses of the ``geosmooth`` command, shared by ``smooth`` and ``submit``.
+"""Exit statuses of the ``geosmooth`` command: the one table of their meanings.
+
+Typed errors carry their status as metadata, a plain ``int`` class attribute ``exit_code``
+(``GeometryError`` 4, ``SolverError`` 5 in :mod:`service.core.errors`; ``FormatError`` 3 in
+:mod:`service.io.errors`; ``JobsError`` 1 / 2 in :mod:`service.jobs.errors`; ``ConfigError`` 2
+in :mod:`service.settings`); the CLI reads it off the exception
+(:func:`service.cli.errors.exit_code_of`) and documents it here. Nothing below the CLI imports
+this module (``tests/test_architecture.py`` checks that every ``exit_code`` of those classes is a
+status of this table).
 
 Kept free of heavy imports, so ``geosmooth --help`` lists them without loading the HTTP client
 or the engine.

@@ -14,9 +14,9 @@ from typing import Any, ClassVar, Literal
 from pydantic import Field, SecretStr, ValidationError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.exit_codes import EXIT_USAGE
+from service.core.params import MAX_ITERATIONS_BOUND, MAX_K, SPECTRUM_MAX_POINTS
 
-__all__ = ["ConfigError", "Settings", "get_settings", "load_settings"]
+__all__ = ["ConfigError", "Settings", "default", "get_settings", "load_settings"]
 
 
 def _default_workers() -> int:
@@ -188,12 +188,17 @@ class Settings(BaseSettings):
         default=2, ge=1, description="Concurrent POST /v1/smooth solves per key; more get 429."
     )
     max_faces: int = Field(default=4_000_000, ge=1, description="Largest mesh (faces) accepted.")
-    max_k: int = Field(default=64, ge=3, le=64, description="Largest ``params.k`` accepted.")
+    max_k: int = Field(default=MAX_K, ge=3, le=MAX_K, description="Largest ``params.k`` accepted.")
     max_iterations: int = Field(
-        default=200, ge=1, le=500, description="Largest ``params.max_iterations`` accepted."
+        default=200,
+        ge=1,
+        le=MAX_ITERATIONS_BOUND,
+        description="Largest ``params.max_iterations`` accepted.",
     )
     max_spectrum_points: int = Field(
-        default=3000, ge=0, description="Largest input for which ``params.spectrum`` is accepted."
+        default=SPECTRUM_MAX_POINTS,
+        ge=0,
+        description="Largest input for which ``params.spectrum`` is accepted.",
     )
     submit_exact_tau_points: int = Field(
         default=50_000,
@@ -261,6 +266,12 @@ class Settings(BaseSettings):
     )
 
 
+def default(name: str) -> Any:
+    """The default of setting ``name``: the one place a default is written (the embedded
+    queue's keyword defaults and the API's documented models read it from here)."""
+    return Settings.model_fields[name].get_default(call_default_factory=True)
+
+
 @lru_cache(maxsize=1)
 def get_settings() -> Settings:
     """Settings from the environment, read once per process (:class:`ConfigError` if invalid)."""
@@ -281,7 +292,7 @@ class ConfigError(Exception):
     code: ClassVar[str] = "invalid-configuration"
     title: ClassVar[str] = "Invalid configuration"
     status: ClassVar[int] = 500
-    exit_code: ClassVar[int] = EXIT_USAGE
+    exit_code: ClassVar[int] = 2  # see the CLI's table, service/exit_codes.py
 
     def __init__(self, message: str, *, field: str) -> None:
         super().__init__(message)

@@ -29,6 +29,7 @@ from service.io import GeometryDocument, write_geometry
 from service.jobs import JobQueue, JobRecord, LocalQueue
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.queue import RQQueue
+from service.jobs.queue import NewJob
 
 __all__ = ["job_mix", "overhead", "redis_cost", "throughput"]
 
@@ -88,7 +89,7 @@ def _wait_all(queue: JobQueue, ids: list[str], timeout: float = 900.0) -> list[J
 
 def _run_mix(queue: JobQueue, jobs: list[Job]) -> dict[str, float]:
     t0 = time.time()
-    ids = [queue.submit(data, fmt, params).id for data, fmt, params in jobs]
+    ids = [queue.submit(NewJob.check(data, fmt, params)).id for data, fmt, params in jobs]
     recs = _wait_all(queue, ids)
     failed = [r.problem for r in recs if r.status.value != "succeeded"]
     if failed:
@@ -151,7 +152,7 @@ def overhead(n_jobs: int = 30) -> dict[str, Any]:
                     lat = []
                     for _ in range(n_jobs + 3):
                         t0 = time.time()
-                        rec = _wait_all(queue, [queue.submit(*tiny).id])[0]
+                        rec = _wait_all(queue, [queue.submit(NewJob.check(*tiny)).id])[0]
                         lat.append(((rec.finished_at or t0) - t0, rec.run_seconds or 0.0))
                     lat = lat[3:]  # warm-up
                     out[name] = {"latency_s": statistics.median(x for x, _ in lat),
@@ -184,7 +185,7 @@ def redis_cost(jobs: list[Job]) -> dict[str, Any]:
             mem0 = int(redis.info("memory")["used_memory"])
             t0 = time.time()
             for data, fmt, params in jobs:
-                queue.submit(data, fmt, params)
+                queue.submit(NewJob.check(data, fmt, params))
             polls = 0
             while queue.store.counts()["succeeded"] < done0 + len(jobs):
                 polls += 1

@@ -22,6 +22,24 @@ __all__ = [
 MEDIA_TYPES: dict[str, str] = {name: f.media_type for name, f in FORMATS.items()}
 
 FORMAT_QUERY_DESCRIPTION = f"Output format: {', '.join(FORMATS)} (default: the input's format)."
+#: ``format`` was the query's name before ``output_format`` (every surface now says which file).
+FORMAT_ALIAS_DESCRIPTION = "Deprecated: the former name of ``output_format``."
+
+
+def output_format(output: object | None, alias: object | None) -> str | None:
+    """The ``output_format`` query, else its deprecated name ``format`` (422 if they differ)."""
+    if output and alias and str(output) != str(alias):
+        from service.api.errors import ApiProblem
+
+        raise ApiProblem(
+            422,
+            f"output_format={output} and format={alias} (its deprecated name) disagree",
+            code="invalid-request",
+            field="output_format",
+        )
+    chosen = output or alias
+    return str(chosen) if chosen else None
+
 
 _DESCRIPTIONS: dict[int, str] = {
     400: "Malformed request, file or body (the parser's message in ``detail``), or a ``Host`` "
@@ -123,8 +141,8 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
         "file": {
             "type": "string",
             "format": "binary",
-            "description": "The geometry file; its format comes from the format part, the "
-            "file name's extension, the part's Content-Type or the content.",
+            "description": "The geometry file; its format comes from the input_format part, "
+            "the file name's extension, the part's Content-Type or the content.",
         },
         "params": {
             "type": "string",
@@ -134,10 +152,16 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
             "'Choosing tau').",
             "example": PARAMS_EXAMPLE,
         },
-        "format": {
+        "input_format": {
             "type": "string",
             "enum": list(FORMATS),
             "description": "Input format when the file name has no telling extension.",
+        },
+        "format": {
+            "type": "string",
+            "enum": list(FORMATS),
+            "deprecated": True,
+            "description": "Deprecated: the former name of input_format.",
         },
         "webhook_url": {
             "type": "string",

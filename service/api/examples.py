@@ -27,8 +27,8 @@ REPORT_EXAMPLE: dict[str, Any] = {
     "laplacian": "normalized",
     "weights": "mean-value",
     "n_fixed": 0,
-    "rms_deviation": 0.013,
-    "max_deviation": 0.041,
+    "rms_displacement": 0.013,
+    "max_displacement": 0.041,
     "volume_scale": None,
     "timings": {"laplacian": 0.004, "analysis": 0.002, "solve": 0.011, "total": 0.03},
     "solver": "cholmod",
@@ -38,6 +38,7 @@ REPORT_EXAMPLE: dict[str, Any] = {
 JOB_EXAMPLE: dict[str, Any] = {
     "id": "3f2a9c0d4b5e6f708192a3b4c5d6e7f8",
     "status": "running",
+    "input_format": "ply",
     "format": "ply",
     "filename": "bunny.ply",
     "params": {"tau": 0.0002},

@@ -13,6 +13,7 @@ from pydantic.json_schema import WithJsonSchema
 from service.api.examples import GEOMETRY_EXAMPLE, JOB_EXAMPLE, REPORT_EXAMPLE
 from service.core.params import SmoothingParams
 from service.io.registry import FORMATS
+from service.settings import default
 
 __all__ = [
     "COMPONENT_REFS",
@@ -180,8 +181,13 @@ class Report(BaseModel):
     laplacian: str = Field(description="Laplacian variant used.")
     weights: str = Field(description="Weight scheme used.")
     n_fixed: int = Field(description="Points held fixed.")
-    rms_deviation: float = Field(description="RMS of ||x_i - p_i||.")
-    max_deviation: float = Field(description="Maximum of ||x_i - p_i||.")
+    rms_displacement: float = Field(
+        description="RMS of ||x_i - p_i|| (was ``rms_deviation`` before 2026-11)."
+    )
+    max_displacement: float = Field(
+        description="Maximum of ||x_i - p_i||, a measurement (``params.max_deviation`` is the "
+        "bound; was ``max_deviation`` before 2026-11)."
+    )
     volume_scale: float | None = Field(description="Scale applied to preserve volume.")
     timings: dict[str, float] = Field(description="Seconds per stage.")
     solver: str = Field(description="cholmod, superlu, cg (matrix-free) or none (filter).")
@@ -302,7 +308,10 @@ class Job(BaseModel):
 
     id: str = Field(description="Job id.")
     status: JobStatusName = Field(description="queued, running, succeeded, failed or cancelled.")
-    format: str = Field(description="Input format (default result format).")
+    input_format: str = Field(description="Input format (default result format).")
+    format: str = Field(
+        description="Deprecated: the former name of ``input_format``.", deprecated=True
+    )
     filename: str | None = Field(default=None, description="Uploaded file name, if any.")
     params: dict[str, Any] = Field(description="Smoothing parameters.")
     weld: bool = Field(default=False, description="Coincident vertices are welded on reading.")
@@ -314,7 +323,9 @@ class Job(BaseModel):
         default=None, description="When a finished job and its files are purged."
     )
     attempts: int = Field(default=0, description="Runs started (interrupted runs are retried).")
-    max_attempts: int = Field(default=3, description="Runs allowed before it is given up.")
+    max_attempts: int = Field(
+        default=default("max_attempts"), description="Runs allowed before it is given up."
+    )
     run_seconds: float | None = Field(default=None, description="Wall time of the successful run.")
     progress: JobProgress | None = Field(
         default=None, description="Latest progress (while queued or running)."

@@ -31,7 +31,7 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     if ns.xyz_dims is not None and ns.xyz_dims < 1:
         raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
     doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
-    facts = {"input": ns.input, "format": doc.source_format}
+    facts = {"input": ns.input, "input_format": doc.source_format, "format": doc.source_format}
     facts.update(describe(doc.geometry, params))
     if doc.weld is not None:
         facts["welded_from"] = int(doc.weld.n_original)

@@ -16,9 +16,7 @@ import inspect
 import json
 import math
 import os
-import stat
 import sys
-import tempfile
 import typing
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,6 +25,7 @@ from typing import Any
 from service.cli.errors import CliError, os_reason
 from service.cli.params import literal_names
 from service.exit_codes import EXIT_OUTPUT, EXIT_USAGE
+from service.io.atomic import is_special, real_target, write_file
 
 __all__ = [
     "check_format",
@@ -53,32 +52,34 @@ def check_format(fmt: str | None, option: str) -> str | None:
 
 
 def output_format(output: str, explicit: str | None) -> str | None:
-    """The format to write: the output's extension, else ``--format``, else ``None``.
+    """The format to write: the output's extension, else ``--output-format``, else ``None``.
 
     ``None`` means "the input's format" (``-o -``, or a name without an extension).
 
     Raises
     ------
     CliError
-        Exit status 2 when ``--format`` contradicts the extension, or the extension is not a
-        format geosmooth writes and no ``--format`` says otherwise.
+        Exit status 2 when ``--output-format`` contradicts the extension, or the extension is
+        not a format geosmooth writes and no ``--output-format`` says otherwise.
     """
     from service.io import UnsupportedFormat, detect_format
 
-    check_format(explicit, "--format")
+    check_format(explicit, "--output-format")
     by_ext: str | None = None
     if output != "-":
         with contextlib.suppress(UnsupportedFormat):
             by_ext = detect_format(output)
     if by_ext and explicit and by_ext != explicit:
         raise CliError(
-            f"--format {explicit} contradicts the output file name {output!r} ({by_ext})",
+            f"--output-format {explicit} contradicts the output file name {output!r} ({by_ext})",
             EXIT_USAGE,
         )
     if by_ext or explicit:
         return by_ext or explicit
     if output != "-" and Path(output).suffix:
-        raise CliError(f"cannot tell the output format from {output!r}; give --format", EXIT_USAGE)
+        raise CliError(
+            f"cannot tell the output format from {output!r}; give --output-format", EXIT_USAGE
+        )
     return None
 
 
@@ -108,73 +109,21 @@ def given_writer_options(ns: argparse.Namespace) -> dict[str, Any]:
 # --------------------------------------------------------------------------- writing
 
 
-def _is_special(target: str) -> bool:
-    """Whether ``target`` exists and is not a regular file (after following links)."""
-    try:
-        return not stat.S_ISREG(os.stat(target).st_mode)
-    except OSError:
-        return False
-
-
-def _in_place(target: str) -> bool:
-    """Whether to write into ``target`` rather than replace it: not a regular file, or a path
-    under ``/dev`` or ``/proc`` (``/dev/stdout`` links to whatever the shell opened)."""
-    top = Path(os.path.abspath(target)).parts[1:2]
-    return _is_special(target) or top in (("dev",), ("proc",))
-
-
-def _real_target(target: str) -> Path:
-    """The regular file to replace: ``target`` with every symbolic link resolved."""
-    return Path(os.path.realpath(target))
-
-
 def check_writable(target: str, what: str) -> None:
     """Fail early (exit status 6) when ``target`` cannot be written, before any work."""
     if target == "-":
         return
-    if _is_special(target):
+    if is_special(target):
         if Path(target).is_dir():
             raise CliError(f"cannot write {what} {target}: Is a directory", EXIT_OUTPUT)
         if not os.access(target, os.W_OK):
             raise CliError(f"cannot write {what} {target}: Permission denied", EXIT_OUTPUT)
         return
-    parent = _real_target(target).parent
+    parent = real_target(target).parent
     if not parent.is_dir():
         raise CliError(f"cannot write {what} {target}: No such directory {parent}", EXIT_OUTPUT)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise CliError(f"cannot write {what} {target}: Permission denied", EXIT_OUTPUT)
-
-
-def write_file(target: str | os.PathLike[str], data: bytes) -> None:
-    """Write ``data`` to ``target``: atomically for regular files, in place otherwise.
-
-    Raises
-    ------
-    OSError
-        As the system reports it; a failed atomic write leaves no temporary file behind.
-    """
-    name = os.fspath(target)
-    if _in_place(name):
-        with open(name, "wb") as fh:  # a device, FIFO, terminal or /dev/stdout: never replace
-            fh.write(data)
-        return
-    path = _real_target(name)
-    try:
-        mode = stat.S_IMODE(path.stat().st_mode)  # keep an existing file's permissions
-    except FileNotFoundError:
-        mode = 0o666 & ~_umask()
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
 
 
 def write_output(target: str, data: bytes, what: str) -> None:
@@ -188,12 +137,6 @@ def write_output(target: str, data: bytes, what: str) -> None:
     except OSError as exc:
         where = "to stdout" if target == "-" else target
         raise CliError(f"cannot write {what} {where}: {os_reason(exc)}", EXIT_OUTPUT) from exc
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 # --------------------------------------------------------------------------- report

@@ -81,15 +81,20 @@ def _formats() -> str:
 
 
 def _add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
-    """Where the result goes: -o, --format, --weld, --report, -q (``smooth`` and ``submit``)."""
+    """Where the result goes: -o, --output-format, --weld, --report, -q (``smooth``, ``submit``).
+
+    ``--input-format`` / ``--output-format`` say which file each is about, on every command and
+    surface (the HTTP API's ``input_format`` part and ``output_format`` query); ``--format`` is
+    the former spelling of ``--output-format``, kept working (deprecated)."""
     files = parser.add_argument_group("files")
     files.add_argument(
         "-o", "--output", required=True, metavar="OUTPUT",
         help="output file ('-' writes stdout); its extension picks the format",
     )  # fmt: skip
     files.add_argument(
-        "--format", dest="format", metavar=_formats(),
-        help="output format when the OUTPUT extension does not say [default: the input's]",
+        "--output-format", "--format", dest="format", metavar=_formats(),
+        help="output format when the OUTPUT extension does not say [default: the input's] "
+        "(--format: former name, deprecated)",
     )  # fmt: skip
     files.add_argument(
         "--weld", action=argparse.BooleanOptionalAction, default=None,

@@ -198,7 +198,8 @@ def format_summary(
         search += f": phi={_g(report['phi'])} (lambda given, no search)."
     lines.append(search)
     lines.append(
-        f"  deviation RMS {_g(report['rms_deviation'], 3)}, max {_g(report['max_deviation'], 3)}"
+        f"  displacement RMS {_g(report['rms_displacement'], 3)}, "
+        f"max {_g(report['max_displacement'], 3)}"
         + (
             f"; volume scale {report['volume_scale']:.6f}"
             if report.get("volume_scale") is not None

@@ -9,7 +9,6 @@ them with their class's exit status.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import re
 import sys
@@ -125,8 +124,9 @@ def tau_message(exc: TauOutOfRange, params: SmoothingParams) -> str:
     if tau_max <= 0.0:
         return str(exc.message)
     if params.rms is not None and exc.tau > 0:
-        # tau = rms^2 * sum of the free points' w_i^2, so rms scales with sqrt(tau).
-        rms_max = params.rms * math.sqrt(tau_max / float(exc.tau))
+        from service.core.search.budget import rms_range
+
+        rms_max = rms_range(params.rms, float(exc.tau), tau_max)
         return (
             f"--rms {params.rms:g} is out of range for this input: the valid range is "
             f"(0, {rms_max:.6g}) (it gives tau = {float(exc.tau):.6g}, and tau must lie in "

@@ -13,8 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import ClassVar
 
-from service.exit_codes import EXIT_GEOMETRY, EXIT_SOLVER
-
 __all__ = [
     "DegenerateElement",
     "GeometryError",
@@ -47,7 +45,7 @@ class GeosmoothError(ValueError):
     #: Problem title (RFC 9457 ``title``), HTTP status and CLI exit status of this error class.
     title: ClassVar[str] = "Invalid input"
     status: ClassVar[int] = 422
-    exit_code: ClassVar[int] = EXIT_GEOMETRY
+    exit_code: ClassVar[int] = 4  # see the CLI's table, service/exit_codes.py
 
     def __init__(self, message: str, *, field: str, indices: Sequence[int] | None = None) -> None:
         super().__init__(message)
@@ -131,4 +129,4 @@ class SolverError(GeosmoothError):
 
     code = "solver-failed"
     title = "The input cannot be solved"
-    exit_code = EXIT_SOLVER
+    exit_code = 5

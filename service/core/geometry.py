@@ -22,7 +22,7 @@ from service.core.errors import (
     NonFiniteCoordinates,
 )
 
-__all__ = ["Geometry", "GeometryKind"]
+__all__ = ["Geometry", "GeometryKind", "mean_spacing"]
 
 GeometryKind = Literal["mesh", "curve", "cloud"]
 
@@ -199,3 +199,21 @@ class Geometry:
         if self.weights is not None:
             mask |= np.isinf(self.weights)
         return mask
+
+
+def mean_spacing(geometry: Geometry) -> float:
+    """Mean edge length (meshes, curves) or mean nearest-neighbour distance (point clouds)."""
+    P = geometry.points
+    if geometry.faces is not None:
+        F = geometry.faces
+        e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    elif geometry.edges is not None:
+        e = geometry.edges
+    else:
+        if geometry.n < 2:
+            return 0.0
+        from scipy.spatial import cKDTree  # here: importing a Geometry stays scipy-free
+
+        d, _ = cKDTree(P).query(P, k=2)
+        return float(np.mean(d[:, 1]))
+    return float(np.mean(np.linalg.norm(P[e[:, 0]] - P[e[:, 1]], axis=1)))

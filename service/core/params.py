@@ -9,7 +9,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from pydantic_core import PydanticCustomError
 
 __all__ = [
+    "MAX_ITERATIONS",
+    "MAX_ITERATIONS_BOUND",
+    "MAX_K",
     "REPORT_PRESET",
+    "SPECTRUM_MAX_POINTS",
+    "TOLERANCE",
     "Displacement",
     "Junctions",
     "LaplacianVariant",
@@ -35,6 +40,17 @@ TauRule = Literal["auto", "gcv"]
 Displacement = Literal["auto", "free", "normal"]
 Preset = Literal["report"]
 Junctions = Literal["corner", "smooth"]
+
+# Bounds and defaults written once: the fields below, the API's per-key bounds (their defaults
+# in service.settings) and the defaults of the search functions read them.
+#: Default relative tolerance xi on |phi - tau| / tau (section 6.3).
+TOLERANCE = 1e-3
+#: Default and largest cap on lambda iterations of the tau search.
+MAX_ITERATIONS, MAX_ITERATIONS_BOUND = 50, 500
+#: Largest neighbours per point (k-NN with k = 64 already gives ~4000 entries per row of L^T L).
+MAX_K = 64
+#: Largest input (free points) for which the dense SVD of the spectral view is computed.
+SPECTRUM_MAX_POINTS = 3000
 
 #: ``preset="report"``: the choices of report TW 451, for every field the caller does not give.
 REPORT_PRESET: dict[str, Any] = {
@@ -128,7 +144,7 @@ class SmoothingParams(BaseModel):
     k: int = Field(
         default=20,
         ge=3,
-        le=64,
+        le=MAX_K,
         description="Point clouds only: neighbours per point (the report: 12).",
     )
     sigma_h: float = Field(
@@ -141,13 +157,16 @@ class SmoothingParams(BaseModel):
         description="Width of the Gaussian psi of eq. (10), on curvatures rescaled to [0, 1].",
     )
     tolerance: float = Field(
-        default=1e-3,
+        default=TOLERANCE,
         gt=0,
         lt=1,
         description="Relative tolerance xi on |phi - tau| / tau (section 6.3).",
     )
     max_iterations: int = Field(
-        default=50, ge=1, le=500, description="Cap on lambda iterations of the tau search."
+        default=MAX_ITERATIONS,
+        ge=1,
+        le=MAX_ITERATIONS_BOUND,
+        description="Cap on lambda iterations of the tau search.",
     )
     fix_boundary: bool = Field(
         default=False,
@@ -194,7 +213,7 @@ class SmoothingParams(BaseModel):
     spectrum: bool = Field(
         default=False,
         description="Also return the singular values of L and the filter factors of eq. (12) "
-        "(inputs up to 3000 points).",
+        f"(inputs up to {SPECTRUM_MAX_POINTS} points).",
     )
 
     # --- core-quality: displacement, max-norm bound, preset --------------------------------------

@@ -10,6 +10,7 @@ internal frame of :mod:`.frame`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +40,14 @@ from service.core.system.deviation import Deviation, SmoothingSystem
 from service.core.system.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.system.elimination import laplacian_system
 
-__all__ = ["ProgressCallback", "build_laplacian", "build_operator", "smooth"]
+__all__ = [
+    "Problem",
+    "ProgressCallback",
+    "build_laplacian",
+    "build_operator",
+    "prepare",
+    "smooth",
+]
 
 Array = NDArray[np.float64]
 
@@ -76,15 +84,11 @@ def smooth(
     ParameterError, TauOutOfRange, SolverError
     """
     run = Run(progress)
-    requested = params.displacement
-    params = resolve_displacement(params, geometry)
     run.emit("neighborhoods")
-    op = _operator(geometry, params, operator)
-    fixed, n_fixed = free_set(geometry, op, params, run.notes)
-    run.frame = frame = op.frame.weighted(geometry.omega()[~fixed])
-    params, system, to_points = auto_system(
-        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
-    )
+    problem = prepare(geometry, params, operator=operator, notes=run.notes)
+    params, op, fixed, n_fixed = problem.params, problem.op, problem.fixed, problem.n_fixed
+    run.frame = frame = problem.frame
+    system, to_points = problem.system, problem.to_points
     run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
     if system.empty:
@@ -108,6 +112,63 @@ def smooth(
     if params.max_deviation is not None:
         X, _ = clip_points(geometry.points, X, params.max_deviation)
     return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything :func:`smooth` sets up before lambda (the opening every analysis shares).
+
+    Attributes
+    ----------
+    geometry : Geometry
+    params : SmoothingParams
+        With ``displacement`` resolved (``"auto"`` replaced by the mode used).
+    op : SmoothingOperator
+        Neighbourhoods, weights, ``L`` (sections 2-4).
+    fixed : ndarray of bool, shape (n,)
+        Points eliminated from the system (section 8), see :func:`free_set`.
+    n_fixed : int
+        Points fixed by the input or ``fix_boundary``.
+    frame : Frame
+        The internal frame, weighted by the free points' ``omega``.
+    system : SmoothingSystem
+        Eq. (4) (or the normal-displacement system) in that frame.
+    to_points : callable
+        From the system's solution ``U`` to the free points (still in the frame).
+    """
+
+    geometry: Geometry
+    params: SmoothingParams
+    op: SmoothingOperator
+    fixed: NDArray[np.bool_]
+    n_fixed: int
+    frame: Frame
+    system: SmoothingSystem
+    to_points: Callable[[Array], Array]
+
+
+def prepare(
+    geometry: Geometry,
+    params: SmoothingParams,
+    *,
+    operator: SmoothingOperator | None = None,
+    notes: list[str] | None = None,
+) -> Problem:
+    """Neighbourhoods and ``L`` -> free points -> the system of the selected mode.
+
+    The opening of :func:`smooth`, shared by :func:`service.core.info.describe` and
+    :func:`service.core.info.valid_range`. ``notes`` collects what the caller should be told
+    (e.g. ``fix_boundary`` without a boundary).
+    """
+    requested = params.displacement
+    params = resolve_displacement(params, geometry)
+    op = _operator(geometry, params, operator)
+    fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes)
+    frame = op.frame.weighted(geometry.omega()[~fixed])
+    params, system, to_points = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+    )
+    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points)
 
 
 def _deviation(

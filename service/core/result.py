@@ -60,8 +60,10 @@ class SmoothResult:
         ``(lambda, phi)`` for every lambda tried, in order.
     deviation : ndarray, shape (n,)
         ``||x_i - p_i||`` per point.
-    rms_deviation, max_deviation : float
-        RMS and maximum of ``deviation``.
+    rms_displacement, max_displacement : float
+        RMS and maximum of ``deviation``: measurements (``max_deviation`` of the parameters
+        is the bound; the old names ``rms_deviation``/``max_deviation`` remain as read-only
+        aliases).
     timings : dict
         Seconds per stage: neighborhoods, laplacian, analysis, factorization, solve, total.
     solver : str
@@ -110,8 +112,8 @@ class SmoothResult:
     factorizations: int
     history: list[tuple[float, float]]
     deviation: NDArray[np.float64]
-    rms_deviation: float
-    max_deviation: float
+    rms_displacement: float
+    max_displacement: float
     timings: dict[str, float]
     solver: str
     laplacian: str
@@ -137,6 +139,16 @@ class SmoothResult:
         )
     )
     bound: dict[str, Any] | None = None
+
+    @property
+    def rms_deviation(self) -> float:
+        """Deprecated name of :attr:`rms_displacement`."""
+        return self.rms_displacement
+
+    @property
+    def max_deviation(self) -> float:
+        """Deprecated name of :attr:`max_displacement` (``params.max_deviation`` is a bound)."""
+        return self.max_displacement
 
     @property
     def n_points(self) -> int:
@@ -165,8 +177,8 @@ class SmoothResult:
             "laplacian": self.laplacian,
             "weights": self.weights,
             "n_fixed": self.n_fixed,
-            "rms_deviation": self.rms_deviation,
-            "max_deviation": self.max_deviation,
+            "rms_displacement": self.rms_displacement,
+            "max_displacement": self.max_displacement,
             "volume_scale": self.volume_scale,
             "timings": dict(self.timings),
             "solver": self.solver,

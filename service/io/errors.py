@@ -15,8 +15,6 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from service.exit_codes import EXIT_INPUT
-
 __all__ = ["FormatError", "UnsupportedFormat"]
 
 
@@ -47,7 +45,7 @@ class FormatError(ValueError):
     #: Problem title, HTTP status and CLI exit status (read by the API, the jobs and the CLI).
     title: ClassVar[str] = "Malformed input file"
     status: ClassVar[int] = 400
-    exit_code: ClassVar[int] = EXIT_INPUT
+    exit_code: ClassVar[int] = 3  # see the CLI's table, service/exit_codes.py
 
     def __init__(self, message: str, *, fmt: str | None = None, line: int | None = None) -> None:
         message = " ".join(message.split())  # always one line

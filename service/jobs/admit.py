@@ -1,6 +1,9 @@
 """What every backend checks before it accepts a job (the shared half of ``submit``).
 
-* the format name and the parameters;
+A :class:`~service.jobs.queue.NewJob` arrives checked (format, parameters, file, ``tau``: the
+API's intake, or :meth:`NewJob.check <service.jobs.queue.NewJob.check>`); what is left needs the
+queue:
+
 * idempotency: the fingerprint of a request (:func:`request_hash`) that an ``Idempotency-Key``
   is bound to;
 * the resource estimate against the per-job memory limit (:func:`admit_size`);
@@ -15,47 +18,42 @@ import contextlib
 import hashlib
 import json
 import os
-from collections.abc import Iterator, Mapping
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from service.jobs.errors import StorageError, StorageFull, storage_error
 from service.jobs.limits import check_admission
-from service.jobs.queue import JobInput, JobSize
-
-if TYPE_CHECKING:
-    from service.core.params import SmoothingParams
-    from service.jobs.embedded.store import NewJob
+from service.jobs.queue import JobInput, JobSize, NewJob
 
 __all__ = [
+    "JobRow",
+    "admit",
     "admit_size",
-    "check_format",
     "check_space",
     "input_size",
-    "new_job",
     "request_hash",
     "storage_errors",
-    "validate_params",
 ]
 
 
-def check_format(fmt: str) -> str:
-    """The normalised format name (``ValueError`` for one geosmooth does not know)."""
-    from service.io import FORMATS
+@dataclass(frozen=True)
+class JobRow:
+    """What a backend's store inserts for an admitted job (``params`` as JSON)."""
 
-    fmt = str(fmt).lower()
-    if fmt not in FORMATS:
-        raise ValueError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
-    return fmt
-
-
-def validate_params(params: SmoothingParams | Mapping[str, Any]) -> SmoothingParams:
-    """``params`` as :class:`SmoothingParams` (``pydantic.ValidationError`` if invalid)."""
-    from service.core.params import SmoothingParams
-
-    if isinstance(params, SmoothingParams):
-        return params
-    return SmoothingParams.model_validate(dict(params))
+    job_id: str
+    fmt: str
+    filename: str | None
+    params: dict[str, Any]
+    input_bytes: int
+    max_attempts: int
+    weld: bool = False
+    tenant: str | None = None
+    webhook_url: str | None = None
+    idempotency_key: str | None = None
+    request_hash: str | None = None
 
 
 def input_size(data: JobInput) -> int:
@@ -80,24 +78,17 @@ def request_hash(data: JobInput, fmt: str, params: dict[str, Any], **fields: Any
     return hashlib.sha256(f"{_digest(data)}\n{meta}".encode()).hexdigest()
 
 
-def admit_size(
-    data: JobInput,
-    fmt: str,
-    params: SmoothingParams,
-    *,
-    weld: bool,
-    size: JobSize | None,
-    limit: int | None,
-) -> None:
-    """Refuse the job if its memory estimate is above ``limit`` (reads the input when the
-    caller did not give its ``size``)."""
+def admit_size(job: NewJob, limit: int | None) -> None:
+    """Refuse the job if its memory estimate is above ``limit`` (reads the input only when the
+    job came without its ``size``)."""
     if limit is None:
         return
+    size = job.size
     if size is None:
         from service.io import read_geometry
 
-        size = JobSize.of(read_geometry(data, fmt, weld=weld).geometry)
-    check_admission(size, params, limit)
+        size = JobSize.of(read_geometry(job.input, job.fmt, weld=job.weld).geometry)
+    check_admission(size, job.params, limit)
 
 
 def check_space(directory: Path, needed: int, min_free: int) -> None:
@@ -125,41 +116,22 @@ def storage_errors() -> Iterator[None]:
         raise typed from exc
 
 
-def new_job(
-    data: JobInput,
-    fmt: str,
-    params: SmoothingParams | Mapping[str, Any],
-    filename: str | None,
-    *,
-    weld: bool,
-    tenant: str | None,
-    webhook_url: str | None,
-    idempotency_key: str | None,
-    size: JobSize | None,
-    memory_limit: int | None,
-    max_attempts: int,
-) -> NewJob:
-    """The checked job of a ``submit`` (every backend's first half): format, parameters,
-    the request's fingerprint when an ``Idempotency-Key`` is given, the memory estimate.
+def admit(job: NewJob, *, memory_limit: int | None, max_attempts: int) -> JobRow:
+    """The row of an admitted job (every backend's first half of ``submit``): the request's
+    fingerprint when an ``Idempotency-Key`` is given, the memory estimate.
 
     Raises
     ------
-    ValueError, pydantic.ValidationError, JobTooLarge
-        Unknown format, invalid parameters, an estimate above ``memory_limit``.
+    JobTooLarge
+        An estimate above ``memory_limit``.
     """
-    import uuid
-
-    from service.jobs.embedded.store import NewJob
-
-    fmt = check_format(fmt)
-    smoothing = validate_params(params)
-    stored = smoothing.model_dump(mode="json", exclude_none=True)
+    stored = job.params.model_dump(mode="json", exclude_none=True)
     digest = None
-    if idempotency_key is not None:
-        digest = request_hash(data, fmt, stored, filename=filename, weld=weld,
-                              webhook_url=webhook_url)  # fmt: skip
-    admit_size(data, fmt, smoothing, weld=weld, size=size, limit=memory_limit)
-    return NewJob(
-        uuid.uuid4().hex, fmt, filename, stored, input_size(data), max_attempts, weld, tenant,
-        webhook_url, idempotency_key, digest,
+    if job.idempotency_key is not None:
+        digest = request_hash(job.input, job.fmt, stored, filename=job.filename, weld=job.weld,
+                              webhook_url=job.webhook_url)  # fmt: skip
+    admit_size(job, memory_limit)
+    return JobRow(
+        uuid.uuid4().hex, job.fmt, job.filename, stored, input_size(job.input), max_attempts,
+        job.weld, job.tenant, job.webhook_url, job.idempotency_key, digest,
     )  # fmt: skip

@@ -12,8 +12,6 @@ import errno
 import sqlite3
 from typing import Any, ClassVar
 
-from service.exit_codes import EXIT_INTERNAL, EXIT_USAGE
-
 __all__ = [
     "IdempotencyConflict",
     "JobTooLarge",
@@ -40,7 +38,7 @@ class JobsError(Exception):
     code: ClassVar[str] = "jobs-error"
     title: ClassVar[str] = "Job queue error"
     status: ClassVar[int] = 500
-    exit_code: ClassVar[int] = EXIT_INTERNAL
+    exit_code: ClassVar[int] = 1  # see the CLI's table, service/exit_codes.py
 
     def __init__(self, message: str, *, field: str | None = None, **extra: Any) -> None:
         super().__init__(message)
@@ -63,7 +61,7 @@ class IdempotencyConflict(JobsError):
     code = "idempotency-conflict"
     title = "Idempotency key reused with a different request"
     status = 409
-    exit_code = EXIT_USAGE
+    exit_code = 2
 
     @classmethod
     def check(cls, stored: str | None, given: str | None, key: str) -> None:
@@ -84,7 +82,7 @@ class JobTooLarge(JobsError):
     code = "job-too-large"
     title = "Job too large"
     status = 422
-    exit_code = EXIT_USAGE
+    exit_code = 2
 
 
 class WebhookUrlRejected(JobsError):
@@ -93,7 +91,7 @@ class WebhookUrlRejected(JobsError):
     code = "webhook-url-rejected"
     title = "Webhook URL rejected"
     status = 422
-    exit_code = EXIT_USAGE
+    exit_code = 2
 
 
 class StorageError(JobsError):

@@ -18,6 +18,8 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from service.core.params import TOLERANCE
+
 if TYPE_CHECKING:
     from service.core.progress import ProgressEvent
 
@@ -83,7 +85,7 @@ class ProgressTracker:
         Relative tolerance of the tau search (the end of the ``search`` slice).
     """
 
-    tolerance: float = 1e-3
+    tolerance: float = TOLERANCE
     _first_error: float | None = field(default=None, repr=False)
     _last: dict[str, Any] = field(default_factory=dict, repr=False)
 

@@ -30,6 +30,7 @@ __all__ = [
     "JobRecord",
     "JobSize",
     "JobStatus",
+    "NewJob",
     "QueueHealth",
     "job_location",
 ]
@@ -76,19 +77,9 @@ def job_location(job_id: str) -> str:
 
 @dataclass(frozen=True)
 class JobSize:
-    """What the resource estimate of a job needs (known to the API once it parsed the input).
-
-    Attributes
-    ----------
-    n : int
-        Points.
-    dim : int
-        Coordinates per point.
-    kind : str
-        ``"mesh"``, ``"polyline"`` or ``"cloud"``.
-    n_faces : int or None
-        Faces of a mesh.
-    """
+    """What the resource estimate of a job needs (known to the API once it parsed the input):
+    points ``n``, coordinates per point ``dim``, ``kind`` (``"mesh"``, ``"curve"``, ``"cloud"``)
+    and the faces of a mesh."""
 
     n: int
     dim: int
@@ -105,6 +96,43 @@ class JobSize:
             kind=str(geometry.kind),
             n_faces=None if faces is None else len(faces),
         )
+
+
+@dataclass(frozen=True)
+class NewJob:
+    """A checked request to run a job: what the API's intake produces and ``submit`` stores.
+
+    ``input``: the file's bytes, or a spooled file moved into the store; ``fmt`` a known format
+    and ``params`` validated (the intake also checked the file, the key's bounds and ``tau``);
+    ``size`` from the parsed input (``None``: the queue reads the input if it has a memory
+    limit); the rest as in :class:`JobRecord`. ``submit`` checks only what needs the queue.
+    """
+
+    input: JobInput
+    fmt: str
+    params: SmoothingParams
+    size: JobSize | None = None
+    filename: str | None = None
+    weld: bool = False
+    tenant: str | None = None
+    webhook_url: str | None = None
+    idempotency_key: str | None = None
+
+    @classmethod
+    def check(
+        cls, input: JobInput, fmt: str, params: SmoothingParams | Mapping[str, Any], **members: Any
+    ) -> NewJob:
+        """A :class:`NewJob` from unchecked values (callers without the API's intake); raises
+        ``ValueError`` for an unknown format, ``pydantic.ValidationError`` for bad params."""
+        from service.core.params import SmoothingParams
+        from service.io import FORMATS
+
+        name = str(fmt).lower()
+        if name not in FORMATS:
+            raise ValueError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+        if not isinstance(params, SmoothingParams):
+            params = SmoothingParams.model_validate(dict(params))
+        return cls(input, name, params, **members)
 
 
 @dataclass(frozen=True)
@@ -217,7 +245,8 @@ class JobRecord:
         return {
             "id": self.id,
             "status": self.status.value,
-            "format": self.fmt,
+            "input_format": self.fmt,
+            "format": self.fmt,  # deprecated name of input_format
             "filename": self.filename,
             "params": dict(self.params),
             "weld": self.weld,
@@ -303,24 +332,11 @@ class JobQueue(Protocol):
         """Stop executing jobs (app shutdown). No accepted job is lost."""
         ...
 
-    def submit(
-        self,
-        input: JobInput,
-        fmt: str,
-        params: SmoothingParams | Mapping[str, Any],
-        filename: str | None = None,
-        *,
-        weld: bool = False,
-        tenant: str | None = None,
-        webhook_url: str | None = None,
-        idempotency_key: str | None = None,
-        size: JobSize | None = None,
-    ) -> JobRecord:
-        """Store the input durably and enqueue a job; returns the ``queued`` record.
+    def submit(self, job: NewJob) -> JobRecord:
+        """Store the input durably and enqueue the job; returns the ``queued`` record.
 
-        ``input`` is the file's bytes or a path to a spooled file (moved into the store).
-        ``size`` (from the parsed input) feeds the resource estimate; without it the queue
-        reads the input itself.
+        The spooled input file is moved into the store. Nothing the intake checked is checked
+        again (see :class:`NewJob`).
 
         Raises
         ------

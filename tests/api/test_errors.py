@@ -250,6 +250,29 @@ def test_format_field_overrides_the_extension(client: httpx.Client) -> None:
     assert r.json()["format"] == "xyz"
 
 
+def test_input_format_names_the_upload_and_format_stays_its_deprecated_alias(
+    client: httpx.Client,
+) -> None:
+    """``input_format`` (upload) and ``output_format`` (download) say which file they are about;
+    the former ``format`` keeps working for both, and contradicting pairs are a 422."""
+    data = encode("xyz", PTS, None)
+    r = _upload(client, "points.txt", data, input_format="xyz")
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert job["input_format"] == job["format"] == "xyz"
+    _problem(_upload(client, "points.txt", data, input_format="xyz", format="ply"), 422,
+             "input_format")  # fmt: skip
+    _problem(_upload(client, "a.xyz", data, input_format="vtp"), 415, "format")
+    r = client.post("/v1/smooth", files={"file": ("p.xyz", data)},
+                    data={"params": json.dumps({"lam": 1.0})},
+                    params={"output_format": "json"})  # fmt: skip
+    assert r.status_code == 200 and "geometry" in r.json(), r.text
+    r = client.post("/v1/smooth", files={"file": ("p.xyz", data)},
+                    data={"params": json.dumps({"lam": 1.0})},
+                    params={"output_format": "json", "format": "obj"})  # fmt: skip
+    _problem(r, 422, "output_format")
+
+
 # --------------------------------------------------------------------------- 422
 
 

@@ -25,7 +25,8 @@ def test_info_of_a_curve_matches_closed_forms(cli: Run) -> None:
     assert res.returncode == 0, res.stderr
     facts = json.loads(res.stdout)
     P = _obj_points(HELIX)
-    assert (facts["format"], facts["kind"], facts["n_points"]) == ("obj", "curve", len(P))
+    assert (facts["input_format"], facts["kind"], facts["n_points"]) == ("obj", "curve", len(P))
+    assert facts["format"] == facts["input_format"]  # the deprecated name, same value
     assert facts["n_edges"] == len(P) - 1  # one open polyline
     np.testing.assert_allclose(facts["bbox"]["min"], P.min(axis=0))
     np.testing.assert_allclose(facts["bbox"]["max"], P.max(axis=0))

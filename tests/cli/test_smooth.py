@@ -46,8 +46,8 @@ def test_bunny_tau_report_and_progress(cli: Run, data: Callable[[str], Path], tm
     report = json.loads(rep.read_text())
     for key in (
         "lambda", "phi", "tau", "relative_error", "converged", "iterations", "factorizations",
-        "history", "n_points", "dimension", "laplacian", "weights", "rms_deviation",
-        "max_deviation", "timings", "solver", "input", "output", "params",
+        "history", "n_points", "dimension", "laplacian", "weights", "rms_displacement",
+        "max_displacement", "timings", "solver", "input", "output", "params",
     ):  # fmt: skip
         assert key in report, key
     assert report["tau"] == pytest.approx(tau)
@@ -62,8 +62,8 @@ def test_bunny_tau_report_and_progress(cli: Run, data: Callable[[str], Path], tm
     # phi recomputed from the two files: sum of squared displacements (all weights 1).
     d2 = ((after.geometry.points - before.geometry.points) ** 2).sum(axis=1)
     assert report["phi"] == pytest.approx(d2.sum(), rel=1e-6)
-    assert report["max_deviation"] == pytest.approx(np.sqrt(d2.max()), rel=1e-6)
-    assert report["rms_deviation"] == pytest.approx(np.sqrt(d2.mean()), rel=1e-6)
+    assert report["max_displacement"] == pytest.approx(np.sqrt(d2.max()), rel=1e-6)
+    assert report["rms_displacement"] == pytest.approx(np.sqrt(d2.mean()), rel=1e-6)
 
     # stderr is not a terminal here: one plain line per lambda iteration, then the summary.
     lines = _progress_lines(res.stderr)

@@ -89,7 +89,8 @@ def test_pydantic_errors_become_one_line(args: list[str], message: str):
         (["--tau", "1", "--no-such-option"], "unrecognized arguments: --no-such-option"),
         (["--rms", "1", "--xyz-dims", "0"], "--xyz-dims: must be at least 1"),
         (["--rms", "1", "--xyz-dims", "4"], "--xyz-dims applies to XYZ input only, not ply"),
-        (["--rms", "1", "--format", "xyz"], "--format xyz contradicts the output file name"),
+        (["--rms", "1", "--format", "xyz"], "--output-format xyz contradicts the output file"),
+        (["--rms", "1", "--output-format", "xyz"], "--output-format xyz contradicts the output"),
         (["--tau"], "argument --tau: expected one argument"),
     ],
 )
@@ -159,7 +160,7 @@ def test_summary_paragraph():
         "lambda": 0.0123, "phi": 0.4999, "tau": 0.5, "relative_error": 2e-4,
         "converged": True, "iterations": 5, "factorizations": 5, "n_points": 10,
         "dimension": 3, "kind": "mesh", "laplacian": "normalized", "weights": "mean-value",
-        "n_fixed": 2, "rms_deviation": 0.01, "max_deviation": 0.03, "volume_scale": None,
+        "n_fixed": 2, "rms_displacement": 0.01, "max_displacement": 0.03, "volume_scale": None,
         "timings": {"laplacian": 0.01, "total": 0.05}, "solver": "cholmod",
         "warnings": ["something to know"],
     }  # fmt: skip

@@ -161,3 +161,15 @@ def test_job_round_trip_of_the_spec_example() -> None:
     )
     progress = models.JobProgress.from_dict(SCHEMAS["JobProgress"]["examples"][0])
     assert (progress.iteration, progress.lam, progress.phi) == (3, 0.011, 0.47)
+
+
+def test_report_reads_the_displacement_measurements_under_old_and_new_names() -> None:
+    """``max_displacement`` is the measurement (``max_deviation`` is the parameter's bound); a
+    report from a service that still sent ``max_deviation`` reads the same."""
+    from geosmooth_client.models import Report
+
+    new = Report({"max_displacement": 0.5, "rms_displacement": 0.1})
+    old = Report({"max_deviation": 0.5, "rms_deviation": 0.1})
+    for report in (new, old):
+        assert report.max_displacement == 0.5 and report.rms_displacement == 0.1
+        assert report.max_deviation == 0.5 and report.rms_deviation == 0.1

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from service.jobs import JobQueue, JobStatus, LocalQueue
+from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, pid_gone, wait_finished, wait_for
 
@@ -41,7 +42,7 @@ def test_local_queue_implements_the_protocol(make_queue: MakeQueue) -> None:
 
 def test_submit_runs_to_success_with_report_and_result_on_disk(make_queue: MakeQueue) -> None:
     queue = make_queue()
-    rec = queue.submit(script("ok", steps=3), "json", PARAMS, filename="in.json")
+    rec = queue.submit(NewJob.check(script("ok", steps=3), "json", PARAMS, filename="in.json"))
     assert rec.status is JobStatus.QUEUED and rec.attempts == 0
     assert queue.files.input(rec.id, "json").read_bytes() == script("ok", steps=3)
 
@@ -72,7 +73,7 @@ def test_submit_runs_to_success_with_report_and_result_on_disk(make_queue: MakeQ
 
 def test_progress_is_visible_while_running(make_queue: MakeQueue) -> None:
     queue = make_queue()
-    rec = queue.submit(script("sleep", seconds=1.5, steps=10), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=1.5, steps=10), "json", PARAMS))
     seen: list[tuple[JobStatus, int | None, float | None]] = []
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline:
@@ -92,8 +93,8 @@ def test_progress_is_visible_while_running(make_queue: MakeQueue) -> None:
 
 def test_cancel_queued_job_never_runs(make_queue: MakeQueue) -> None:
     queue = make_queue(workers=1)
-    blocker = queue.submit(script("sleep", seconds=20), "json", PARAMS)
-    waiting = queue.submit(script("ok"), "json", PARAMS)
+    blocker = queue.submit(NewJob.check(script("sleep", seconds=20), "json", PARAMS))
+    waiting = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     running_pid(queue, blocker.id)
     cancelled = queue.cancel(waiting.id)
     assert cancelled is not None and cancelled.status is JobStatus.CANCELLED
@@ -106,7 +107,7 @@ def test_cancel_queued_job_never_runs(make_queue: MakeQueue) -> None:
 
 def test_cancel_running_job_kills_its_process(make_queue: MakeQueue) -> None:
     queue = make_queue()
-    rec = queue.submit(script("sleep", seconds=30), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
     pid = running_pid(queue, rec.id)
     assert not pid_gone(pid)
     t0 = time.monotonic()
@@ -131,8 +132,10 @@ def test_crashing_jobs_fail_alone(make_queue: MakeQueue) -> None:
         "raise": script("raise"),
         "core_error": script("core_error"),
     }
-    bad = {name: queue.submit(data, "json", PARAMS).id for name, data in scripts.items()}
-    good = [queue.submit(script("ok"), "json", PARAMS).id for _ in range(3)]
+    bad = {
+        name: queue.submit(NewJob.check(data, "json", PARAMS)).id for name, data in scripts.items()
+    }
+    good = [queue.submit(NewJob.check(script("ok"), "json", PARAMS)).id for _ in range(3)]
     results = {name: wait_finished(queue, job_id) for name, job_id in bad.items()}
     assert all(r.status is JobStatus.FAILED for r in results.values())
     assert all(wait_finished(queue, j).status is JobStatus.SUCCEEDED for j in good)
@@ -157,8 +160,8 @@ def test_crashing_jobs_fail_alone(make_queue: MakeQueue) -> None:
 
 def test_timeout_kills_the_job_and_the_queue_goes_on(make_queue: MakeQueue) -> None:
     queue = make_queue(workers=1, job_timeout=1.0)
-    slow = queue.submit(script("sleep", seconds=30), "json", PARAMS)
-    after = queue.submit(script("ok"), "json", PARAMS)
+    slow = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
+    after = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     pid = running_pid(queue, slow.id)
     rec = wait_finished(queue, slow.id, timeout=8)
     assert rec.status is JobStatus.FAILED
@@ -171,7 +174,7 @@ def test_timeout_kills_the_job_and_the_queue_goes_on(make_queue: MakeQueue) -> N
 
 def test_stop_requeues_running_jobs_without_counting_a_try(make_queue: MakeQueue) -> None:
     queue = make_queue(workers=1)
-    rec = queue.submit(script("sleep", seconds=30), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
     pid = running_pid(queue, rec.id)
     queue.stop()
     assert pid_gone(pid)
@@ -187,9 +190,9 @@ def test_stop_requeues_running_jobs_without_counting_a_try(make_queue: MakeQueue
 
 def test_delete_only_finished_jobs(make_queue: MakeQueue) -> None:
     queue = make_queue(workers=1)
-    done = queue.submit(script("ok"), "json", PARAMS)
+    done = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     wait_finished(queue, done.id)
-    running = queue.submit(script("sleep", seconds=30), "json", PARAMS)
+    running = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
     running_pid(queue, running.id)
     assert queue.delete(running.id) is False
     assert queue.get(running.id) is not None
@@ -204,8 +207,8 @@ def test_delete_only_finished_jobs(make_queue: MakeQueue) -> None:
 
 def test_results_expire_after_ttl(make_queue: MakeQueue) -> None:
     queue = make_queue(result_ttl=0.5, sweep_interval=0.1)
-    keep = queue.submit(script("sleep", seconds=30), "json", PARAMS)
-    rec = queue.submit(script("ok"), "json", PARAMS)
+    keep = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
+    rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     finished = wait_finished(queue, rec.id)
     assert finished.expires_at == pytest.approx(finished.finished_at + 0.5)  # type: ignore[operator]
     wait_for(lambda: queue.get(rec.id) is None, timeout=5)
@@ -223,7 +226,7 @@ def test_concurrent_submissions_all_complete(make_queue: MakeQueue) -> None:
     def client() -> None:
         try:
             for _ in range(4):
-                job_id = queue.submit(script("ok", steps=1), "json", PARAMS).id
+                job_id = queue.submit(NewJob.check(script("ok", steps=1), "json", PARAMS)).id
                 with lock:
                     ids.append(job_id)
         except BaseException as exc:  # pragma: no cover - reported below
@@ -248,10 +251,10 @@ def test_concurrent_submissions_all_complete(make_queue: MakeQueue) -> None:
 def test_submit_validates_format_and_params(make_queue: MakeQueue, tmp_path: Path) -> None:
     queue = make_queue(start=False)
     with pytest.raises(ValueError, match="unknown format"):
-        queue.submit(b"x", "svg", PARAMS)
+        queue.submit(NewJob.check(b"x", "svg", PARAMS))
     with pytest.raises(ValueError):
-        queue.submit(b"x", "json", {"tau": 1.0, "lam": 1.0})
-    rec = queue.submit(script("ok"), "JSON", {"rms": 0.1})
+        queue.submit(NewJob.check(b"x", "json", {"tau": 1.0, "lam": 1.0}))
+    rec = queue.submit(NewJob.check(script("ok"), "JSON", {"rms": 0.1}))
     assert rec.fmt == "json" and rec.params["rms"] == 0.1 and "tau" not in rec.params
     assert queue.get(rec.id).status is JobStatus.QUEUED  # type: ignore[union-attr]
     assert list((tmp_path / "data" / "jobs").iterdir()) == [queue.files.dir(rec.id)]

@@ -15,6 +15,7 @@ import pytest
 
 from service.jobs import JobSize, JobStatus, LocalQueue, problems
 from service.jobs.limits import limit_memory
+from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, pid_gone, start_server, wait_finished, wait_for
 
@@ -25,8 +26,8 @@ MIB = 1024 * 1024
 def test_a_job_above_the_memory_cap_fails_alone(make_queue: MakeQueue) -> None:
     queue = make_queue(memory_limit=200 * MIB)
     tiny = JobSize(n=3, dim=2, kind="cloud")  # what the estimate sees: the script lies about it
-    hog = queue.submit(script("hog", bytes=2048 * MIB), "json", PARAMS, size=tiny)
-    fine = queue.submit(script("hog", bytes=20 * MIB), "json", PARAMS, size=tiny)
+    hog = queue.submit(NewJob.check(script("hog", bytes=2048 * MIB), "json", PARAMS, size=tiny))
+    fine = queue.submit(NewJob.check(script("hog", bytes=20 * MIB), "json", PARAMS, size=tiny))
     done = wait_finished(queue, hog.id, timeout=30)
     assert done.status is JobStatus.FAILED and done.attempts == 1
     assert done.problem is not None and done.problem["code"] == "out-of-memory"
@@ -50,10 +51,11 @@ def test_limit_memory_caps_the_address_space_of_the_process() -> None:
 
 def test_a_worker_killed_by_sigkill_is_retried_like_a_server_death(make_queue: MakeQueue) -> None:
     queue = make_queue(max_attempts=2)
-    once = queue.submit(script("oom_once"), "json", PARAMS)
+    once = queue.submit(NewJob.check(script("oom_once"), "json", PARAMS))
     done = wait_finished(queue, once.id, timeout=20)
     assert done.status is JobStatus.SUCCEEDED and done.attempts == 2
-    always = queue.submit(script("sleep", seconds=30), "json", PARAMS)  # killed every time
+    # killed every time
+    always = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
     for attempt in (1, 2):
         def run(attempt: int = attempt) -> int | None:
             r = queue.get(always.id)
@@ -74,7 +76,7 @@ def test_a_burst_of_server_crashes_does_not_exhaust_the_head_of_the_queue(
 ) -> None:
     data_dir = tmp_path / "data"
     client = make_queue(start=False, data_dir=data_dir, max_attempts=3)
-    ids = [client.submit(script("sleep", seconds=1.5, steps=3), "json", PARAMS).id
+    ids = [client.submit(NewJob.check(script("sleep", seconds=1.5, steps=3), "json", PARAMS)).id
            for _ in range(4)]  # fmt: skip
     interrupted = 0
     for _ in range(3):  # three crashes within seconds, each while jobs run
@@ -96,7 +98,7 @@ def test_a_burst_of_server_crashes_does_not_exhaust_the_head_of_the_queue(
 
 def test_stray_temporary_files_are_removed(make_queue: MakeQueue) -> None:
     queue = make_queue(start=False, sweep_interval=0.1)
-    rec = queue.submit(script("ok"), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     stray = queue.files.dir(rec.id) / ".result.npy.12345.tmp"
     stray.write_bytes(b"half a file")
     old = time.time() - 3600
@@ -129,11 +131,12 @@ def test_a_job_estimated_above_the_limit_is_refused_at_submit(make_queue: MakeQu
     queue = make_queue(start=False, memory_limit=256 * MIB)
     big = JobSize(n=5_000_000, dim=3, kind="cloud")
     with pytest.raises(JobTooLarge) as err:
-        queue.submit(script("ok"), "json", PARAMS, size=big)
+        queue.submit(NewJob.check(script("ok"), "json", PARAMS, size=big))
     problem = err.value.to_dict()
     est = estimate_resources(big.n, big.dim, big.kind, PARAMS, memory_limit=256 * MIB)
     assert problem["estimate_bytes"] == est.memory_bytes > problem["limit_bytes"] == 256 * MIB
     assert err.value.status == 422 and "0.25 GiB" in err.value.message
     assert queue.list()[1] == 0  # nothing stored
-    small = queue.submit(script("ok"), "json", PARAMS, size=JobSize(n=1000, dim=3, kind="cloud"))
+    size = JobSize(n=1000, dim=3, kind="cloud")
+    small = queue.submit(NewJob.check(script("ok"), "json", PARAMS, size=size))
     assert small.status is JobStatus.QUEUED

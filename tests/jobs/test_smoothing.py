@@ -12,6 +12,7 @@ from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 from service.io import GeometryDocument, read_geometry, write_geometry
 from service.jobs import JobStatus, LocalQueue
+from service.jobs.queue import NewJob
 from service.jobs.runner import DEFAULT_RUNNER
 from tests.jobs.jobs_helpers import wait_finished
 
@@ -52,7 +53,7 @@ def test_default_runner_is_the_real_one(make_queue: MakeQueue) -> None:
 def test_polyline_job_meets_tau(real_queue: LocalQueue) -> None:
     ring = noisy_ring()
     params = SmoothingParams(tau=0.05)
-    rec = real_queue.submit(as_bytes(ring, "obj"), "obj", params, filename="ring.obj")
+    rec = real_queue.submit(NewJob.check(as_bytes(ring, "obj"), "obj", params, filename="ring.obj"))
     done = wait_finished(real_queue, rec.id, timeout=60)
     assert done.status is JobStatus.SUCCEEDED, done.problem
 
@@ -85,7 +86,7 @@ def test_polyline_job_meets_tau(real_queue: LocalQueue) -> None:
 def test_mesh_job_with_rms_meets_the_implied_tau(real_queue: LocalQueue) -> None:
     sphere = noisy_sphere()
     params = SmoothingParams(rms=0.005)
-    rec = real_queue.submit(as_bytes(sphere, "ply"), "ply", params)
+    rec = real_queue.submit(NewJob.check(as_bytes(sphere, "ply"), "ply", params))
     done = wait_finished(real_queue, rec.id, timeout=60)
     assert done.status is JobStatus.SUCCEEDED, done.problem
     report = done.report
@@ -99,8 +100,8 @@ def test_mesh_job_with_rms_meets_the_implied_tau(real_queue: LocalQueue) -> None
 
 
 def test_malformed_file_fails_with_a_format_problem(real_queue: LocalQueue) -> None:
-    rec = real_queue.submit(b"ply\nformat ascii 1.0\nelement vertex banana\n", "ply",
-                            SmoothingParams(tau=1.0))  # fmt: skip
+    rec = real_queue.submit(NewJob.check(b"ply\nformat ascii 1.0\nelement vertex banana\n", "ply",
+                            SmoothingParams(tau=1.0)))  # fmt: skip
     done = wait_finished(real_queue, rec.id, timeout=30)
     assert done.status is JobStatus.FAILED
     assert done.problem is not None and done.problem["code"] == "format-error"
@@ -109,7 +110,9 @@ def test_malformed_file_fails_with_a_format_problem(real_queue: LocalQueue) -> N
 
 
 def test_tau_out_of_range_fails_with_the_valid_range(real_queue: LocalQueue) -> None:
-    rec = real_queue.submit(as_bytes(noisy_ring(50), "xyz"), "xyz", SmoothingParams(tau=1e6))
+    rec = real_queue.submit(
+        NewJob.check(as_bytes(noisy_ring(50), "xyz"), "xyz", SmoothingParams(tau=1e6))
+    )
     done = wait_finished(real_queue, rec.id, timeout=30)
     assert done.status is JobStatus.FAILED
     problem = done.problem

@@ -10,6 +10,7 @@ import pytest
 
 from service.jobs import LocalQueue
 from service.jobs.errors import WebhookUrlRejected
+from service.jobs.queue import NewJob
 from service.jobs.webhooks import SIGNATURE_HEADER, check_webhook_url, deliver, sign
 from service.settings import Settings
 from tests.jobs.jobs_fakes import script
@@ -31,7 +32,7 @@ def test_finished_jobs_are_posted_signed_and_retried(make_queue: MakeQueue) -> N
     verify = documented_verifier()
     with Receiver([500, 503, 200]) as hook:
         queue = make_queue(settings=_settings())
-        rec = queue.submit(script("ok"), "json", PARAMS, webhook_url=hook.url())
+        rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS, webhook_url=hook.url()))
         done = wait_finished(queue, rec.id)
         wait_for(lambda: len(hook.deliveries) == 3, timeout=10)  # 500, 503, then 200
         time.sleep(0.3)
@@ -55,9 +56,11 @@ def test_finished_jobs_are_posted_signed_and_retried(make_queue: MakeQueue) -> N
 def test_cancelled_and_failed_jobs_are_posted_too(make_queue: MakeQueue) -> None:
     with Receiver() as hook:
         queue = make_queue(settings=_settings())
-        failing = queue.submit(script("core_error"), "json", PARAMS, webhook_url=hook.url("/f"))
-        waiting = queue.submit(script("sleep", seconds=30), "json", PARAMS,
-                               webhook_url=hook.url("/c"))  # fmt: skip
+        failing = queue.submit(
+            NewJob.check(script("core_error"), "json", PARAMS, webhook_url=hook.url("/f"))
+        )
+        waiting = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS,
+                               webhook_url=hook.url("/c")))  # fmt: skip
         wait_finished(queue, failing.id)
         queue.cancel(waiting.id)
         wait_for(lambda: len(hook.deliveries) == 2, timeout=10)
@@ -69,7 +72,7 @@ def test_cancelled_and_failed_jobs_are_posted_too(make_queue: MakeQueue) -> None
 def test_an_undelivered_webhook_is_redelivered_after_a_restart(make_queue: MakeQueue) -> None:
     with Receiver() as hook:
         queue = make_queue(start=False, settings=_settings())
-        rec = queue.submit(script("ok"), "json", PARAMS, webhook_url=hook.url())
+        rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS, webhook_url=hook.url()))
         # the job finished but its deliverer died before delivering (state never written)
         queue.store._conn().execute(
             "UPDATE jobs SET status = 'succeeded', finished_at = ? WHERE id = ?",

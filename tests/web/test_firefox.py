@@ -171,7 +171,7 @@ def test_firefox_mesh_file_upload(
     assert abs(report["phi"] - report["tau"]) / report["tau"] <= 1e-3
     assert_panes_drawn(page, 0.05)
     vmax = float(page.evaluate("document.getElementById('viewer-note').dataset.vmax"))
-    assert vmax == pytest.approx(report["max_deviation"], rel=1e-3)
+    assert vmax == pytest.approx(report["max_displacement"], rel=1e-3)
     shot(page, screenshot_dir, "02-mesh-done")
     check_download(page, "ply", read_geometry(sample).geometry.points, report)
     assert_clean(page, web_server)

@@ -46,7 +46,8 @@ def test_mesh_upload_without_params(client: httpx.Client) -> None:
     n = len(points)
     assert (out["n_points"], out["dimension"], out["kind"]) == (642, 3, "mesh")
     assert (out["n_faces"], out["n_edges"], out["n_polylines"]) == (1280, 1920, 0)
-    assert out["format"] == "ply" and out["filename"] == path.name and out["weld"] is False
+    assert out["input_format"] == out["format"] == "ply" and out["filename"] == path.name
+    assert out["weld"] is False
     assert out["bbox"]["min"] == pytest.approx(points.min(axis=0).tolist())
     assert out["bbox"]["max"] == pytest.approx(points.max(axis=0).tolist())
     # default displacement for meshes moves points along their normals: its phi(0) is the one

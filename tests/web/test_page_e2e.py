@@ -110,7 +110,7 @@ def check_download(
     phi = deviation_phi(input_points, result)
     assert phi == pytest.approx(report["phi"], rel=1e-7)
     assert np.sqrt(np.mean(np.sum((result - input_points) ** 2, axis=1))) == pytest.approx(
-        report["rms_deviation"], rel=1e-7
+        report["rms_displacement"], rel=1e-7
     )
     saved = json.loads(download(page, "#download-report"))
     assert saved["phi"] == report["phi"] and saved["lambda"] == report["lambda"]
@@ -150,7 +150,7 @@ def check_viewer_controls(page: Any) -> None:
 def check_viewer_note(page: Any, report: dict[str, Any]) -> None:
     """The page's own deviation (float32 display copy) agrees with the report's maximum."""
     vmax = float(page.get_attribute("#viewer-note", "data-vmax"))
-    assert vmax == pytest.approx(report["max_deviation"], rel=1e-3)
+    assert vmax == pytest.approx(report["max_displacement"], rel=1e-3)
     assert not page.locator("#legend").is_hidden()
 
 

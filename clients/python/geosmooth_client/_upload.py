@@ -167,7 +167,7 @@ class Upload:
             opener = lambda: io.BytesIO(data)  # noqa: E731
             name, fmt = filename or "geometry.json", fmt or "json"
         if fmt:
-            form["format"] = fmt
+            form["input_format"] = fmt
         if weld is not None:  # else the service's default for the format (STL, GLB: welded)
             form["weld"] = "true" if weld else "false"
         if webhook_url:

@@ -25,7 +25,7 @@ from geosmooth_client._protocol import (
     transport_error,
 )
 from geosmooth_client._upload import Upload, params_dict
-from geosmooth_client.errors import ConnectionFailed, NotFound
+from geosmooth_client.errors import ConnectionFailed, NotFound, raise_for_status
 from geosmooth_client.models import Job, JobList, Report
 from geosmooth_client.result import AsyncResult
 
@@ -157,7 +157,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
 
     async def download(self, job_id: str, fmt: str | None = None) -> bytes:
         """See :meth:`Client.download`."""
-        query = {"format": fmt} if fmt else None
+        query = {"output_format": fmt} if fmt else None
         return (await self._send("GET", job_path(job_id, "/result"), params=query)).content
 
     async def cancel(self, job_id: str) -> Job:
@@ -263,4 +263,4 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         except BaseException:  # cancelled, timed out, unreachable: leave no job running
             await asyncio.shield(self._cancel_quietly(job.id))
             raise
-        return AsyncResult(self, job.raise_for_status())
+        return AsyncResult(self, raise_for_status(job))

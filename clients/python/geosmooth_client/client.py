@@ -32,7 +32,7 @@ from geosmooth_client._protocol import (
     transport_error,
 )
 from geosmooth_client._upload import Upload, params_dict
-from geosmooth_client.errors import ConnectionFailed, JobInterrupted, NotFound
+from geosmooth_client.errors import ConnectionFailed, JobInterrupted, NotFound, raise_for_status
 from geosmooth_client.models import Job, JobList, Report
 from geosmooth_client.result import Result
 
@@ -222,7 +222,7 @@ class Client(ClientBase[httpx.Client]):
 
     def download(self, job_id: str, fmt: str | None = None) -> bytes:
         """The smoothed geometry, in ``fmt`` (default: the input's format)."""
-        query = {"format": fmt} if fmt else None
+        query = {"output_format": fmt} if fmt else None
         return self._send("GET", job_path(job_id, "/result"), params=query).content
 
     def cancel(self, job_id: str) -> Job:
@@ -366,4 +366,4 @@ class Client(ClientBase[httpx.Client]):
         except BaseException:  # timed out, unreachable: leave no job running
             self._cancel_quietly(job.id)
             raise
-        return Result(self, job.raise_for_status())
+        return Result(self, raise_for_status(job))

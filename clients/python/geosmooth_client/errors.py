@@ -16,12 +16,11 @@ import email.utils
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import httpx
 
-if TYPE_CHECKING:
-    from geosmooth_client.models import Job
+from geosmooth_client.models import Job
 
 __all__ = [
     "ApiError",
@@ -45,6 +44,7 @@ __all__ = [
     "UnsupportedMediaType",
     "WaitTimeout",
     "error_from_response",
+    "raise_for_status",
 ]
 
 
@@ -224,6 +224,15 @@ class JobCancelled(GeosmoothClientError):
         super().__init__(f"job {job.id} was cancelled")
 
 
+def raise_for_status(job: Job) -> Job:
+    """Raise :class:`JobFailed` / :class:`JobCancelled` for those statuses; else ``job``."""
+    if job.status == "failed":
+        raise JobFailed(job)
+    if job.status == "cancelled":
+        raise JobCancelled(job)
+    return job
+
+
 class WaitTimeout(GeosmoothClientError, TimeoutError):
     """:meth:`Client.wait` gave up; ``job`` is the last state seen (it may still run)."""
 
@@ -325,4 +334,3 @@ def error_from_response(response: httpx.Response) -> ApiError:
     status = response.status_code
     retry = retry_after_seconds(response.headers.get("Retry-After"))
     return error_class(status)(status, problem_of(response), retry_after=retry)
-

@@ -164,9 +164,19 @@ class Report(Mapping[str, Any]):
         "n_points": "n_points",
         "dimension": "dimension",
         "kind": "kind",
-        "rms_deviation": "rms_deviation",
-        "max_deviation": "max_deviation",
+        "rms_displacement": "rms_displacement",
+        "max_displacement": "max_displacement",
         "warnings": "warnings",
+    }
+    #: JSON member -> the name a service before 2026-11 sent (read when the new one is absent).
+    FORMERLY: Mapping[str, str] = {
+        "rms_displacement": "rms_deviation",
+        "max_displacement": "max_deviation",
+    }
+    #: Deprecated attributes -> current ones.
+    ALIASES: Mapping[str, str] = {
+        "rms_deviation": "rms_displacement",
+        "max_deviation": "max_displacement",
     }
 
     def __init__(self, data: Mapping[str, Any]) -> None:
@@ -182,9 +192,12 @@ class Report(Mapping[str, Any]):
         return len(self._data)
 
     def __getattr__(self, name: str) -> Any:
-        key = type(self).ATTRIBUTES.get(name)
+        cls = type(self)
+        key = cls.ATTRIBUTES.get(cls.ALIASES.get(name, name))
         if key is None:
             raise AttributeError(name)
+        if key not in self._data and key in cls.FORMERLY:
+            return self._data.get(cls.FORMERLY[key])
         return self._data.get(key)
 
     def __repr__(self) -> str:
@@ -197,7 +210,8 @@ class Job:
 
     id: str
     status: JobStatus
-    format: str | None = None
+    input_format: str | None = None
+    format: str | None = None  # deprecated name of input_format (services before 2026-11)
     filename: str | None = None
     created_at: datetime | None = None
     started_at: datetime | None = None
@@ -221,6 +235,8 @@ class Job:
         status = str(values.get("status"))
         if status not in _STATUSES:
             raise ValueError(f"unknown job status {status!r}")
+        if values.get("input_format") is None:  # a service before 2026-11: "format" only
+            values["input_format"] = values.get("format")
         for key in ("created_at", "started_at", "finished_at", "expires_at"):
             values[key] = _time(values.get(key))
         if values.get("progress") is not None:
@@ -244,16 +260,6 @@ class Job:
         """This job, running, with newer progress (from an events stream)."""
         status: JobStatus = "running" if self.status == "queued" else self.status
         return dataclasses.replace(self, status=status, progress=progress)
-
-    def raise_for_status(self) -> Job:
-        """Raise :class:`JobFailed` / :class:`JobCancelled` for those statuses; else ``self``."""
-        from geosmooth_client.errors import JobCancelled, JobFailed
-
-        if self.status == "failed":
-            raise JobFailed(self)
-        if self.status == "cancelled":
-            raise JobCancelled(self)
-        return self
 
 
 @dataclasses.dataclass(frozen=True)

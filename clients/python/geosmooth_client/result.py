@@ -12,13 +12,9 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from geosmooth_client.models import Job, Report
-
-if TYPE_CHECKING:
-    from geosmooth_client.async_client import AsyncClient
-    from geosmooth_client.client import Client
 
 __all__ = ["Arrays", "AsyncResult", "Result", "arrays_from_geometry", "format_for_path"]
 
@@ -70,6 +66,22 @@ def format_for_path(path: str | os.PathLike[str], fmt: str | None) -> str | None
     return suffix or None
 
 
+class _Fetcher(Protocol):
+    """What a :class:`Result` needs of its client (:class:`~geosmooth_client.Client`)."""
+
+    def report(self, job_id: str) -> Report: ...
+
+    def download(self, job_id: str, fmt: str | None = None) -> bytes: ...
+
+
+class _AsyncFetcher(Protocol):
+    """What an :class:`AsyncResult` needs of its client (:class:`~geosmooth_client.AsyncClient`)."""
+
+    async def report(self, job_id: str) -> Report: ...
+
+    async def download(self, job_id: str, fmt: str | None = None) -> bytes: ...
+
+
 class Result:
     """A succeeded job of a :class:`Client`.
 
@@ -79,7 +91,7 @@ class Result:
         The job as it finished.
     """
 
-    def __init__(self, client: Client, job: Job) -> None:
+    def __init__(self, client: _Fetcher, job: Job) -> None:
         self.job = job
         self._client = client
         self._report = job.report
@@ -121,7 +133,7 @@ class Result:
 class AsyncResult:
     """A succeeded job of an :class:`AsyncClient` (the methods of :class:`Result`, awaited)."""
 
-    def __init__(self, client: AsyncClient, job: Job) -> None:
+    def __init__(self, client: _AsyncFetcher, job: Job) -> None:
         self.job = job
         self._client = client
         self._report = job.report

@@ -28,6 +28,7 @@ from service.core.search.tau_range import check_tau
 from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
 from service.io.dispatch import detect_format, sniff_format
 from service.io.errors import FormatError, UnsupportedFormat
+from service.jobs.queue import JobSize, NewJob
 
 __all__ = [
     "IngestRequest",
@@ -195,8 +196,16 @@ def _media_format(part_type: str | None) -> str | None:
 
 
 def _format(req: IngestRequest) -> str:
-    """Explicit ``format`` part, else the file name, the part's content type, the content."""
-    explicit = req.fields.get("format", "").strip()
+    """Explicit ``input_format`` part (``format``: its deprecated name), else the file name, the
+    part's content type, the content."""
+    explicit = req.fields.get("input_format", "").strip()
+    former = req.fields.get("format", "").strip()
+    if explicit and former and explicit.lower() != former.lower():
+        raise _invalid(
+            "input_format", f"input_format={explicit} and format={former} (its deprecated name) "
+            "disagree",
+        )  # fmt: skip
+    explicit = explicit or former
     if explicit:
         fmt = explicit.lower().lstrip(".")
         if fmt not in FORMATS:
@@ -325,29 +334,21 @@ def parse_request(req: IngestRequest, max_points: int | None = None) -> ParsedRe
     return parsed
 
 
-def _size(document: GeometryDocument) -> dict[str, Any]:
-    g = document.geometry
-    faces = None if g.faces is None else len(g.faces)
-    return {"n": int(g.n), "dim": int(g.dim), "kind": str(g.kind), "n_faces": faces}
-
-
-def check_job(req: IngestRequest) -> dict[str, Any]:
-    """``POST /v1/jobs``: everything a job needs, checked; the input file to store (an inline
-    geometry is written as a JSON file next to the spooled body, once every check passed)."""
+def check_job(req: IngestRequest) -> NewJob:
+    """``POST /v1/jobs``: the parsed, checked job (format, parameters, file, the key's bounds,
+    ``tau``), typed; the router adds tenant and idempotency key. An inline geometry becomes a
+    JSON file next to the spooled body, written once every check passed."""
     parsed = parse_request(req, req.limits.max_points)
     check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
     if "geometry" in parsed.extra:
         inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
         inline.write_text(json.dumps(parsed.extra["geometry"], separators=(",", ":")))
         parsed.input_path = str(inline)
-    return {
-        "fmt": parsed.fmt,
-        "params": parsed.params.model_dump(mode="json", exclude_none=True),
-        "weld": parsed.weld,
-        "webhook_url": parsed.webhook_url,
-        "input_path": parsed.input_path,
-        "size": _size(parsed.document),
-    }
+    return NewJob(
+        Path(parsed.input_path), parsed.fmt, parsed.params,
+        size=JobSize.of(parsed.document.geometry), filename=req.filename, weld=parsed.weld,
+        webhook_url=parsed.webhook_url,
+    )  # fmt: skip
 
 
 def smooth_input(req: IngestRequest) -> dict[str, Any]:
@@ -379,7 +380,8 @@ def describe_input(req: IngestRequest) -> dict[str, Any]:
     parsed = parse_request(req)
     info = describe(parsed.document.geometry, parsed.params)
     info.update(
-        format=parsed.fmt,
+        input_format=parsed.fmt,
+        format=parsed.fmt,  # deprecated name of input_format
         filename=req.filename,
         n_polylines=len(parsed.document.polylines),
         notes=list(parsed.document.notes),

@@ -18,7 +18,7 @@ from __future__ import annotations
 import multiprocessing
 import signal
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 import anyio
 from starlette.types import Receive
@@ -28,6 +28,7 @@ from service.api.http.logs import get_logger
 from service.api.intake.worker import child_main
 
 __all__ = ["Isolation"]
+T = TypeVar("T")
 
 log = get_logger("geosmooth.api")
 
@@ -57,7 +58,7 @@ class Isolation:
 
     async def run(
         self,
-        func: Callable[[Any], dict[str, Any]],
+        func: Callable[[Any], T],
         arg: Any,
         *,
         timeout: float,
@@ -65,8 +66,8 @@ class Isolation:
         what: str,
         redact: Mapping[str, str] | None = None,
         disconnect: Receive | None = None,
-    ) -> dict[str, Any] | None:
-        """Run ``func(arg)`` in a new process; its dict, or ``None`` if the client left.
+    ) -> T | None:
+        """Run ``func(arg)`` in a new process; its answer, or ``None`` if the client left.
 
         Raises
         ------
@@ -110,7 +111,7 @@ class Isolation:
                 await anyio.to_thread.run_sync(proc.join, 5.0)
 
     @staticmethod
-    def _answer(reader: Any, proc: Any, what: str) -> dict[str, Any]:
+    def _answer(reader: Any, proc: Any, what: str) -> Any:
         try:
             kind, value, stats = reader.recv()
         except (EOFError, OSError):
@@ -133,7 +134,7 @@ class Isolation:
             rss_peak_mib=round(stats["rss_peak"] / mib, 1),
         )
         if kind == "ok":
-            return value  # type: ignore[no-any-return]
+            return value
         if kind == "problem":
             raise ApiProblem.from_wire(value)
         log.error("request.worker_error", work=what, error=value)

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import anyio
 from fastapi import Request
@@ -46,6 +46,7 @@ INGEST_BASE_BYTES = 768 * 2**20
 INGEST_FACTOR = 6
 MAX_JSON_BODY_BYTES = 32 * 2**20
 _SPOOL_MAX_AGE = 3600.0
+T = TypeVar("T")
 
 
 def spool_dir(settings: Settings) -> Path:
@@ -127,13 +128,13 @@ class Intake:
         request: Request,
         upload: Upload,
         principal: Principal,
-        func: Callable[[IngestRequest], dict[str, Any]],
+        func: Callable[[IngestRequest], T],
         *,
         mode: Literal["ingest", "sync"] = "ingest",
         params_required: bool = True,
         out_format: str | None = None,
         options: dict[str, Any] | None = None,
-    ) -> dict[str, Any] | None:
+    ) -> T | None:
         """``func`` on the spooled upload in a worker process (``None``: the client left)."""
         assert upload.path is not None
         req = IngestRequest(

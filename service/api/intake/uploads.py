@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 __all__ = ["FIELDS", "Upload", "receive_upload"]
 
 #: Small parts of a multipart upload besides ``file``.
-FIELDS = ("params", "format", "weld", "webhook_url")
+FIELDS = ("params", "input_format", "format", "weld", "webhook_url")
 _SMALL_PART = 64 * 1024
 
 

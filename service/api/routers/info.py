@@ -81,6 +81,7 @@ class Info(BaseModel):
                     "sigma_estimate": 0.0098,
                     "suggested_tau": 0.062,
                     "suggested_rms": 0.0098,
+                    "input_format": "ply",
                     "format": "ply",
                     "filename": "noisy-sphere.ply",
                     "n_polylines": 0,
@@ -104,7 +105,10 @@ class Info(BaseModel):
     sigma_estimate: float | None = Field(description="Estimated noise level, when available.")
     suggested_tau: float | None = Field(description="A suggested tau, when available.")
     suggested_rms: float | None = Field(description="A suggested rms, when available.")
-    format: str = Field(description="Format the input was read as.")
+    input_format: str = Field(description="Format the input was read as.")
+    format: str = Field(
+        description="Deprecated: the former name of ``input_format``.", deprecated=True
+    )
     filename: str | None = Field(default=None, description="Uploaded file name.")
     n_polylines: int = Field(description="Polylines in the file.")
     notes: list[str] = Field(description="What the reader repaired or ignored.")

@@ -6,6 +6,7 @@ Every route is scoped to the request's tenant: a job of another key is unknown (
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -25,12 +26,14 @@ from service.api.deps import (
     job_not_found,
 )
 from service.api.docs import (
+    FORMAT_ALIAS_DESCRIPTION,
     FORMAT_QUERY_DESCRIPTION,
     JOB_SUBMIT_OPENAPI,
     MEDIA_TYPES,
     RESULT_CONTENT,
     problem_responses,
 )
+from service.api.docs import output_format as output_format_of
 from service.api.errors import ApiProblem
 from service.api.http.logs import get_logger
 from service.api.intake.ingest import check_job
@@ -38,7 +41,7 @@ from service.api.intake.request import spool_dir
 from service.api.problems import FiniteJSONResponse
 from service.api.results import pin_file, render_geometry, result_name
 from service.api.schemas import Job, JobList, JobStatusName, OutputFormat, PageLinks, Report
-from service.jobs.queue import JobQueue, JobRecord, JobSize, JobStatus, job_location
+from service.jobs.queue import JobQueue, JobRecord, JobStatus, NewJob, job_location
 from service.jobs.webhooks import check_webhook_url
 
 __all__ = ["router"]
@@ -109,29 +112,18 @@ async def submit_job(
         )
     started = time.time()
     upload = await intake.receive(request)
-    checked: dict[str, Any] | None = None
+    job: NewJob | None = None
     try:
         checked = await intake.run(request, upload, principal, check_job)
         assert checked is not None
-        if checked["webhook_url"]:
-            await run_in_threadpool(check_webhook_url, checked["webhook_url"], settings)
-        record = await run_in_threadpool(
-            lambda: queue.submit(
-                Path(checked["input_path"]),
-                checked["fmt"],
-                checked["params"],
-                upload.filename,
-                weld=checked["weld"],
-                tenant=principal.tenant,
-                webhook_url=checked["webhook_url"],
-                idempotency_key=idempotency_key,
-                size=JobSize(**checked["size"]),
-            )
-        )
+        job = replace(checked, tenant=principal.tenant, idempotency_key=idempotency_key)
+        if job.webhook_url:
+            await run_in_threadpool(check_webhook_url, job.webhook_url, settings)
+        record = await run_in_threadpool(queue.submit, job)
     finally:
         upload.discard()
-        if checked is not None:
-            Path(checked["input_path"]).unlink(missing_ok=True)
+        if job is not None and isinstance(job.input, Path):
+            job.input.unlink(missing_ok=True)
     replayed = record.created_at < started
     if not replayed:
         metrics.jobs_submitted.inc()
@@ -140,7 +132,7 @@ async def submit_job(
             job_id=record.id,
             tenant=record.tenant,
             format=record.fmt,
-            n_points=checked["size"]["n"],
+            n_points=checked.size.n if checked.size else None,
         )
     headers = {"Location": job_location(record.id)}
     if replayed:
@@ -251,10 +243,15 @@ async def get_result(
     job: JobDep,
     queue: QueueDep,
     settings: SettingsDep,
-    format: Annotated[OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)] = None,
+    output_format: Annotated[
+        OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)
+    ] = None,
+    format: Annotated[
+        OutputFormat | None, Query(description=FORMAT_ALIAS_DESCRIPTION, deprecated=True)
+    ] = None,
 ) -> Response:
     _require_succeeded(job)
-    fmt = str(format or job.fmt)
+    fmt = output_format_of(output_format, format) or job.fmt
     name = f"{result_name(job.filename, job.id)}.{fmt}"
     url = await run_in_threadpool(queue.result_url, job.id, fmt)
     if url is not None:

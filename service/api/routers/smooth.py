@@ -12,12 +12,14 @@ from starlette.background import BackgroundTask
 
 from service.api.deps import IntakeDep, MetricsDep, PrincipalDep
 from service.api.docs import (
+    FORMAT_ALIAS_DESCRIPTION,
     FORMAT_QUERY_DESCRIPTION,
     MEDIA_TYPES,
     RESULT_CONTENT,
     SMOOTH_OPENAPI,
     problem_responses,
 )
+from service.api.docs import output_format as output_format_of
 from service.api.intake.ingest import smooth_input
 from service.api.results import REPORT_HEADER, report_header, result_name
 from service.api.schemas import OutputFormat
@@ -58,7 +60,7 @@ _RESPONSES = {
         "``sync_max_points`` points (setting ``GEOSMOOTH_SYNC_MAX_POINTS``, default 20000) that "
         "finish within ``sync_timeout`` seconds (default 60) and ``sync_memory_bytes`` of "
         "memory; anything larger gets 413: submit a job instead. The solve runs in its own "
-        "process, stopped when the client disconnects. ``format=json`` answers "
+        "process, stopped when the client disconnects. ``output_format=json`` answers "
         "``{geometry, report}``; any other format answers the file with the report in the "
         "``X-Geosmooth-Report`` header."
     ),
@@ -71,8 +73,14 @@ async def smooth_now(
     principal: PrincipalDep,
     intake: IntakeDep,
     metrics: MetricsDep,
-    format: Annotated[OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)] = None,
+    output_format: Annotated[
+        OutputFormat | None, Query(description=FORMAT_QUERY_DESCRIPTION)
+    ] = None,
+    format: Annotated[
+        OutputFormat | None, Query(description=FORMAT_ALIAS_DESCRIPTION, deprecated=True)
+    ] = None,
 ) -> Response:
+    out_format = output_format_of(output_format, format)
     with intake.sync_slot(principal.bucket, principal.limits.max_sync_per_key):
         upload = await intake.receive(request)
         try:
@@ -83,7 +91,7 @@ async def smooth_now(
                 principal,
                 smooth_input,
                 mode="sync",
-                out_format=str(format) if format else None,
+                out_format=out_format,
             )
         finally:
             upload.discard()

@@ -190,7 +190,7 @@ def noise_ratio(geometry: Geometry, sigma: float | None = None) -> float | None:
         if est is None:
             return None
         sigma = est.sigma
-    from service.core.info import mean_spacing
+    from service.core.geometry import mean_spacing
 
     h = mean_spacing(geometry)
     return sigma / h if h > 0 else None

@@ -13,10 +13,10 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from service.core.params import SPECTRUM_MAX_POINTS
+
 __all__ = ["SPECTRUM_MAX_POINTS", "filter_factors", "singular_values"]
 
-SPECTRUM_MAX_POINTS = 3000
-"""Largest input (free points) for which the dense SVD of the spectral view is computed."""
 
 
 def _scaled(L: sp.spmatrix, omega: NDArray[np.float64]) -> NDArray[np.float64]:

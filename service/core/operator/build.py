@@ -18,10 +18,10 @@ from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.linalg import cache
 from service.core.operator.curvature import curvature
+from service.core.operator.delaunay import cloud_delaunay_neighborhoods
 from service.core.operator.laplacian import laplacian, presmooth, without_junction_rows
 from service.core.operator.neighborhoods import (
     Neighborhoods,
-    cloud_delaunay_neighborhoods,
     cloud_knn_neighborhoods,
     curve_neighborhoods,
     mesh_neighborhoods,

@@ -18,7 +18,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.operator.neighborhoods import _EMPTY3, Neighborhoods, _adjacency, _knn
+from service.core.operator.neighborhoods import (
+    NO_TRIPLES,
+    Neighborhoods,
+    knn,
+    pair_adjacency,
+)
 
 __all__ = ["cloud_delaunay_neighborhoods"]
 
@@ -169,10 +174,10 @@ def cloud_delaunay_neighborhoods(
         chains (predecessor, successor along the local line).
     """
     n, s = points.shape
-    dist, idx = _knn(points, k)
+    dist, idx = knn(points, k)
     if idx.shape[1] == 0:
-        empty = _adjacency(np.zeros(0, np.int64), np.zeros(0, np.int64), n)
-        return Neighborhoods(n, empty, _EMPTY3, _EMPTY3, np.zeros(n, dtype=bool), "delaunay")
+        empty = pair_adjacency(np.zeros(0, np.int64), np.zeros(0, np.int64), n)
+        return Neighborhoods(n, empty, NO_TRIPLES, NO_TRIPLES, np.zeros(n, dtype=bool), "delaunay")
     evals, evecs = _local_frames(points, idx)
     rel = points[idx] - points[:, None, :]  # (n, k, s)
     curve_like = s == 1 or float(np.median(evals[:, 1] / np.maximum(evals[:, 0], 1e-300))) < (
@@ -190,10 +195,10 @@ def cloud_delaunay_neighborhoods(
         has_next = np.isfinite(pos.min(axis=1))
         i = np.concatenate([rows[has_prev], rows[has_next]])
         j = np.concatenate([prev[has_prev], nxt[has_next]])
-        adj = _adjacency(i, j, n)
+        adj = pair_adjacency(i, j, n)
         both = has_prev & has_next
         chains = np.column_stack([rows[both], prev[both], nxt[both]]).astype(np.int64)
-        return Neighborhoods(n, adj, _EMPTY3, chains, has_prev ^ has_next, "delaunay")
+        return Neighborhoods(n, adj, NO_TRIPLES, chains, has_prev ^ has_next, "delaunay")
     q = np.stack(
         [np.einsum("nks,ns->nk", rel, evecs[:, :, c]) for c in (0, 1)],
         axis=-1,
@@ -203,7 +208,7 @@ def cloud_delaunay_neighborhoods(
     slot_ok = fans >= 0
     nb = np.where(slot_ok, idx[rows[:, None], np.maximum(fans, 0)], -1)
     i = np.repeat(rows, slot_ok.sum(axis=1))
-    adj = _adjacency(i, nb[slot_ok], n)
+    adj = pair_adjacency(i, nb[slot_ok], n)
     # wedges between consecutive fan neighbours; closed fans wrap around
     w_i, w_j, w_k = [], [], []
     for t in range(fans.shape[1]):
@@ -215,4 +220,4 @@ def cloud_delaunay_neighborhoods(
         w_k.append(nb[sel, np.where(closing[sel], 0, t + 1)])
     wedges = np.column_stack([np.concatenate(w_i), np.concatenate(w_j), np.concatenate(w_k)])
     wedges = wedges[(wedges[:, 1] != wedges[:, 2])].astype(np.int64)
-    return Neighborhoods(n, adj, wedges, _EMPTY3, open_fan, "delaunay")
+    return Neighborhoods(n, adj, wedges, NO_TRIPLES, open_fan, "delaunay")

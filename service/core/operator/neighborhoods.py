@@ -32,16 +32,18 @@ from scipy.spatial import cKDTree
 from service.core._arrays import unique_keys
 
 __all__ = [
+    "NO_TRIPLES",
     "Neighborhoods",
-    "cloud_delaunay_neighborhoods",
     "cloud_knn_neighborhoods",
     "curve_neighborhoods",
+    "knn",
     "mesh_neighborhoods",
+    "pair_adjacency",
     "unique_faces",
 ]
 
 Source = Literal["mesh", "curve", "knn", "delaunay"]
-_EMPTY3 = np.zeros((0, 3), dtype=np.int64)
+NO_TRIPLES = np.zeros((0, 3), dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,7 @@ class Neighborhoods:
         return np.diff(self.adjacency.indptr).astype(np.int64)
 
 
-def _adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
+def pair_adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
     """Pattern (ones) of the pairs ``(i, j)``, duplicates merged, via integer keys ``i n + j``."""
     keys = np.sort(i.astype(np.int64) * n + j.astype(np.int64))
     keys = keys[np.concatenate([[True], keys[1:] != keys[:-1]])] if keys.size else keys
@@ -119,7 +121,7 @@ def unique_faces(faces: NDArray[np.int64]) -> NDArray[np.int64]:
 def _edge_graph(edges: NDArray[np.int64], n: int) -> sp.csr_matrix:
     i = np.concatenate([edges[:, 0], edges[:, 1]])
     j = np.concatenate([edges[:, 1], edges[:, 0]])
-    return _adjacency(i, j, n)
+    return pair_adjacency(i, j, n)
 
 
 def _chains(adj: sp.csr_matrix, rows: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -132,7 +134,7 @@ def _chains(adj: sp.csr_matrix, rows: NDArray[np.int64]) -> NDArray[np.int64]:
         nb = adj.indices[adj.indptr[i] : adj.indptr[i + 1]]
         a, b = np.triu_indices(nb.size, 1)
         out.append(np.column_stack([np.full(a.size, i), nb[a], nb[b]]))
-    return np.concatenate(out).astype(np.int64) if out else _EMPTY3
+    return np.concatenate(out).astype(np.int64) if out else NO_TRIPLES
 
 
 def curve_neighborhoods(edges: NDArray[np.int64], n: int) -> Neighborhoods:
@@ -153,7 +155,7 @@ def curve_neighborhoods(edges: NDArray[np.int64], n: int) -> Neighborhoods:
     adj = _edge_graph(edges, n)
     deg = np.diff(adj.indptr)
     chains = _chains(adj, np.flatnonzero(deg >= 2))
-    return Neighborhoods(n, adj, _EMPTY3, chains, deg == 1, "curve")
+    return Neighborhoods(n, adj, NO_TRIPLES, chains, deg == 1, "curve")
 
 
 def mesh_neighborhoods(
@@ -182,7 +184,7 @@ def mesh_neighborhoods(
     wedges = np.concatenate([faces, faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
     i = np.concatenate([wedges[:, 0], wedges[:, 0]])
     j = np.concatenate([wedges[:, 1], wedges[:, 2]])
-    adj = _adjacency(i, j, n)
+    adj = pair_adjacency(i, j, n)
     # boundary: undirected edges used by exactly one face (integer keys min * n + max)
     a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
     b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
@@ -191,7 +193,7 @@ def mesh_neighborhoods(
     single = uniq[counts == 1]
     boundary[single // n] = True
     boundary[single % n] = True
-    chains = _EMPTY3
+    chains = NO_TRIPLES
     if edges is not None and len(edges):
         in_face = np.zeros(n, dtype=bool)
         in_face[faces.ravel()] = True
@@ -209,7 +211,7 @@ def mesh_neighborhoods(
     return Neighborhoods(n, adj, wedges.astype(np.int64), chains, boundary, "mesh")
 
 
-def _knn(points: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def knn(points: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """k nearest neighbours of every point (itself excluded); ``-1`` pads small clouds."""
     n = points.shape[0]
     kk = min(k, n - 1)
@@ -238,10 +240,7 @@ def cloud_knn_neighborhoods(points: NDArray[np.float64], k: int) -> Neighborhood
         Neighbours per point.
     """
     n = points.shape[0]
-    _, idx = _knn(points, k)
+    _, idx = knn(points, k)
     rows = np.repeat(np.arange(n), idx.shape[1])
-    adj = _adjacency(rows, idx.ravel(), n)
-    return Neighborhoods(n, adj, _EMPTY3, _EMPTY3, np.zeros(n, dtype=bool), "knn")
-
-
-from service.core.operator.delaunay import cloud_delaunay_neighborhoods  # noqa: E402  (re-export)
+    adj = pair_adjacency(rows, idx.ravel(), n)
+    return Neighborhoods(n, adj, NO_TRIPLES, NO_TRIPLES, np.zeros(n, dtype=bool), "knn")

@@ -33,6 +33,8 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from service.core.params import TOLERANCE
+
 __all__ = ["BoundResult", "bound_deviation", "clip_points", "point_deviations"]
 
 Array = NDArray[np.float64]
@@ -125,7 +127,7 @@ def bound_deviation(
     group: int = 1,
     tau: float | None = None,
     bracket: tuple[float, float] | None = None,
-    tolerance: float = 1e-3,
+    tolerance: float = TOLERANCE,
     max_rounds: int = 30,
 ) -> BoundResult:
     """Enforce ``||x_i - p_i|| <= delta`` on a solution at ``lam`` (see the module docstring).

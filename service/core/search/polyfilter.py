@@ -34,6 +34,7 @@ from numpy.polynomial import chebyshev as cheb
 from numpy.typing import NDArray
 
 from service.core.errors import ParameterError
+from service.core.params import TOLERANCE
 from service.core.search.roots import LambdaSearch
 from service.core.system.deviation import Deviation
 
@@ -137,7 +138,7 @@ def windowed_sinc(
     mu_max: float,
     *,
     degree: int = DEGREE,
-    tolerance: float = 1e-3,
+    tolerance: float = TOLERANCE,
 ) -> tuple[SincFilter, float, list[tuple[float, float]]]:
     """The pass band with ``phi = tau`` (from the moments) and the phi it reaches.
 

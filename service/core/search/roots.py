@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.core.linalg.krylov import Quadrature, lanczos
+from service.core.params import MAX_ITERATIONS, TOLERANCE
 
 __all__ = [
     "LambdaSearch",
@@ -241,8 +242,8 @@ def newton_search(
     hi: float,
     *,
     order: int = 1,
-    tolerance: float = 1e-3,
-    max_iterations: int = 50,
+    tolerance: float = TOLERANCE,
+    max_iterations: int = MAX_ITERATIONS,
     propose: Callable[[float, float, float, float], float | None] | None = None,
     below: Callable[[], None] | None = None,
 ) -> LambdaSearch:

@@ -19,6 +19,7 @@ from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.run import Run
 from service.core.search.autotau import auto_tau, gcv_lambda, knee_tau
+from service.core.search.budget import free_weight, rms_to_tau
 from service.core.search.roots import (
     LambdaSearch,
     estimate_lambda,
@@ -55,7 +56,7 @@ def resolve_tau(
     if rule == "tau":
         return float(params.tau)  # type: ignore[arg-type]
     assert params.rms is not None
-    return float(params.rms**2 * np.sum(geometry.omega()[~fixed] ** 2))
+    return rms_to_tau(params.rms, free_weight(geometry, fixed))
 
 
 def _out_of_range(params: SmoothingParams, tau: float, phi0: float) -> TauOutOfRange:

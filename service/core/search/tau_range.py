@@ -26,6 +26,7 @@ from service.core.errors import SolverError, TauOutOfRange
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
+from service.core.search.budget import free_weight, rms_to_tau, tau_to_rms
 
 __all__ = ["centroid_bound", "check_tau"]
 
@@ -49,14 +50,8 @@ def _range(geometry: Geometry, params: SmoothingParams, exact: bool) -> tuple[fl
         try:
             return valid_range(geometry, params)
         except SolverError:  # phi(0) needs a factorization that does not fit: the run checks
-            return float("inf"), valid_weight(geometry, params)
+            return float("inf"), free_weight(geometry)
     return centroid_bound(geometry)
-
-
-def valid_weight(geometry: Geometry, params: SmoothingParams) -> float:
-    """``sum omega_i^2`` over the points not fixed by the input (``rms`` -> ``tau``)."""
-    omega = geometry.omega()
-    return float(np.sum(omega[~geometry.fixed_mask()] ** 2))
 
 
 def _numeric(value: object) -> bool:
@@ -80,7 +75,7 @@ def check_tau(
     if not analyse:
         if _numeric(params.rms):
             _, weight = centroid_bound(geometry)
-            tau = float(params.rms) ** 2 * weight  # type: ignore[arg-type]
+            tau = rms_to_tau(params.rms, weight)  # type: ignore[arg-type]
             if not (0.0 < tau < float("inf")):
                 raise TauOutOfRange(
                     f"rms={params.rms:.6g} gives the smoothing factor tau={tau:.6g}, which is not "
@@ -95,10 +90,9 @@ def check_tau(
     phi0, weight = _range(geometry, params, exact)
     if params.tau is not None:
         value, bound, name, tau = float(params.tau), phi0, "tau", float(params.tau)
-    else:  # tau = rms^2 * sum(omega_i^2) over the points that can move
+    else:  # rms: the same budget per point (service.core.search.budget)
         value, name = float(params.rms), "rms"  # type: ignore[arg-type]
-        bound = float(np.sqrt(phi0 / weight)) if weight > 0 else 0.0
-        tau = value**2 * weight
+        bound, tau = tau_to_rms(phi0, weight), rms_to_tau(value, weight)
     if 0.0 < value < bound and 0.0 < tau < float("inf"):
         return
     kind = "phi(0)" if exact else "an upper bound of phi(0)"

@@ -15,7 +15,6 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,10 +24,9 @@ from service.jobs.distributed.blobs import DirectoryBlobs
 from service.jobs.files import is_job_id
 from service.jobs.limits import default_job_memory
 from service.jobs.notify import Notifier
-from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
+from service.jobs.queue import JobQueue, JobRecord, JobStatus, NewJob, QueueHealth
 
 if TYPE_CHECKING:
-    from service.core.params import SmoothingParams
     from service.io import GeometryDocument
     from service.settings import Settings
 
@@ -120,39 +118,24 @@ class RQQueue:
         self.stop()
 
     # -- the JobQueue protocol -----------------------------------------------------------
-    def submit(
-        self,
-        input: JobInput,
-        fmt: str,
-        params: SmoothingParams | Mapping[str, Any],
-        filename: str | None = None,
-        *,
-        weld: bool = False,
-        tenant: str | None = None,
-        webhook_url: str | None = None,
-        idempotency_key: str | None = None,
-        size: JobSize | None = None,
-    ) -> JobRecord:
+    def submit(self, job: NewJob) -> JobRecord:
         """See :meth:`service.jobs.queue.JobQueue.submit`."""
-        job = admit.new_job(
-            input, fmt, params, filename, weld=weld, tenant=tenant, webhook_url=webhook_url,
-            idempotency_key=idempotency_key, size=size, memory_limit=self.memory_limit,
-            max_attempts=self.settings.max_attempts,
-        )
+        row = admit.admit(job, memory_limit=self.memory_limit,
+                          max_attempts=self.settings.max_attempts)  # fmt: skip
         with self._errors():
             if isinstance(self.blobs, DirectoryBlobs):
-                admit.check_space(self.blobs.files.root, job.input_bytes,
+                admit.check_space(self.blobs.files.root, row.input_bytes,
                                   self.settings.min_free_bytes)  # fmt: skip
-            self.blobs.put_input(job.job_id, job.fmt, input)
-            rq_id = self.backend.new_rq_id(job.job_id)
+            self.blobs.put_input(row.job_id, row.fmt, job.input)
+            rq_id = self.backend.new_rq_id(row.job_id)
             try:
                 rec, created = self.store.insert(
-                    job, rq_id, lambda pipe: self.backend.enqueue(job.job_id, rq_id, pipe))
+                    row, rq_id, lambda pipe: self.backend.enqueue(row.job_id, rq_id, pipe))
             except BaseException:
-                self.blobs.remove(job.job_id)
+                self.blobs.remove(row.job_id)
                 raise
         if not created:
-            self.blobs.remove(job.job_id)
+            self.blobs.remove(row.job_id)
             return self.get(rec.id) or rec
         return rec
 

@@ -27,8 +27,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from service.jobs.admit import JobRow
 from service.jobs.distributed import scripts
-from service.jobs.embedded.store import NewJob
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.metrics import DURATION_BUCKETS, bucket_index, cumulative
 from service.jobs.progress import queued_progress
@@ -153,7 +153,7 @@ class RedisJobStore:
         return None if data is None else self._record(data)
 
     def insert(
-        self, job: NewJob, rq_job: str, enqueue: Callable[[Any], None]
+        self, job: JobRow, rq_job: str, enqueue: Callable[[Any], None]
     ) -> tuple[JobRecord, bool]:
         """Add a ``queued`` job and, in the same transaction, ``enqueue(pipeline)`` its run as
         the RQ job ``rq_job``.
@@ -195,7 +195,7 @@ class RedisJobStore:
         assert rec is not None
         return rec, True
 
-    def _earlier(self, idem: str, job: NewJob) -> JobRecord | None:
+    def _earlier(self, idem: str, job: JobRow) -> JobRecord | None:
         earlier_id = self.redis.get(idem)
         data = self.raw(earlier_id.decode()) if earlier_id else None
         if data is None:  # a submit that died before its record was written: take the key over

@@ -26,7 +26,6 @@ import logging
 import os
 import threading
 import uuid
-from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -40,12 +39,12 @@ from service.jobs.files import JobFiles, is_job_id
 from service.jobs.limits import default_job_memory
 from service.jobs.metrics import DurationHistogram
 from service.jobs.notify import Notifier
-from service.jobs.queue import JobInput, JobQueue, JobRecord, JobSize, JobStatus, QueueHealth
+from service.jobs.queue import JobQueue, JobRecord, JobStatus, NewJob, QueueHealth
 from service.jobs.runner import DEFAULT_RUNNER
 from service.jobs.storage_health import StorageProbe
+from service.settings import default
 
 if TYPE_CHECKING:
-    from service.core.params import SmoothingParams
     from service.io import GeometryDocument
     from service.settings import Settings
 
@@ -53,8 +52,12 @@ __all__ = ["LocalQueue"]
 
 log = logging.getLogger("geosmooth.jobs")
 
+
 class LocalQueue(Maintenance):
     """Embedded job queue (the default backend of the service).
+
+    Every default that is also a setting is the setting's (:func:`service.settings.default`,
+    e.g. ``min_free_bytes`` 64 MiB, ``lease`` = ``worker_lease``): one place for each.
 
     Parameters
     ----------
@@ -103,22 +106,22 @@ class LocalQueue(Maintenance):
         self,
         data_dir: Path | str,
         workers: int | None = None,
-        job_timeout: float | None = 3600.0,
-        result_ttl: float | None = 7 * 24 * 3600.0,
+        job_timeout: float | None = default("job_timeout"),
+        result_ttl: float | None = default("result_ttl"),
         *,
         runner: str = DEFAULT_RUNNER,
-        max_attempts: int = 3,
+        max_attempts: int = default("max_attempts"),
         start_method: str | None = None,
-        lease: float = 15.0,
+        lease: float = default("worker_lease"),
         kill_grace: float = 2.0,
         sweep_interval: float | None = None,
         poll_interval: float = 0.5,
         progress_interval: float = 0.2,
-        retry_backoff: float = 5.0,
+        retry_backoff: float = default("retry_backoff"),
         memory_limit: int | None = None,
         threads_per_job: int | None = None,
-        min_free_bytes: int = 0,
-        reserve_bytes: int = 8 * 1024 * 1024,
+        min_free_bytes: int = default("min_free_bytes"),
+        reserve_bytes: int = default("reserve_bytes"),
         settings: Settings | None = None,
     ) -> None:
         if max_attempts < 1:
@@ -225,48 +228,32 @@ class LocalQueue(Maintenance):
         self.stop()
 
     # -- the JobQueue protocol -----------------------------------------------------------
-    def submit(
-        self,
-        input: JobInput,
-        fmt: str,
-        params: SmoothingParams | Mapping[str, Any],
-        filename: str | None = None,
-        *,
-        weld: bool = False,
-        tenant: str | None = None,
-        webhook_url: str | None = None,
-        idempotency_key: str | None = None,
-        size: JobSize | None = None,
-    ) -> JobRecord:
+    def submit(self, job: NewJob) -> JobRecord:
         """Store the input durably, enqueue the job and return its ``queued`` record.
 
-        See :meth:`service.jobs.queue.JobQueue.submit`. Also raises ``ValueError`` for an
-        unknown format and ``pydantic.ValidationError`` for invalid ``params``.
+        See :meth:`service.jobs.queue.JobQueue.submit`.
         """
-        job = admit.new_job(
-            input, fmt, params, filename, weld=weld, tenant=tenant, webhook_url=webhook_url,
-            idempotency_key=idempotency_key, size=size, memory_limit=self.memory_limit,
-            max_attempts=self.max_attempts,
-        )
+        row = admit.admit(job, memory_limit=self.memory_limit, max_attempts=self.max_attempts)
+        tenant, idempotency_key, input = job.tenant, job.idempotency_key, job.input
         if idempotency_key is not None:
             with admit.storage_errors():
                 earlier = self.store.find_idempotent(tenant, idempotency_key)
             if earlier is not None:
-                assert job.request_hash is not None
-                IdempotencyConflict.check(earlier[1], job.request_hash, idempotency_key)
+                assert row.request_hash is not None
+                IdempotencyConflict.check(earlier[1], row.request_hash, idempotency_key)
                 if isinstance(input, Path):
                     input.unlink(missing_ok=True)  # moved into the store: nothing to keep
                 return self._with_report(earlier[0])
         with admit.storage_errors():
-            admit.check_space(self.data_dir, job.input_bytes, self.min_free_bytes)
+            admit.check_space(self.data_dir, row.input_bytes, self.min_free_bytes)
             try:
-                self.files.create(job.job_id, job.fmt, input)
-                rec, created = self.store.insert(job)
+                self.files.create(row.job_id, row.fmt, input)
+                rec, created = self.store.insert(row)
             except BaseException:
-                self.files.remove(job.job_id)
+                self.files.remove(row.job_id)
                 raise
         if not created:  # the same request won a race with this one
-            self.files.remove(job.job_id)
+            self.files.remove(row.job_id)
             return self._with_report(rec)
         self.pool.notify()
         return rec

@@ -17,12 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from service.jobs.admit import JobRow
 from service.jobs.embedded.sqlite import Database, with_reserve
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.progress import queued_progress
 from service.jobs.queue import FINISHED, JobRecord, JobStatus
 
-__all__ = ["Claim", "JobStore", "NewJob", "RunningRow"]
+__all__ = ["Claim", "JobStore", "RunningRow"]
 
 _MAX_OFFSET = 2**62
 
@@ -52,23 +53,6 @@ class RunningRow:
     lease_until: float | None
     attempts: int
     max_attempts: int
-
-
-@dataclass(frozen=True)
-class NewJob:
-    """What ``insert`` stores for a submitted job."""
-
-    job_id: str
-    fmt: str
-    filename: str | None
-    params: dict[str, Any]
-    input_bytes: int
-    max_attempts: int
-    weld: bool = False
-    tenant: str | None = None
-    webhook_url: str | None = None
-    idempotency_key: str | None = None
-    request_hash: str | None = None
 
 
 class JobStore(Database):
@@ -139,7 +123,7 @@ class JobStore(Database):
         )
         return None if row is None else (self._record(row), row["request_hash"])
 
-    def insert(self, job: NewJob) -> tuple[JobRecord, bool]:
+    def insert(self, job: JobRow) -> tuple[JobRecord, bool]:
         """Add a ``queued`` job (committed, and synced to disk, when this returns).
 
         Returns

@@ -7,8 +7,8 @@ import pytest
 import trimesh
 
 from service.core.operator.curvature import curvature, osculating_curvature
+from service.core.operator.delaunay import cloud_delaunay_neighborhoods
 from service.core.operator.neighborhoods import (
-    cloud_delaunay_neighborhoods,
     curve_neighborhoods,
     mesh_neighborhoods,
 )

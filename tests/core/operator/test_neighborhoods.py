@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, cKDTree
 
+from service.core.operator.delaunay import cloud_delaunay_neighborhoods
 from service.core.operator.neighborhoods import (
-    cloud_delaunay_neighborhoods,
     cloud_knn_neighborhoods,
     curve_neighborhoods,
     mesh_neighborhoods,

@@ -52,10 +52,10 @@ def test_bound_holds_for_every_point(make, target: dict, displacement: str) -> N
 def test_rounds_end_without_clipping_at_a_feasible_bound() -> None:
     g = _mesh()
     base = smooth(g, SmoothingParams(weights="uniform"))
-    delta = 3.0 * base.rms_deviation
+    delta = 3.0 * base.rms_displacement
     res = smooth(g, SmoothingParams(weights="uniform", max_deviation=delta))
     assert res.bound is not None and res.bound["clipped"] == 0 and res.bound["rounds"] <= 10
-    assert res.max_deviation <= delta
+    assert res.max_displacement <= delta
 
 
 def test_infeasible_tau_keeps_the_bound_and_says_so() -> None:
@@ -63,7 +63,7 @@ def test_infeasible_tau_keeps_the_bound_and_says_so() -> None:
     delta = 0.005
     tau = 2.0 * g.n * delta**2  # more than every point moving by delta
     res = smooth(g, SmoothingParams(weights="uniform", tau=tau, max_deviation=delta))
-    assert res.max_deviation <= delta
+    assert res.max_displacement <= delta
     assert any("cannot hold" in w for w in res.warnings)
 
 

@@ -19,6 +19,7 @@ import pytest
 from service.jobs import JobStatus
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.queue import RQQueue
+from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, REPO, pid_gone, wait_finished, wait_for
 from tests.jobs.rq_harness import (
@@ -67,7 +68,7 @@ def _no_overlap(cluster: dict[str, Any], job_id: str) -> list[tuple[int, float, 
 
 def test_sigkill_of_a_worker_mid_job_reruns_it_on_the_other(cluster: dict[str, Any]) -> None:
     queue: RQQueue = cluster["queue"]
-    ids = [queue.submit(script("sleep", seconds=2.5, steps=10), "json", PARAMS).id
+    ids = [queue.submit(NewJob.check(script("sleep", seconds=2.5, steps=10), "json", PARAMS)).id
            for _ in range(2)]  # fmt: skip
 
     def both_running() -> list[Any] | None:
@@ -99,7 +100,7 @@ def test_sigterm_of_a_worker_requeues_its_job_without_counting_a_try(
     cluster: dict[str, Any],
 ) -> None:
     queue: RQQueue = cluster["queue"]
-    rec = queue.submit(script("sleep", seconds=2.0, steps=8), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=2.0, steps=8), "json", PARAMS))
     running = wait_for(lambda: (r := queue.get(rec.id)) and r.status is JobStatus.RUNNING
                        and r.pid and runs(_job_dir(cluster, rec.id)) and r, timeout=20)  # fmt: skip
     owner = queue.store.raw(rec.id)["owner"]  # type: ignore[index]
@@ -117,7 +118,7 @@ def test_sigterm_of_a_worker_requeues_its_job_without_counting_a_try(
 
 def test_timeout_kills_a_run_stuck_anywhere(cluster: dict[str, Any]) -> None:
     queue: RQQueue = cluster["queue"]
-    rec = queue.submit(script("sleep", seconds=60), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=60), "json", PARAMS))
     running = wait_for(lambda: (r := queue.get(rec.id)) and r.pid and r, timeout=30)
     done = wait_finished(queue, rec.id, timeout=20)
     assert done.status is JobStatus.FAILED and done.problem["code"] == "timeout"  # type: ignore[index]
@@ -130,9 +131,9 @@ def test_redis_killed_and_restarted_loses_no_job(cluster: dict[str, Any]) -> Non
     redis: RedisServer = cluster["redis"]
     for w in cluster["workers"]:
         w.wait_registered(queue.backend.redis)
-    long = [queue.submit(script("sleep", seconds=2.0, steps=8), "json", PARAMS).id
+    long = [queue.submit(NewJob.check(script("sleep", seconds=2.0, steps=8), "json", PARAMS)).id
             for _ in range(2)]  # fmt: skip
-    short = [queue.submit(script("ok", steps=2), "json", PARAMS).id for _ in range(4)]
+    short = [queue.submit(NewJob.check(script("ok", steps=2), "json", PARAMS)).id for _ in range(4)]
     wait_for(lambda: all((r := queue.get(j)) and r.status is JobStatus.RUNNING for j in long),
              timeout=20)  # fmt: skip
     redis.kill()  # SIGKILL: only the append-only file survives

@@ -18,6 +18,7 @@ from service.io import GeometryDocument, write_geometry
 from service.jobs import JobQueue, JobStatus, LocalQueue
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.queue import RQQueue
+from service.jobs.queue import NewJob
 from service.jobs.runner import DEFAULT_RUNNER
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, pid_gone, wait_finished, wait_for
@@ -87,7 +88,7 @@ def test_twenty_jobs_from_four_threads_equal_the_embedded_results(
         try:
             for i in indices:
                 data, fmt, params = inputs[i]
-                ids[i] = queue.submit(data, fmt, params, filename=f"in{i}.{fmt}").id
+                ids[i] = queue.submit(NewJob.check(data, fmt, params, filename=f"in{i}.{fmt}")).id
         except BaseException as exc:  # pragma: no cover - reported below
             errors.append(exc)
 
@@ -98,7 +99,7 @@ def test_twenty_jobs_from_four_threads_equal_the_embedded_results(
         t.join()
     assert not errors and len(set(ids.values())) == 20
     local = make_queue(runner=DEFAULT_RUNNER)
-    local_ids = {i: local.submit(*inputs[i]).id for i in range(20)}
+    local_ids = {i: local.submit(NewJob.check(*inputs[i])).id for i in range(20)}
     remote = {i: wait_finished(queue, j, timeout=60) for i, j in ids.items()}
     embedded = {i: wait_finished(local, j, timeout=60) for i, j in local_ids.items()}
     data_dir = Path(cluster["settings"].data_dir)
@@ -122,7 +123,7 @@ def test_twenty_jobs_from_four_threads_equal_the_embedded_results(
 
 def test_progress_of_a_remote_run_is_visible(cluster: dict[str, Any]) -> None:
     queue = _queue(cluster)
-    rec = queue.submit(script("sleep", seconds=1.5, steps=10), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=1.5, steps=10), "json", PARAMS))
     assert rec.progress is not None and rec.progress["stage"] == "queued"
     seen: list[dict[str, Any]] = []
     deadline = time.monotonic() + 20
@@ -144,7 +145,7 @@ def test_progress_of_a_remote_run_is_visible(cluster: dict[str, Any]) -> None:
 
 def test_cancel_kills_the_remote_run(cluster: dict[str, Any]) -> None:
     queue = _queue(cluster)
-    rec = queue.submit(script("sleep", seconds=30), "json", PARAMS)
+    rec = queue.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
     running = wait_for(lambda: (r := queue.get(rec.id)) and r.status is JobStatus.RUNNING
                        and r.pid and r, timeout=20)  # fmt: skip
     pid = running.pid
@@ -154,7 +155,9 @@ def test_cancel_kills_the_remote_run(cluster: dict[str, Any]) -> None:
     assert time.monotonic() - t0 < 10
     assert cancelled is not None and cancelled.status is JobStatus.CANCELLED
     assert pid_gone(pid)  # the work horse is gone when cancel returns
-    follow = queue.submit(script("ok"), "json", PARAMS)  # both workers still take jobs
+    follow = queue.submit(
+        NewJob.check(script("ok"), "json", PARAMS)
+    )  # both workers still take jobs
     assert wait_finished(queue, follow.id, 20).status is JobStatus.SUCCEEDED
     time.sleep(0.3)
     assert queue.get(rec.id).status is JobStatus.CANCELLED  # type: ignore[union-attr]
@@ -162,8 +165,10 @@ def test_cancel_kills_the_remote_run(cluster: dict[str, Any]) -> None:
 
 def test_cancel_of_a_queued_remote_job(cluster: dict[str, Any]) -> None:
     queue = _queue(cluster)
-    blockers = [queue.submit(script("sleep", seconds=3), "json", PARAMS) for _ in range(2)]
-    waiting = queue.submit(script("ok"), "json", PARAMS)
+    blockers = [
+        queue.submit(NewJob.check(script("sleep", seconds=3), "json", PARAMS)) for _ in range(2)
+    ]
+    waiting = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     assert queue.cancel(waiting.id).status is JobStatus.CANCELLED  # type: ignore[union-attr]
     for b in blockers:
         assert wait_finished(queue, b.id, 20).status is JobStatus.SUCCEEDED
@@ -173,7 +178,7 @@ def test_cancel_of_a_queued_remote_job(cluster: dict[str, Any]) -> None:
 
 def test_crashes_fail_input_errors_fail_oom_kill_is_retried(cluster: dict[str, Any]) -> None:
     queue = _queue(cluster)
-    jobs = {name: queue.submit(script(name), "json", PARAMS).id
+    jobs = {name: queue.submit(NewJob.check(script(name), "json", PARAMS)).id
             for name in ("segfault", "core_error", "raise", "oom_once")}  # fmt: skip
     done = {name: wait_finished(queue, j, timeout=30) for name, j in jobs.items()}
     assert done["segfault"].status is JobStatus.FAILED and done["segfault"].attempts == 1
@@ -190,14 +195,24 @@ def test_crashes_fail_input_errors_fail_oom_kill_is_retried(cluster: dict[str, A
 
 def test_tenants_and_idempotency_through_redis(cluster: dict[str, Any]) -> None:
     queue = _queue(cluster)
-    a = queue.submit(script("ok"), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
-    again = queue.submit(script("ok"), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
+    a = queue.submit(
+        NewJob.check(script("ok"), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
+    )
+    again = queue.submit(
+        NewJob.check(script("ok"), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
+    )
     assert again.id == a.id
     from service.jobs.errors import IdempotencyConflict
 
     with pytest.raises(IdempotencyConflict):
-        queue.submit(script("ok", steps=9), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
-    b = queue.submit(script("ok"), "json", PARAMS, tenant="b" * 16, idempotency_key="k")
+        queue.submit(
+            NewJob.check(
+                script("ok", steps=9), "json", PARAMS, tenant="a" * 16, idempotency_key="k"
+            )
+        )
+    b = queue.submit(
+        NewJob.check(script("ok"), "json", PARAMS, tenant="b" * 16, idempotency_key="k")
+    )
     assert b.id != a.id
     assert queue.get(b.id, tenant="a" * 16) is None and queue.get(a.id, tenant="a" * 16)
     page, total = queue.list(tenant="b" * 16)
@@ -207,7 +222,9 @@ def test_tenants_and_idempotency_through_redis(cluster: dict[str, Any]) -> None:
     assert queue.delete(a.id, tenant="a" * 16) is True and queue.get(a.id) is None
     data_dir = Path(cluster["settings"].data_dir)
     assert not (data_dir / "jobs" / a.id).exists()
-    c = queue.submit(script("ok"), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
+    c = queue.submit(
+        NewJob.check(script("ok"), "json", PARAMS, tenant="a" * 16, idempotency_key="k")
+    )
     assert c.id != a.id  # the key went with the deleted job
 
 
@@ -224,7 +241,7 @@ def test_the_worker_that_finished_a_job_posts_its_webhook(cluster: dict[str, Any
     queue = _queue(cluster)
     verify = documented_verifier()
     with Receiver([502, 200]) as hook:
-        rec = queue.submit(script("ok"), "json", PARAMS, webhook_url=hook.url())
+        rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS, webhook_url=hook.url()))
         done = wait_finished(queue, rec.id, 20)
         wait_for(lambda: len(hook.deliveries) == 2, timeout=15)
     last = hook.deliveries[-1]
@@ -235,7 +252,7 @@ def test_the_worker_that_finished_a_job_posts_its_webhook(cluster: dict[str, Any
 
 def test_ttl_expiry_removes_records_and_blobs(cluster: dict[str, Any]) -> None:
     queue = _queue(cluster)
-    rec = queue.submit(script("ok"), "json", PARAMS, idempotency_key="ttl-key")
+    rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS, idempotency_key="ttl-key"))
     assert wait_finished(queue, rec.id, 20).status is JobStatus.SUCCEEDED
     job_dir = Path(cluster["settings"].data_dir) / "jobs" / rec.id
     assert job_dir.exists()
@@ -246,5 +263,5 @@ def test_ttl_expiry_removes_records_and_blobs(cluster: dict[str, Any]) -> None:
     assert queue.store.redis.exists(queue.store.key(rec.id)) == 0
     assert all(queue.store.redis.zscore(queue.store.index(None, s), rec.id) is None
                for s in (None, "succeeded"))  # fmt: skip
-    again = queue.submit(script("ok"), "json", PARAMS, idempotency_key="ttl-key")
+    again = queue.submit(NewJob.check(script("ok"), "json", PARAMS, idempotency_key="ttl-key"))
     assert again.id != rec.id  # the idempotency key expired with its job

@@ -17,6 +17,7 @@ from service.jobs import JobStatus
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.blobs import S3Blobs
 from service.jobs.distributed.queue import RQQueue
+from service.jobs.queue import NewJob
 from tests.jobs.jobs_helpers import wait_finished
 from tests.jobs.rq_harness import MotoServer, RedisServer, WorkerProcess, rq_settings
 
@@ -65,7 +66,7 @@ def test_jobs_run_with_inputs_and_results_in_s3(s3_cluster: dict[str, Any]) -> N
     geometry = _cloud(5)
     params = SmoothingParams(rms=0.01)
     data = write_geometry(GeometryDocument.from_geometry(geometry), "ply")
-    rec = queue.submit(data, "ply", params, filename="scan.ply")
+    rec = queue.submit(NewJob.check(data, "ply", params, filename="scan.ply"))
     done = wait_finished(queue, rec.id, timeout=60)
     assert done.status is JobStatus.SUCCEEDED, done.problem
     keys = sorted(o["Key"] for o in queue.blobs.client.list_objects_v2(
@@ -115,7 +116,7 @@ def test_no_geometry_travels_through_redis(s3_cluster: dict[str, Any]) -> None:
     marker = "0.123456789012345"  # a coordinate that appears in the input file only
     body = ("\n".join(f"{x} {y} 0.5" for x, y in np.random.default_rng(1).uniform(size=(200, 2)))
             + f"\n{marker} 0.25 0.5\n").encode()  # fmt: skip
-    rec = queue.submit(body, "xyz", SmoothingParams(rms=0.01))
+    rec = queue.submit(NewJob.check(body, "xyz", SmoothingParams(rms=0.01)))
     assert wait_finished(queue, rec.id, timeout=60).status is JobStatus.SUCCEEDED
     redis = queue.backend.redis
     total = 0

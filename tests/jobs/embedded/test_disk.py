@@ -11,6 +11,7 @@ import pytest
 
 from service.jobs import JobStatus, LocalQueue
 from service.jobs.errors import StorageFull, StorageUnavailable
+from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, wait_finished, wait_for
 
@@ -54,15 +55,15 @@ def test_full_disk_fails_running_jobs_refuses_submits_and_recovers(
             "sweep_interval": 0.2}  # fmt: skip
     queue = make_queue(**opts)
     assert (data_dir / "jobs.reserve").stat().st_size == 128 * 1024
-    done_before = queue.submit(script("ok"), "json", PARAMS)
+    done_before = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     assert wait_finished(queue, done_before.id).status is JobStatus.SUCCEEDED
-    running = queue.submit(script("sleep", seconds=2.0, steps=4, extra_bytes=1 << 20), "json",
-                           PARAMS)  # fmt: skip
+    slow = script("sleep", seconds=2.0, steps=4, extra_bytes=1 << 20)
+    running = queue.submit(NewJob.check(slow, "json", PARAMS))
     wait_for(lambda: (r := queue.get(running.id)) and r.status is JobStatus.RUNNING)
     filler = _fill(small_fs)
 
     with pytest.raises(StorageFull) as err:  # 507 at submit
-        queue.submit(script("ok"), "json", PARAMS)
+        queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     assert err.value.status == 507 and str(small_fs) not in err.value.message
     health = queue.health()
     assert not health.ok and health.checks["storage"] == "full"
@@ -80,7 +81,7 @@ def test_full_disk_fails_running_jobs_refuses_submits_and_recovers(
 
     filler.unlink()  # space comes back: the queue recovers by itself
     wait_for(lambda: again.health().ok, timeout=5)
-    after = again.submit(script("ok"), "json", PARAMS)
+    after = again.submit(NewJob.check(script("ok"), "json", PARAMS))
     assert wait_finished(again, after.id).status is JobStatus.SUCCEEDED
     wait_for(lambda: (data_dir / "jobs.reserve").exists(), timeout=5)  # reserve kept again
 
@@ -88,29 +89,30 @@ def test_full_disk_fails_running_jobs_refuses_submits_and_recovers(
 def test_read_only_store_is_unavailable_then_recovers(
     make_queue: MakeQueue, small_fs: Path
 ) -> None:
-    first_queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0)
-    first = first_queue.submit(script("ok"), "json", PARAMS)
+    # a 4 MiB store: no free-space floor (the default, 64 MiB, is the whole disk here)
+    first_queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0, min_free_bytes=0)
+    first = first_queue.submit(NewJob.check(script("ok"), "json", PARAMS))
     assert wait_finished(first_queue, first.id).status is JobStatus.SUCCEEDED
     first_queue.stop()  # (a remount needs no file open for writing)
     subprocess.run(["mount", "-o", "remount,ro", str(small_fs)], check=True)
     try:
-        queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0)  # starts read-only
+        queue = make_queue(data_dir=small_fs / "data", reserve_bytes=0, min_free_bytes=0)
         with pytest.raises(StorageUnavailable) as err:
-            queue.submit(script("ok"), "json", PARAMS)
+            queue.submit(NewJob.check(script("ok"), "json", PARAMS))
         assert err.value.status == 503
         assert queue.health().checks["storage"] == "read-only"
         assert queue.get(first.id).status is JobStatus.SUCCEEDED  # type: ignore[union-attr]
     finally:
         subprocess.run(["mount", "-o", "remount,rw", str(small_fs)], check=True)
     assert queue.health().ok
-    assert wait_finished(queue, queue.submit(script("ok"), "json", PARAMS).id).status is (
-        JobStatus.SUCCEEDED)  # fmt: skip
+    again = queue.submit(NewJob.check(script("ok"), "json", PARAMS))
+    assert wait_finished(queue, again.id).status is JobStatus.SUCCEEDED
 
 
 def test_corrupted_database_is_reported_not_ready(make_queue: MakeQueue, tmp_path: Path) -> None:
     data_dir = tmp_path / "data"
     queue = make_queue(data_dir=data_dir)
-    ids = [queue.submit(script("ok"), "json", PARAMS).id for _ in range(30)]
+    ids = [queue.submit(NewJob.check(script("ok"), "json", PARAMS)).id for _ in range(30)]
     for job_id in ids:
         wait_finished(queue, job_id)
     assert queue.health().checks["database"] == "ok"

@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from service.jobs import JobStatus, LocalQueue
+from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, pid_gone, start_server, wait_finished, wait_for
 
@@ -33,7 +34,8 @@ def test_sigkill_of_the_server_loses_no_job(make_queue: MakeQueue, tmp_path: Pat
     # submit through a queue that is not started: the jobs only live in the store
     client = make_queue(start=False, data_dir=data_dir)
     ids = [
-        client.submit(script("sleep", seconds=2.0, steps=8), "json", PARAMS).id for _ in range(4)
+        client.submit(NewJob.check(script("sleep", seconds=2.0, steps=8), "json", PARAMS)).id
+        for _ in range(4)
     ]
     server = start_server(data_dir, workers=2)
     try:
@@ -75,7 +77,7 @@ def test_sigkill_of_the_server_loses_no_job(make_queue: MakeQueue, tmp_path: Pat
 def test_poison_job_gives_up_after_max_attempts(make_queue: MakeQueue, tmp_path: Path) -> None:
     data_dir = tmp_path / "data"
     client = make_queue(start=False, data_dir=data_dir, max_attempts=2)
-    poison = client.submit(script("kill_server"), "json", PARAMS).id
+    poison = client.submit(NewJob.check(script("kill_server"), "json", PARAMS)).id
     for attempt in range(1, 3):
         server = start_server(data_dir, workers=1, max_attempts=2)
         try:
@@ -94,6 +96,6 @@ def test_poison_job_gives_up_after_max_attempts(make_queue: MakeQueue, tmp_path:
     assert rec.problem is not None and rec.problem["code"] == "attempts-exhausted"
     assert "2 times" in rec.problem["detail"]
     # and the queue goes on
-    ok = queue.submit(script("ok"), "json", PARAMS).id
+    ok = queue.submit(NewJob.check(script("ok"), "json", PARAMS)).id
     assert wait_finished(queue, ok).status is JobStatus.SUCCEEDED
     assert len(_pids(queue, poison)) == 2  # never started again

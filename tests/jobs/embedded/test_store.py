@@ -18,10 +18,12 @@ from service.core.errors import IndexOutOfRange
 from service.core.progress import ProgressEvent
 from service.io.errors import FormatError, UnsupportedFormat
 from service.jobs import JobStatus, LocalQueue, problems
+from service.jobs.admit import JobRow
 from service.jobs.embedded.maintenance import owner_dead as _owner_dead
-from service.jobs.embedded.store import JobStore, NewJob
+from service.jobs.embedded.store import JobStore
 from service.jobs.files import JobFiles, is_job_id, write_durable
 from service.jobs.progress import final_progress
+from service.jobs.queue import NewJob
 from service.jobs.runner import JobContext, RunLost
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, pid_gone, wait_for
@@ -37,7 +39,7 @@ def store(tmp_path: Path) -> JobStore:
 
 
 def _add(store: JobStore, job_id: str = "a" * 32, max_attempts: int = 3) -> str:
-    store.insert(NewJob(job_id, "json", None, {"tau": 1.0}, 10, max_attempts))
+    store.insert(JobRow(job_id, "json", None, {"tau": 1.0}, 10, max_attempts))
     return job_id
 
 
@@ -90,7 +92,7 @@ def test_stale_attempt_cannot_overwrite_a_newer_run(store: JobStore) -> None:
 
 def test_recovery_requeues_only_runs_of_dead_owners(make_queue: MakeQueue) -> None:
     queue = make_queue(start=False, max_attempts=2)
-    ids = [queue.submit(script("ok"), "json", PARAMS).id for _ in range(4)]
+    ids = [queue.submit(NewJob.check(script("ok"), "json", PARAMS)).id for _ in range(4)]
     store = queue.store
     host = socket.gethostname()
     alive_elsewhere = f"{host}@{os.getppid()}:x"  # a live process on this host, lease valid
@@ -129,7 +131,7 @@ def test_a_zombie_owner_is_dead() -> None:
 def test_cancel_from_another_process_kills_the_job(make_queue: MakeQueue) -> None:
     server = make_queue(poll_interval=0.1)
     other = make_queue(start=False, data_dir=server.data_dir)  # e.g. another API worker
-    rec = other.submit(script("sleep", seconds=30), "json", PARAMS)
+    rec = other.submit(NewJob.check(script("sleep", seconds=30), "json", PARAMS))
     pid = wait_for(lambda: (r := server.get(rec.id)) and r.status is JobStatus.RUNNING and r.pid)
     assert other.cancel(rec.id).status is JobStatus.CANCELLED  # type: ignore[union-attr]
     wait_for(lambda: pid_gone(pid), timeout=5)
@@ -138,7 +140,7 @@ def test_cancel_from_another_process_kills_the_job(make_queue: MakeQueue) -> Non
 
 def test_orphan_directories_are_removed_on_start(make_queue: MakeQueue) -> None:
     queue = make_queue(start=False)
-    kept = queue.submit(script("ok"), "json", PARAMS).id
+    kept = queue.submit(NewJob.check(script("ok"), "json", PARAMS)).id
     orphan = queue.files.root / ("f" * 32)
     orphan.mkdir()
     old = time.time() - 3600

@@ -71,7 +71,7 @@ function jsonSegments(json) {
  * of the page when the job was submitted from it; null for a job opened from the list).
  */
 export async function loadResultView(job, input) {
-  const response = await apiFetch(`${job.links.result}?format=json`);
+  const response = await apiFetch(`${job.links.result}?output_format=json`);
   const json = await response.json();
   const v = getViewer();
   if (!input || input.geom.n !== json.points.length) {

@@ -77,7 +77,7 @@ function wireInput() {
 function inputForm(file, name) {
   const body = new FormData();
   body.append("file", file, name);
-  if ($("#format-select").value) body.append("format", $("#format-select").value);
+  if ($("#format-select").value) body.append("input_format", $("#format-select").value);
   if ($("#weld").checked) body.append("weld", "true");
   return body;
 }
@@ -121,7 +121,7 @@ function showInfo(info, name) {
     ["kind", info.kind, "points", fmt(info.n_points)],
     ["dimension", `${info.dimension}-D`, info.kind === "mesh" ? "faces" : "polylines", fmt(info.kind === "mesh" ? info.n_faces : info.n_polylines)],
     ["neighbour pairs", fmt(info.n_edges), "mean spacing", fmt(info.mean_spacing)],
-    ["bounding box", bbox, "format", info.format],
+    ["bounding box", bbox, "format", info.input_format ?? info.format],
     ["φ(0)", fmt(info.phi0), "valid τ", `(0, ${fmt(info.tau_range[1])})`],
     ["noise estimate σ", fmt(info.sigma_estimate), "valid rms", `(0, ${fmt(info.rms_range[1])})`],
   ];

@@ -11,7 +11,7 @@ export function showReport(report) {
     ["τ", fmt(report.tau, 6), "relative error |φ − τ| / τ", fmt(report.relative_error, 3)],
     ["converged", String(report.converged), "iterations", fmt(report.iterations)],
     ["factorizations", fmt(report.factorizations), "solver", report.solver || "–"],
-    ["RMS deviation", fmt(report.rms_deviation), "max deviation", fmt(report.max_deviation)],
+    ["RMS displacement", fmt(report.rms_displacement), "max displacement", fmt(report.max_displacement)],
     ["points", fmt(report.n_points), "kind / dimension", `${report.kind} / ${report.dimension}-D`],
     ["Laplacian", report.laplacian || "–", "weights", report.weights || "–"],
     ["fixed points", fmt(report.n_fixed), "volume scale", fmt(report.volume_scale)],
@@ -40,12 +40,13 @@ export function clearReport() {
 /** Enable the download buttons for `job` (a succeeded Job). */
 export function enableDownloads(job) {
   const select = $("#download-format");
-  if (job.format && [...select.options].some((o) => o.value === job.format)) select.value = job.format;
+  const input = job.input_format ?? job.format;
+  if (input && [...select.options].some((o) => o.value === input)) select.value = input;
   $("#download-result").disabled = false;
   $("#download-report").disabled = false;
   $("#download-result").onclick = async () => {
     const fmtName = select.value;
-    const response = await apiFetch(`${job.links.result}?format=${encodeURIComponent(fmtName)}`);
+    const response = await apiFetch(`${job.links.result}?output_format=${encodeURIComponent(fmtName)}`);
     saveBlob(await response.blob(), filenameFrom(response, `result.${fmtName}`));
   };
   $("#download-report").onclick = async () => {
