@@ -37,7 +37,9 @@ HOSTILE = {
     "nan_ellipse": _entity(
         "ELLIPSE", [(10, 0), (20, 0), (11, 1), (21, 0), (40, "nan"), (41, 0), (42, 6.28)]
     ),
-    "nan_extrusion": _entity("CIRCLE", [(10, 0), (20, 0), (40, 1), (210, "nan"), (220, 0), (230, 1)]),
+    "nan_extrusion": _entity(
+        "CIRCLE", [(10, 0), (20, 0), (40, 1), (210, "nan"), (220, 0), (230, 1)]
+    ),
     "polyline_nan": "0\nPOLYLINE\n8\n0\n66\n1\n70\n8\n0\nVERTEX\n8\n0\n10\n0\n20\n0\n30\n0\n70\n32"
     "\n0\nVERTEX\n8\n0\n10\nnan\n20\n1\n30\n0\n70\n32\n0\nSEQEND\n",
     "zero_arc": _entity("ARC", [(10, 0), (20, 0), (40, 0), (50, 0), (51, 90)]),
