@@ -98,6 +98,12 @@ class SmoothResult:
         ``volume_change``, ``area_change``, ``moved_far``.
     bound : dict or None
         ``max_deviation`` bound: ``{"max_deviation", "rounds", "clipped"}``.
+    shape_warnings : list of str
+        The warnings of the shape checks alone (also in ``warnings``); ``strict=True`` fails
+        on any.
+    noise_found : bool or None
+        Automatic tau: whether the noise estimate found noise (``False``: the input was
+        returned unchanged, ``tau_how`` says why); ``None`` for other rules.
     """
 
     points: NDArray[np.float64]
@@ -137,6 +143,8 @@ class SmoothResult:
         )
     )
     bound: dict[str, Any] | None = None
+    shape_warnings: list[str] = field(default_factory=list)
+    noise_found: bool | None = None
 
     @property
     def n_points(self) -> int:
@@ -180,6 +188,8 @@ class SmoothResult:
             tau_rule=self.tau_rule,
             sigma_estimate=self.sigma_estimate,
             tau_how=self.tau_how,
+            noise_found=self.noise_found,
+            shape_warnings=list(self.shape_warnings),
             bound=self.bound,
             **self.checks,
         )

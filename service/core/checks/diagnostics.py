@@ -9,9 +9,9 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.checks.guards import guard_warnings, noise_ratio, shape_checks
+from service.core.checks.guards import fold_note, guard_warnings, noise_ratio, shape_checks
 from service.core.checks.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
-from service.core.errors import SolverError
+from service.core.errors import ShapeLost, SolverError
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
@@ -59,7 +59,13 @@ def diagnostics(
         )
     checks = shape_checks(geometry, X)
     ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
-    run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
+    shape_warnings = guard_warnings(checks, params.tau_rule, ratio)
+    if shape_warnings and params.strict:
+        raise ShapeLost(shape_warnings, checks.to_dict())
+    run.notes.extend(shape_warnings)
+    note = fold_note(checks, params.displacement)
+    if note:
+        run.notes.append(note)
     timings["search"] = run.search_seconds
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
@@ -99,6 +105,8 @@ def diagnostics(
         tau_how=run.tau_how,
         checks=checks.to_dict(),
         bound=run.bound,
+        shape_warnings=shape_warnings,
+        noise_found=None if params.tau_rule != "auto" else bool(run.sigma),
     )
 
 

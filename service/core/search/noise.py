@@ -35,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
@@ -245,6 +246,8 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
     if k < p + 2:
         return None
     P = geometry.points
+    if geometry.faces is None and geometry.edges is not None:
+        return _estimate(P, _curve_neighbours(geometry, 2 * k), k, d)
     tree = cKDTree(P)
     at = _sample(P.shape[0])
     dist, _ = tree.query(P[at], k=2)
@@ -256,7 +259,43 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
         at = _sample(P.shape[0])
     k2 = min(2 * k, P.shape[0])
     _, nbr = tree.query(P[at], k=k2)
-    nbr = np.asarray(nbr, dtype=np.int64).reshape(at.size, k2)
+    return _estimate(P, np.asarray(nbr, dtype=np.int64).reshape(at.size, k2), k, d)
+
+
+def _curve_neighbours(geometry: Geometry, K: int) -> NDArray[np.int64]:
+    """The ``K`` nearest points along the curves (hops over the edges, then distance) of
+    sampled points whose curve has that many; nearest in space would take points of the next
+    turn of a helix or of a neighbouring strand for the curve's own (a helix with 100 points a
+    turn and pitch 0.63: 20 nearest in space span two turns)."""
+    n = geometry.n
+    E = np.asarray(geometry.edges)
+    A = sp.csr_matrix((np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                      shape=(n, n))
+    A = (A + sp.identity(n, format="csr")).astype(bool).astype(np.float64)
+    at = _sample(n)
+    R = sp.csr_matrix((np.ones(at.size), (np.arange(at.size), at)), shape=(at.size, n))
+    score = R.copy()
+    for _ in range(K):  # each hop adds 1 to every point reached so far: nearer, higher
+        R = (R @ A).astype(bool).astype(np.float64)
+        score = score + R
+    score = score.tocsr()
+    P = geometry.points
+    rows = []
+    for i in range(at.size):
+        lo, hi = score.indptr[i], score.indptr[i + 1]
+        if hi - lo < K:
+            continue
+        cols = score.indices[lo:hi]
+        dist = np.linalg.norm(P[cols] - P[at[i]], axis=1)
+        rows.append(cols[np.lexsort((dist, -score.data[lo:hi]))[:K]])
+    return np.array(rows, dtype=np.int64).reshape(-1, K)
+
+
+def _estimate(P: Array, nbr: NDArray[np.int64], k: int, d: int) -> NoiseEstimate | None:
+    """The estimate from neighbourhoods ``nbr`` (nearest first, ``k`` or more per row)."""
+    k2 = nbr.shape[1]
+    if nbr.shape[0] == 0 or k2 < k:
+        return None
     v = patch_variances(P, nbr[:, :k], d)
     ok = np.isfinite(v)
     if ok.sum() < max(10, v.size // 10):
