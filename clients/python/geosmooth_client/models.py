@@ -167,6 +167,11 @@ class Report(Mapping[str, Any]):
         "rms_deviation": "rms_deviation",
         "max_deviation": "max_deviation",
         "warnings": "warnings",
+        "sigma_estimate": "sigma_estimate",
+        "noise_found": "noise_found",
+        "tau_rule": "tau_rule",
+        "tau_how": "tau_how",
+        "shape_warnings": "shape_warnings",
     }
 
     def __init__(self, data: Mapping[str, Any]) -> None:
