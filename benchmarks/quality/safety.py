@@ -69,7 +69,8 @@ def _run(g: Geometry, **kw: Any) -> tuple[np.ndarray, dict[str, Any]]:
         "noise_found": rep.get("noise_found"),
         "tau": rep.get("tau"),
         "warnings": rep.get("warnings", []),
-        "shape_warned": _shape_warned(rep.get("warnings", [])),
+        "shape_warned": bool(rep["shape_warnings"]) if "shape_warnings" in rep
+        else _shape_warned(rep.get("warnings", [])),
         "area_change": rep.get("area_change"),
         "volume_change": rep.get("volume_change"),
         "flipped_faces": rep.get("flipped_faces"),
