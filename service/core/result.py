@@ -90,7 +90,9 @@ class SmoothResult:
     tau_rule : str
         How lambda was set: ``"lam"``, ``"tau"``, ``"rms"``, ``"auto"`` or ``"gcv"``.
     sigma_estimate : float or None
-        Estimated noise level (automatic tau, ``service.core.search.noise``).
+        Estimated noise level (``service.core.search.noise``): the automatic tau's (0 when no
+        noise was found), or for a given tau/rms/lam the one the shape checks compared with
+        (``None`` when no noise was found).
     tau_how : str or None
         How the automatic tau was chosen, in words.
     checks : dict

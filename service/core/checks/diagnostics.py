@@ -105,7 +105,7 @@ def diagnostics(
         spectrum=spectrum,
         displacement=params.displacement,
         tau_rule=params.tau_rule,
-        sigma_estimate=run.sigma,
+        sigma_estimate=run.sigma if run.sigma is not None else sigma,
         tau_how=run.tau_how,
         checks=checks.to_dict(),
         bound=run.bound,

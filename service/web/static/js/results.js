@@ -25,7 +25,6 @@ export function showReport(report) {
     rows.push(row);
   }
   if (t.total !== undefined) rows.push(["time: total (smoothing)", seconds(t.total)]);
-  for (const w of report.warnings || []) rows.push(["warning", w]);
   fillTable($("#report-table"), rows);
   showNotices(report);
   const gamma = report.spectrum?.gamma;
