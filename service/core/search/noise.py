@@ -247,7 +247,10 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
         return None
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None:
-        return _estimate(P, _curve_neighbours(geometry, 2 * k), k, d)
+        along = _curve_neighbours(geometry, 2 * k)
+        if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
+            return _estimate(P, along, k, d)
+        # mostly polylines shorter than 2k points: neighbours in space, as for clouds
     tree = cKDTree(P)
     at = _sample(P.shape[0])
     dist, _ = tree.query(P[at], k=2)
