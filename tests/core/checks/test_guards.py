@@ -89,3 +89,20 @@ def test_moves_beyond_the_noise_warn_and_name_the_parameter() -> None:
     assert guard_warnings(c, "rms", moves=0.9 * NOISE_MOVES) == []
     ws = guard_warnings(c, "rms", moves=1.5 * NOISE_MOVES)
     assert len(ws) == 1 and "lower rms" in ws[0] and "times the estimated noise" in ws[0]
+
+
+def test_folds_the_input_had_and_kept_are_a_note_not_a_shape_warning() -> None:
+    """The quantized-helicoid case of issue 20: the result keeps the input's folds. Not a loss
+    of shape (no warning, strict passes), but the user is told and pointed to free
+    displacement."""
+    from service.core.checks.guards import fold_note
+
+    P, F = grid_mesh(20, 20)
+    rng = np.random.default_rng(4)
+    noisy = P + 0.04 * rng.normal(size=P.shape) * np.r_[1.0, 1.0, 0.2]
+    c = shape_checks(Geometry(noisy, faces=F), noisy + 1e-9)  # nothing unfolded
+    assert c.folded_faces == c.folded_input and c.new_folds == 0
+    assert not guard_warnings(c, "auto")
+    note = fold_note(c, "normal")
+    assert note is not None and f"{c.folded_faces} faces" in note and "'free'" in note
+    assert fold_note(shape_checks(Geometry(noisy, faces=F), P), "normal") is None  # unfolded
