@@ -21,6 +21,7 @@ EXIT_INPUT = 3
 EXIT_GEOMETRY = 4
 EXIT_SOLVER = 5
 EXIT_OUTPUT = 6
+EXIT_SHAPE = 12
 EXIT_INTERRUPTED = 130
 
 #: Exit status -> meaning; printed in ``geosmooth --help``.
@@ -33,6 +34,7 @@ EXIT_CODES: dict[int, str] = {
     "(e.g. tau outside (0, phi(0)); the message gives the valid range)",
     EXIT_SOLVER: "the linear solver failed",
     EXIT_OUTPUT: "cannot write the output or report file",
+    EXIT_SHAPE: "--strict: smoothing lost shape (a shape check warned); nothing was written",
     EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
 }
 

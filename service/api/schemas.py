@@ -210,8 +210,26 @@ class Report(BaseModel):
         default=None,
         description="max_deviation bound: {max_deviation, rounds, clipped}.",
     )
+    noise_found: bool | None = Field(
+        default=None,
+        description="Automatic tau: whether noise was found (false: the input was returned "
+        "unchanged, tau_how says why).",
+    )
+    shape_warnings: list[str] = Field(
+        default_factory=list,
+        description="The shape checks' warnings (also in warnings); strict fails on any.",
+    )
     flipped_faces: int | None = Field(
         default=None, description="Faces whose normal turned against the input's (meshes)."
+    )
+    folded_faces: int | None = Field(
+        default=None, description="Faces folded against their neighbours in the result."
+    )
+    folded_input: int | None = Field(
+        default=None, description="Faces folded against their neighbours in the input."
+    )
+    new_folds: int | None = Field(
+        default=None, description="Folded faces with no folded input face sharing a vertex."
     )
     volume_change: float | None = Field(
         default=None,

@@ -137,6 +137,21 @@ def _timings(timings: Mapping[str, float]) -> str:
     return f" ({', '.join(stages)})" if stages else ""
 
 
+def _noise_lines(report: Mapping[str, Any]) -> list[str]:
+    """The noise estimate and how tau was chosen (automatic tau and GCV)."""
+    out = []
+    found = report.get("noise_found")
+    sigma = report.get("sigma_estimate")
+    if found is False:
+        out.append("  noise: no noise found (sigma = 0).")
+    elif sigma is not None:
+        out.append(f"  noise: sigma = {_g(sigma, 4)} (estimated).")
+    how = report.get("tau_how")
+    if how:
+        out.append(f"  tau: {how}.")
+    return out
+
+
 def format_summary(
     report: Mapping[str, Any],
     *,
@@ -194,9 +209,12 @@ def format_summary(
             f": phi={_g(report['phi'])} vs tau={_g(report['tau'])}"
             f" (relative error {_g(report.get('relative_error'), 2)}{tol}, {state})."
         )
+    elif report.get("tau_rule") == "auto":
+        search = "  not smoothed: the input is returned unchanged (see noise and tau below)."
     else:
         search += f": phi={_g(report['phi'])} (lambda given, no search)."
     lines.append(search)
+    lines.extend(_noise_lines(report))
     lines.append(
         f"  displacement RMS {_g(report['rms_displacement'], 3)}, "
         f"max {_g(report['max_displacement'], 3)}"

@@ -26,6 +26,7 @@ from service.exit_codes import (
     EXIT_OK,
     EXIT_REJECTED,
     EXIT_SERVER,
+    EXIT_SHAPE,
     EXIT_UNREACHABLE,
 )
 
@@ -91,8 +92,8 @@ def _exit_for(exc: Exception, server: str) -> CliError | None:
 
     if isinstance(exc, gc.ConnectionFailed):
         return CliError(str(exc), EXIT_UNREACHABLE)
-    if isinstance(exc, gc.JobFailed):
-        return CliError(str(exc), EXIT_JOB_FAILED)
+    if isinstance(exc, gc.JobFailed):  # --strict on the server: the same status as smooth's
+        return CliError(str(exc), EXIT_SHAPE if exc.code == "shape-lost" else EXIT_JOB_FAILED)
     if isinstance(exc, gc.JobCancelled):
         return CliError(str(exc), EXIT_CANCELLED)
     if isinstance(exc, gc.ApiError):

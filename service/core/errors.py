@@ -21,6 +21,7 @@ __all__ = [
     "InvalidShape",
     "NonFiniteCoordinates",
     "ParameterError",
+    "ShapeLost",
     "SolverError",
     "TauOutOfRange",
 ]
@@ -130,3 +131,34 @@ class SolverError(GeosmoothError):
     code = "solver-failed"
     title = "The input cannot be solved"
     exit_code = 5
+
+
+class ShapeLost(GeosmoothError):
+    """``strict=True`` and a shape check warned: the result lost shape (folds the input did not
+    have, volume, area or length changed beyond what removing the noise explains).
+
+    Attributes
+    ----------
+    warnings : list of str
+        The shape checks' warnings (each names the parameter to change).
+    checks : dict
+        The measurements behind them (``service.core.checks.guards.ShapeChecks``).
+    """
+
+    code = "shape-lost"
+    title = "Smoothing lost shape (strict mode)"
+    status = 422
+    exit_code = 12
+
+    def __init__(self, warnings: Sequence[str], checks: dict[str, object]) -> None:
+        super().__init__(
+            "the result lost shape: " + "; ".join(warnings), field="params.strict"
+        )
+        self.warnings = list(warnings)
+        self.checks = dict(checks)
+
+    def to_dict(self) -> dict[str, object]:
+        out = super().to_dict()
+        out["warnings"] = self.warnings
+        out["checks"] = self.checks
+        return out

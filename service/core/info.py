@@ -96,9 +96,11 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
     -------
     dict
         ``n_points, dimension, kind, n_faces, n_edges, bbox {min, max}, mean_spacing, phi0,
-        tau_range [0, phi0], rms_range [0, r], sigma_estimate, suggested_tau, suggested_rms``
+        tau_range [0, phi0], rms_range [0, r], sigma_estimate, noise, suggested_tau,
+        suggested_rms``
         where ``r = sqrt(phi0 / sum omega_i^2)`` over the points that can move and ``n_edges``
         counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs).
+        ``noise`` says whether noise was found and on what evidence.
         ``sigma_estimate`` is the noise level across the shape
         (:func:`~service.core.search.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
         rule would choose with ``params`` (:func:`~service.core.search.autotau.auto_tau`) and
@@ -113,6 +115,7 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
     params, fixed, adjacency = problem.params, problem.fixed, problem.op.neighborhoods.adjacency
     r = tau_to_rms(phi0, weight_sum)
     sigma: float | None = None
+    noise: str | None = None
     suggested_tau: float | None = None
     suggested_rms: float | None = None
     if weight_sum > 0:
@@ -121,7 +124,7 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         except ParameterError:  # no noise estimate
             auto = None
         if auto is not None:
-            sigma = auto.sigma
+            sigma, noise = auto.sigma, auto.rule.removeprefix("automatic: ")
             tau = _knee(problem, auto.tau) if auto.tau > 0 else auto.tau
             if 0 < tau < phi0:
                 suggested_tau = tau
@@ -138,6 +141,7 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         "tau_range": [0.0, phi0],
         "rms_range": [0.0, r],
         "sigma_estimate": sigma,
+        "noise": noise,
         "suggested_tau": suggested_tau,
         "suggested_rms": suggested_rms,
     }

@@ -256,6 +256,15 @@ class SmoothingParams(BaseModel):
             "for every i (report section 9), alone or together with tau/rms/lam."
         ),
     )
+    strict: bool = Field(
+        default=False,
+        description=(
+            "Fail instead of warning when the result lost shape (faces folded where the input "
+            "had none; volume, area or length changed beyond what removing the noise "
+            "explains): a typed error 'shape-lost' (CLI exit 12, HTTP 422), nothing written. "
+            "For pipelines that must never pass a damaged file on."
+        ),
+    )
     preset: Preset | None = Field(
         default=None,
         description=(

@@ -91,17 +91,30 @@ def smooth(
     system, to_points = problem.system, problem.to_points
     run.tau = resolve_tau(params, geometry, fixed, run, op)
     run.emit("analysis")
-    if system.empty:
+    automatic = params.tau_rule == "auto"
+    if system.empty and automatic and run.tau:
+        run.tau_how = (run.tau_how or "") + "; but nothing can move (all fixed or uncoupled)"
+    if system.empty or (automatic and not run.tau):
         return _unchanged(geometry, params, op, run, n_fixed)
     if params.method == "windowed-sinc":
         return _filtered(geometry, params, op, run, system, to_points, fixed, n_fixed)
     dev = _deviation(system, params, memory_limit, run)
-    if params.tau_rule == "auto" and run.tau:
-        knee(dev, run)
-    if params.tau_rule == "gcv":
-        search = gcv_search(dev, geometry, params, fixed, run)
-    else:
-        search = find_lambda(dev, op, fixed, params, run)
+    try:
+        if automatic:
+            knee(dev, run)
+        if params.tau_rule == "gcv":
+            search = gcv_search(dev, geometry, params, fixed, run)
+        else:
+            search = find_lambda(dev, op, fixed, params, run)
+    except TauOutOfRange as exc:
+        if not automatic:
+            raise
+        run.tau_how = (run.tau_how or "") + (
+            f"; this tau is not below phi(0) = {exc.tau_max:.6g}, the deviation of the fully "
+            "smoothed shape: the estimated noise is as large as the shape"
+        )
+        run.tau = None
+        return _unchanged(geometry, params, op, run, n_fixed)
     run.emit("postprocess", iteration=len(dev.history))
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
@@ -308,8 +321,14 @@ def _filtered(
 def _unchanged(
     geometry: Geometry, params: SmoothingParams, op: SmoothingOperator, run: Run, n_fixed: int
 ) -> SmoothResult:
-    """Nothing can move (every point fixed, or a zero Laplacian)."""
-    if run.tau is not None:
+    """Nothing to do: every point fixed, a zero Laplacian, or an automatic tau that finds no
+    noise or no valid budget (the reason is in ``tau_how`` and the notes)."""
+    if params.tau_rule == "auto":
+        run.notes.append(
+            "not smoothed: " + (run.tau_how or "nothing can move").removeprefix("automatic: ")
+        )
+        run.tau = None
+    elif run.tau is not None:
         raise TauOutOfRange(
             "nothing can move (every point is fixed or uncoupled): no smoothing factor can be "
             "met; valid range is empty",
@@ -317,6 +336,7 @@ def _unchanged(
             tau=run.tau,
             tau_max=0.0,
         )
-    run.notes.append("nothing to smooth: the input is returned unchanged")
+    else:
+        run.notes.append("nothing to smooth: the input is returned unchanged")
     search = LambdaSearch(float(params.lam or 0.0), 0.0, True, [])
     return diagnostics(geometry, params, op, run, geometry.points.copy(), None, search, n_fixed)

@@ -92,7 +92,9 @@ class SmoothResult:
     tau_rule : str
         How lambda was set: ``"lam"``, ``"tau"``, ``"rms"``, ``"auto"`` or ``"gcv"``.
     sigma_estimate : float or None
-        Estimated noise level (automatic tau, ``service.core.search.noise``).
+        Estimated noise level (``service.core.search.noise``): the automatic tau's (0 when no
+        noise was found), or for a given tau/rms/lam the one the shape checks compared with
+        (``None`` when no noise was found).
     tau_how : str or None
         How the automatic tau was chosen, in words.
     checks : dict
@@ -100,6 +102,12 @@ class SmoothResult:
         ``volume_change``, ``area_change``, ``moved_far``.
     bound : dict or None
         ``max_deviation`` bound: ``{"max_deviation", "rounds", "clipped"}``.
+    shape_warnings : list of str
+        The warnings of the shape checks alone (also in ``warnings``); ``strict=True`` fails
+        on any.
+    noise_found : bool or None
+        Automatic tau: whether the noise estimate found noise (``False``: the input was
+        returned unchanged, ``tau_how`` says why); ``None`` for other rules.
     """
 
     points: NDArray[np.float64]
@@ -139,6 +147,8 @@ class SmoothResult:
         )
     )
     bound: dict[str, Any] | None = None
+    shape_warnings: list[str] = field(default_factory=list)
+    noise_found: bool | None = None
 
     @property
     def rms_deviation(self) -> float:
@@ -192,6 +202,8 @@ class SmoothResult:
             tau_rule=self.tau_rule,
             sigma_estimate=self.sigma_estimate,
             tau_how=self.tau_how,
+            noise_found=self.noise_found,
+            shape_warnings=list(self.shape_warnings),
             bound=self.bound,
             **self.checks,
         )

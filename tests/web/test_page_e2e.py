@@ -339,3 +339,27 @@ def test_docs_and_redoc_render_offline(browsing: Browsing, web_server: WebServer
     browsing.shot("11-redoc")
     assert not browsing.console, browsing.console  # e.g. a Content-Security-Policy violation
     browsing.assert_offline()
+
+
+def test_shape_warning_and_noise_shown_above_the_report(
+    browsing: Browsing, web_server: WebServer
+) -> None:
+    """Issue 20: a run that lost shape shows its warning (marked, naming the parameter) and the
+    noise estimate on the page, not only in the downloadable report."""
+    page = open_page(browsing, web_server)
+    page.set_input_files("#file-input", str(SAMPLES / "noisy-sphere.ply"))
+    wait_info(page, "mesh")
+    set_target(page, "rms", 0.3)
+    with web_server.client() as client:
+        report = submit_and_finish(browsing, client)["report"]
+    assert report["shape_warnings"], report["warnings"]
+    page.wait_for_selector("#report-notices .notice-shape")
+    shown = page.eval_on_selector_all("#report-notices p", "ps => ps.map(p => p.textContent)")
+    assert len(shown) == len(report["warnings"])
+    assert any("lower rms" in s and s.startswith("⚠ shape") for s in shown), shown
+    rows = dict(page.eval_on_selector_all(
+        "#report-table th", "ths => ths.map(th => [th.textContent, th.nextElementSibling"
+        " ? th.nextElementSibling.textContent : ''])"
+    ))
+    assert rows["noise estimate σ̂"] == "–" or float(rows["noise estimate σ̂"]) > 0
+    browsing.shot("07-shape-warning")

@@ -167,6 +167,11 @@ class Report(Mapping[str, Any]):
         "rms_displacement": "rms_displacement",
         "max_displacement": "max_displacement",
         "warnings": "warnings",
+        "sigma_estimate": "sigma_estimate",
+        "noise_found": "noise_found",
+        "tau_rule": "tau_rule",
+        "tau_how": "tau_how",
+        "shape_warnings": "shape_warnings",
     }
     #: JSON member -> the name a service before 2026-11 sent (read when the new one is absent).
     FORMERLY: Mapping[str, str] = {

@@ -103,6 +103,11 @@ class Info(BaseModel):
     tau_range: list[float] = Field(description="Valid tau: the open interval (0, phi(0)).")
     rms_range: list[float] = Field(description="Valid rms: the open interval it maps to.")
     sigma_estimate: float | None = Field(description="Estimated noise level, when available.")
+    noise: str | None = Field(
+        default=None,
+        description="Whether noise was found and the evidence (\"no noise found: ...\" when the "
+        "default would return the input unchanged).",
+    )
     suggested_tau: float | None = Field(description="A suggested tau, when available.")
     suggested_rms: float | None = Field(description="A suggested rms, when available.")
     input_format: str = Field(description="Format the input was read as.")

@@ -9,15 +9,16 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.checks.guards import guard_warnings, noise_ratio, shape_checks
+from service.core.checks.guards import fold_note, guard_warnings, noise_ratio, shape_checks
 from service.core.checks.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
-from service.core.errors import SolverError
+from service.core.errors import ShapeLost, SolverError
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.result import SmoothResult, Spectrum
 from service.core.run import Run
+from service.core.search.noise import codimension, estimate_noise
 from service.core.search.roots import LambdaSearch
 from service.core.system.deviation import Deviation
 
@@ -58,8 +59,17 @@ def diagnostics(
             matvec=stats.matvec,
         )
     checks = shape_checks(geometry, X)
-    ratio = lambda: noise_ratio(geometry, run.sigma)  # noqa: E731 (only called when needed)
-    run.notes.extend(guard_warnings(checks, params.tau_rule, ratio))
+    rms = float(np.sqrt(np.mean(dev_pt**2)))
+    sigma = _noise_for_checks(geometry, params, run, rms)
+    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
+    moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
+    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
+    if shape_warnings and params.strict:
+        raise ShapeLost(shape_warnings, checks.to_dict())
+    run.notes.extend(shape_warnings)
+    note = fold_note(checks, params.displacement)
+    if note:
+        run.notes.append(note)
     timings["search"] = run.search_seconds
     timings["total"] = time.perf_counter() - run.t0
     tau = run.tau
@@ -79,7 +89,7 @@ def diagnostics(
         matvecs=stats.matvecs if stats else 0,
         history=[(frame.lam_out(lam), p * frame.phi_factor) for lam, p in search.history],
         deviation=dev_pt,
-        rms_displacement=float(np.sqrt(np.mean(dev_pt**2))),
+        rms_displacement=rms,
         max_displacement=float(dev_pt.max()),
         timings=timings,
         solver=dev.solver.name if dev is not None and params.method == "tikhonov" else "none",
@@ -95,11 +105,26 @@ def diagnostics(
         spectrum=spectrum,
         displacement=params.displacement,
         tau_rule=params.tau_rule,
-        sigma_estimate=run.sigma,
+        sigma_estimate=run.sigma if run.sigma is not None else sigma,
         tau_how=run.tau_how,
         checks=checks.to_dict(),
         bound=run.bound,
+        shape_warnings=shape_warnings,
+        noise_found=None if params.tau_rule != "auto" else bool(run.sigma),
     )
+
+
+def _noise_for_checks(
+    geometry: Geometry, params: SmoothingParams, run: Run, rms: float
+) -> float | None:
+    """The noise level the shape checks compare with: the automatic tau's estimate, else one
+    made here (sampled, bounded cost) when anything moved; ``None`` when no noise is found."""
+    if params.tau_rule == "auto":
+        return run.sigma or None
+    if rms == 0 or geometry.dim - 1 < 1:
+        return None
+    est = estimate_noise(geometry)
+    return est.sigma if est is not None and est.sigma > 0 else None
 
 
 def _spectrum(

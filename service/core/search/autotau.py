@@ -45,6 +45,8 @@ class AutoTau:
     tau: float
     sigma: float
     rule: str
+    #: The tau the local roughness would give if it were all noise (GCV's starting point).
+    rough_tau: float = 0.0
 
 
 def auto_tau(
@@ -55,35 +57,37 @@ def auto_tau(
 ) -> AutoTau:
     """``tau`` from the estimated noise (discrepancy principle, calibrated factor).
 
-    Raises
-    ------
-    ParameterError
-        When the noise cannot be estimated (too few points, degenerate input): give tau, rms
-        or lam.
+    ``tau = 0`` (the run returns its input unchanged, ``rule`` says why) when there is nothing
+    to remove: no noise found (:func:`~service.core.search.noise.estimate_noise`: exactly
+    smooth, or residuals that grow with the neighbourhood like the shape's own detail), no
+    estimate possible (too few or degenerate points), or no point free to move.
     """
     est = estimate_noise(geometry)
     if est is None:
-        raise ParameterError(
-            "the noise level of this input cannot be estimated (too few or degenerate points): "
-            "give tau, rms or lam",
-            field="params.tau",
-        )
+        return AutoTau(0.0, 0.0, "automatic: the noise level of this input cannot be estimated "
+                       "(too few or degenerate points): returned unchanged; give tau, rms or lam "
+                       "to smooth it")
     r = codimension(geometry)
     w2 = float(np.sum(geometry.omega()[~fixed] ** 2))
+    if not est.noise_found:
+        rough = discrepancy_tau(est.roughness, w2, r, params.displacement)
+        return AutoTau(0.0, 0.0, f"automatic: {est.describe()}: returned unchanged; give tau, "
+                       "rms or lam to smooth it anyway", rough)
+    if r == 0 or w2 == 0:
+        return AutoTau(0.0, est.sigma, f"automatic: {est.describe()}, but no point is free to "
+                       "move: returned unchanged")
     rho = 0.0
-    if params.displacement == "free" and adjacency is not None and r > 0:
+    if params.displacement == "free" and adjacency is not None:
         rho = tangential_ratio(geometry.points, adjacency, r)
     tau = discrepancy_tau(est.sigma, w2, r, params.displacement, rho)
     rule = (
-        f"automatic: tau = {tau:.6g} from the estimated noise sigma = {est.sigma:.6g} "
+        f"automatic: {est.describe()}; tau = {tau:.6g} "
         f"(discrepancy principle: {tau / (r * est.sigma**2 * w2):.3g} x {r} x sigma^2 x "
         f"sum omega^2 over {int((~fixed).sum())} free points"
         + (f"; roughness along/across the shape {rho:.3g}" if rho else "")
         + ")"
-        if est.sigma > 0
-        else "automatic: the input has no measurable noise (sigma = 0)"
     )
-    return AutoTau(tau, est.sigma, rule)
+    return AutoTau(tau, est.sigma, rule, tau)
 
 
 def _residual_trace(dev: Deviation, lam: float, probes: int) -> float:

@@ -176,7 +176,7 @@ def gcv_search(
     lo = dev.floor
     start = None
     try:
-        tau0 = auto_tau(geometry, params, fixed).tau / run.frame.phi_factor
+        tau0 = auto_tau(geometry, params, fixed).rough_tau / run.frame.phi_factor
         if tau0 > 0:
             start = lanczos_lambda(dev, tau0, lo, max(system.lambda_ceiling(tau0), lo))
     except ParameterError:  # no noise estimate: start from the middle of the range

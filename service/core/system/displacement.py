@@ -59,6 +59,15 @@ __all__ = [
 #: ``displacement="auto"`` per kind of input (chosen on the quality benchmark).
 DEFAULT_DISPLACEMENT = {"mesh": "normal", "curve": "free", "cloud": "normal"}
 FRAME_NEIGHBOURS = 12
+#: ``displacement="auto"`` takes normal displacement only up to this codimension: its system has
+#: ``r x r`` blocks per Laplacian entry (assembly ``O(nnz r^2)``, factor ``O(r^3)`` times the free
+#: system's, which solves ``s`` columns with one factor). Surfaces in 3-D and curves in 2-D have
+#: ``r = 1``, a cloud in 4-D ``r = 2``; a cloud in 300-D would have ``r = 298`` (minutes for 50
+#: points) while in ``s - 2`` of ``s`` directions normal and free displacement barely differ.
+AUTO_NORMAL_MAX_CODIM = 2
+#: Bound on the estimated entries of the normal system, ``n min(n, 40) r^2``: above it an
+#: explicit ``displacement="normal"`` is a ParameterError (``5e7`` entries: ~1.2 GB of COO).
+NORMAL_MAX_ENTRIES = 50_000_000
 #: Averaging steps before the normals are estimated (sphere with noise 0.5 h: 0 steps give
 #: normals 19 degrees off, 3 steps 6.5, 10 steps 2.3; 10 steps round the creases of
 #: fandisk.obj, 3-5 do not; see benchmarks/quality/README.md).
@@ -268,22 +277,33 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
     free for ``method="windowed-sinc"`` (Taubin's filter of the points themselves) and for
     ``tau="gcv"`` (cross-validation assumes the data are the points: in normal displacement the
     Laplacian of the clean curved shape is part of the data and its score falls towards the
-    collapsed shape).
+    collapsed shape). Normal displacement only up to codimension
+    :data:`AUTO_NORMAL_MAX_CODIM` (its cost grows like ``r^2``-``r^3``).
 
     Raises
     ------
     ParameterError
-        ``tau="gcv"`` with ``displacement="normal"``.
+        ``tau="gcv"`` with ``displacement="normal"``; ``displacement="normal"`` whose system
+        would exceed :data:`NORMAL_MAX_ENTRIES`.
     """
     free_only = params.method == "windowed-sinc" or params.tau_rule == "gcv"
     if params.displacement == "normal" and params.tau_rule == "gcv":
         raise ParameterError(
             "tau 'gcv' needs displacement 'free' (or 'auto')", field="params.displacement"
         )
+    r = codimension(geometry)
+    entries = geometry.n * min(geometry.n, 40) * r * r
+    if params.displacement == "normal" and entries > NORMAL_MAX_ENTRIES:
+        raise ParameterError(
+            f"displacement 'normal' in {geometry.dim}-D has {r} normal directions per point: "
+            f"its system would hold about {entries:.3g} entries (bound {NORMAL_MAX_ENTRIES:.3g});"
+            " use displacement 'free' or 'auto'",
+            field="params.displacement",
+        )
     if params.displacement != "auto":
         return params
     mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
-    if mode == "normal" and codimension(geometry) < 1:  # e.g. a planar mesh given in 2-D
+    if mode == "normal" and not 1 <= r <= AUTO_NORMAL_MAX_CODIM:  # e.g. a mesh given in 2-D
         mode = "free"
     return params.model_copy(update={"displacement": mode})
 

@@ -36,6 +36,13 @@ from service.io.source import Source
 __all__ = ["DxfLayout", "read_dxf", "write_dxf"]
 
 _KINDS = ("LWPOLYLINE", "POLYLINE", "LINE", "ARC", "CIRCLE", "ELLIPSE", "SPLINE")
+#: Largest magnitude of any number of a supported entity (coordinates, radii, bulges, knots,
+#: weights). ezdxf's geometry loops forever on NaN and on radii whose square overflows (a 71-byte
+#: file with a NaN-centre circle or a 1e300 radius never finished parsing), so values are checked
+#: before any geometry call. 1e12 keeps georeferenced drawings (1e7) with room to spare.
+MAX_VALUE = 1e12
+#: Points of all flattened entities together: a bound on the work of the flattening loop.
+MAX_POINTS = 5_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,25 +71,82 @@ def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, boo
 
     entities = [e for e in doc.modelspace() if e.dxftype() in _KINDS]
     entities = [e for e in entities if not (e.dxftype() == "POLYLINE" and not _plain_polyline(e))]
+    for e in entities:
+        _check_values(e)
     paths = []
     for e in entities:
         try:
             paths.append((e, ezpath.make_path(e)))
         except (TypeError, ValueError):
             continue
-    if not paths:
-        raise FormatError("DXF modelspace has no lines, arcs or polylines", fmt="dxf")
     corners = np.array([v for _, p in paths for v in p.control_vertices()], dtype=np.float64)
+    if not paths or corners.size == 0:
+        raise FormatError("DXF modelspace has no lines, arcs or polylines", fmt="dxf")
     extent = float(np.max(np.ptp(corners, axis=0))) or 1.0
+    if not (np.isfinite(corners).all() and np.isfinite(extent)):
+        raise FormatError("DXF: an entity's geometry is not finite", fmt="dxf")
     out = []
+    budget = MAX_POINTS
     for e, p in paths:
-        pts = np.array([tuple(v) for v in p.flattening(1e-3 * extent)], dtype=np.float64)
+        pts = _flatten(e, p, 1e-3 * extent, budget)
+        budget -= len(pts)
         closed = _closed(e, p)
         if closed and len(pts) > 2 and np.allclose(pts[0], pts[-1], atol=1e-9 * extent):
             pts = pts[:-1]
         simple = e.dxftype() in ("LWPOLYLINE", "POLYLINE") and not _has_arcs(e)
         out.append((e.dxf.handle, pts, closed, simple))
     return out, extent
+
+
+def _numbers(e: Any) -> list[float]:
+    """Every number of an entity that its geometry depends on."""
+    vals: list[float] = []
+    for value in e.dxf.all_existing_dxf_attribs().values():
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            vals.append(float(value))
+        elif hasattr(value, "__iter__") and not isinstance(value, str):
+            vals.extend(float(x) for x in value if isinstance(x, (int, float)))
+    kind = e.dxftype()
+    if kind == "LWPOLYLINE":
+        vals.extend(float(x) for row in e.get_points("xyseb") for x in row)
+    elif kind == "POLYLINE":
+        for v in e.vertices:
+            vals.extend(float(x) for x in v.dxf.location)
+            vals.append(float(v.dxf.get("bulge", 0.0)))
+    elif kind == "SPLINE":
+        for seq in (e.control_points, e.fit_points):
+            vals.extend(float(x) for q in seq for x in q)
+        vals.extend(float(x) for x in e.knots)
+        vals.extend(float(x) for x in e.weights)
+    return vals
+
+
+def _check_values(e: Any) -> None:
+    """:class:`FormatError` (naming the entity) for a non-finite or absurdly large number."""
+    vals = np.asarray(_numbers(e), dtype=np.float64)
+    bad = ~np.isfinite(vals) | (np.abs(vals) > MAX_VALUE)
+    if bad.any():
+        handle = e.dxf.get("handle", "?")
+        raise FormatError(
+            f"DXF: {e.dxftype()} (handle {handle}) has the value {float(vals[bad][0]):g}: "
+            f"coordinates, radii and other numbers must be finite and at most {MAX_VALUE:g} "
+            "in magnitude",
+            fmt="dxf",
+        )
+
+
+def _flatten(e: Any, p: Any, sagitta: float, budget: int) -> NDArray[np.float64]:
+    """The entity's path as points, stopping at ``budget`` points (then a FormatError)."""
+    pts = []
+    for v in p.flattening(sagitta):
+        pts.append(tuple(v))
+        if len(pts) > budget:
+            raise FormatError(
+                f"DXF: the entities flatten to more than {MAX_POINTS} points "
+                f"(at {e.dxftype()} handle {e.dxf.get('handle', '?')})",
+                fmt="dxf",
+            )
+    return np.array(pts, dtype=np.float64).reshape(-1, 3)
 
 
 def _closed(e: Any, p: Any) -> bool:
@@ -148,7 +212,9 @@ def read_dxf(source: Source, *, weld: bool = False) -> GeometryDocument:
         raise FormatError("the file is empty", fmt="dxf")
     doc = _load(data)
     seqs, extent = _sequences(doc)
-    chains = _chains(seqs, 1e-9 * extent)
+    chains = [c for c in _chains(seqs, 1e-9 * extent) if len(c[1])]
+    if not chains:
+        raise FormatError("DXF modelspace has no lines, arcs or polylines", fmt="dxf")
     pts = np.concatenate([c[1] for c in chains])
     flat = pts[:, 2] if np.all(pts[:, 2] == pts[0, 2]) else None
     points = pts[:, :2] if flat is not None else pts

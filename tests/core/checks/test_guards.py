@@ -57,3 +57,52 @@ def test_melted_bunny_warns_and_sensible_tau_is_silent() -> None:
     auto = smooth(g, SmoothingParams())
     assert auto.checks["flipped_faces"] <= melted.checks["flipped_faces"]
     assert not [w for w in auto.warnings if "destroyed" in w or "flattened" in w]
+
+
+def test_folds_against_the_neighbours_not_against_the_noisy_input() -> None:
+    """A noisy grid whose noise folded faces, smoothed back to the plane: faces flip against
+    the input (the former rule warned) but no fold is new; a crumpled result warns."""
+    from service.core.checks.guards import FOLD_FRACTION, folded_faces
+
+    P, F = grid_mesh(20, 20)
+    rng = np.random.default_rng(4)
+    noisy = P + 0.04 * rng.normal(size=P.shape) * np.r_[1.0, 1.0, 0.2]
+    g = Geometry(noisy, faces=F)
+    c = shape_checks(g, P)  # the clean plane: closer to the truth than the input
+    normals = np.cross(noisy[F[:, 1]] - noisy[F[:, 0]], noisy[F[:, 2]] - noisy[F[:, 0]])
+    assert c.folded_input == int(folded_faces(normals, F, len(P)).sum()) > 0
+    assert c.flipped_faces and c.flipped_faces > 0 and c.folded_faces == 0 and c.new_folds == 0
+    assert not [w for w in guard_warnings(c, "auto") if "fold" in w]
+    crumpled = P.copy()
+    inner = np.flatnonzero((P[:, 0] > 0.2) & (P[:, 0] < 0.8) & (P[:, 1] > 0.2) & (P[:, 1] < 0.8))
+    crumpled[inner[::3], 0] += 0.12  # every third inner vertex pushed past its neighbour
+    cc = shape_checks(Geometry(P, faces=F), crumpled)
+    assert cc.new_folds is not None and cc.new_folds > FOLD_FRACTION * len(F)
+    assert any("folded over where the input had no fold" in w for w in guard_warnings(cc, "tau"))
+
+
+def test_moves_beyond_the_noise_warn_and_name_the_parameter() -> None:
+    from service.core.checks.guards import NOISE_MOVES
+
+    P, F = noisy_icosphere(2, 0.0)
+    c = shape_checks(Geometry(P, faces=F), P)
+    assert guard_warnings(c, "rms", moves=0.9 * NOISE_MOVES) == []
+    ws = guard_warnings(c, "rms", moves=1.5 * NOISE_MOVES)
+    assert len(ws) == 1 and "lower rms" in ws[0] and "times the estimated noise" in ws[0]
+
+
+def test_folds_the_input_had_and_kept_are_a_note_not_a_shape_warning() -> None:
+    """The quantized-helicoid case of issue 20: the result keeps the input's folds. Not a loss
+    of shape (no warning, strict passes), but the user is told and pointed to free
+    displacement."""
+    from service.core.checks.guards import fold_note
+
+    P, F = grid_mesh(20, 20)
+    rng = np.random.default_rng(4)
+    noisy = P + 0.04 * rng.normal(size=P.shape) * np.r_[1.0, 1.0, 0.2]
+    c = shape_checks(Geometry(noisy, faces=F), noisy + 1e-9)  # nothing unfolded
+    assert c.folded_faces == c.folded_input and c.new_folds == 0
+    assert not guard_warnings(c, "auto")
+    note = fold_note(c, "normal")
+    assert note is not None and f"{c.folded_faces} faces" in note and "'free'" in note
+    assert fold_note(shape_checks(Geometry(noisy, faces=F), P), "normal") is None  # unfolded

@@ -125,6 +125,7 @@ function showInfo(info, name) {
     ["φ(0)", fmt(info.phi0), "valid τ", `(0, ${fmt(info.tau_range[1])})`],
     ["noise estimate σ", fmt(info.sigma_estimate), "valid rms", `(0, ${fmt(info.rms_range[1])})`],
   ];
+  if (info.noise) rows.push(["noise", info.noise]);
   const suggest = [];
   if (info.suggested_tau) suggest.push("suggested τ", useButton("tau", info.suggested_tau));
   if (info.suggested_rms) suggest.push("suggested rms", useButton("rms", info.suggested_rms));

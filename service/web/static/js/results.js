@@ -15,7 +15,9 @@ export function showReport(report) {
     ["points", fmt(report.n_points), "kind / dimension", `${report.kind} / ${report.dimension}-D`],
     ["Laplacian", report.laplacian || "–", "weights", report.weights || "–"],
     ["fixed points", fmt(report.n_fixed), "volume scale", fmt(report.volume_scale)],
+    ["noise estimate σ̂", noiseText(report), "τ chosen by", report.tau_rule || "–"],
   ];
+  if (report.tau_how) rows.push(["how τ was chosen", report.tau_how]);
   const keys = Object.keys(t).filter((k) => k !== "total");
   for (let i = 0; i < keys.length; i += 2) {
     const row = [`time: ${keys[i]}`, seconds(t[keys[i]])];
@@ -23,15 +25,43 @@ export function showReport(report) {
     rows.push(row);
   }
   if (t.total !== undefined) rows.push(["time: total (smoothing)", seconds(t.total)]);
-  for (const w of report.warnings || []) rows.push(["warning", w]);
   fillTable($("#report-table"), rows);
+  showNotices(report);
   const gamma = report.spectrum?.gamma;
   $("#spectrum-figure").hidden = !gamma;
   if (gamma) drawSpectrum($("#spectrum-plot"), gamma);
 }
 
+function noiseText(report) {
+  if (report.noise_found === false) return "no noise found (σ̂ = 0): input returned unchanged";
+  return report.sigma_estimate == null ? "–" : fmt(report.sigma_estimate, 4);
+}
+
+/** The warnings above the report table, shape warnings first and marked (issue 20). */
+function showNotices(report) {
+  const table = $("#report-table");
+  let box = document.getElementById("report-notices");
+  if (!box) {
+    box = document.createElement("div");
+    box.id = "report-notices";
+    box.setAttribute("role", "status");
+    table.parentNode.insertBefore(box, table);
+  }
+  const shape = new Set(report.shape_warnings || []);
+  const items = [...shape, ...(report.warnings || []).filter((w) => !shape.has(w))];
+  box.replaceChildren(...items.map((w) => {
+    const p = document.createElement("p");
+    p.className = shape.has(w) ? "notice notice-shape" : "notice";
+    p.textContent = (shape.has(w) ? "⚠ shape: " : "note: ") + w;
+    if (shape.has(w)) p.style.color = "#b00020";
+    return p;
+  }));
+  box.hidden = items.length === 0;
+}
+
 export function clearReport() {
   $("#report-table").replaceChildren();
+  document.getElementById("report-notices")?.replaceChildren();
   $("#spectrum-figure").hidden = true;
   $("#download-result").disabled = true;
   $("#download-report").disabled = true;
