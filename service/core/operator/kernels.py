@@ -1,0 +1,102 @@
+"""Compiled kernels of the neighbourhood builds (numba; imported lazily by their callers).
+
+* :func:`rows_from_pairs` — the CSR pattern of directed pairs ``(i, j)`` with each distinct
+  pair's multiplicity: a counting sort on ``i`` and an insertion sort of each (short) row, so
+  the cost is linear in the number of pairs (no global sort of ``i n + j`` keys).
+* :func:`mesh_rings` — the same for the 1-rings of a triangle mesh straight from its faces (the
+  six directed edges of every face), with the boundary flags: an undirected edge used by
+  exactly one face appears exactly once in each of its end points' rows (twice for a
+  degenerate self-edge ``(a, a)``, which contributes both directions to one row).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = ["mesh_rings", "rows_from_pairs"]
+
+
+@njit(cache=True)
+def _sort_rows(
+    indptr: NDArray[np.int64], cols: NDArray[np.int64], n: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover
+    """Sort each row of a bucketed pattern, merge duplicates, count them."""
+    out_ptr = np.zeros(n + 1, dtype=np.int64)
+    out = np.empty(cols.size, dtype=np.int64)
+    mult = np.empty(cols.size, dtype=np.int64)
+    pos = 0
+    for r in range(n):
+        a, b = indptr[r], indptr[r + 1]
+        for p in range(a + 1, b):  # insertion sort: rows hold ~12 entries
+            v = cols[p]
+            q = p - 1
+            while q >= a and cols[q] > v:
+                cols[q + 1] = cols[q]
+                q -= 1
+            cols[q + 1] = v
+        p = a
+        while p < b:
+            v = cols[p]
+            c = 0
+            while p < b and cols[p] == v:
+                c += 1
+                p += 1
+            out[pos] = v
+            mult[pos] = c
+            pos += 1
+        out_ptr[r + 1] = pos
+    return out_ptr, out[:pos].copy(), mult[:pos].copy()
+
+
+@njit(cache=True)
+def rows_from_pairs(
+    i: NDArray[np.int64], j: NDArray[np.int64], n: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover
+    """CSR ``(indptr, indices, multiplicity)`` of the distinct pairs ``(i, j)``, rows sorted."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for p in range(i.size):
+        indptr[i[p] + 1] += 1
+    for r in range(n):
+        indptr[r + 1] += indptr[r]
+    fill = indptr[:-1].copy()
+    cols = np.empty(i.size, dtype=np.int64)
+    for p in range(i.size):
+        cols[fill[i[p]]] = j[p]
+        fill[i[p]] += 1
+    return _sort_rows(indptr, cols, n)
+
+
+@njit(cache=True)
+def mesh_rings(
+    faces: NDArray[np.int64], n: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:  # pragma: no cover
+    """1-ring CSR ``(indptr, indices)`` of a triangle mesh and its boundary vertices.
+
+    ``faces`` must hold distinct triangles (any winding).
+    """
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    m = faces.shape[0]
+    for f in range(m):
+        for c in range(3):
+            indptr[faces[f, c] + 1] += 2
+    for r in range(n):
+        indptr[r + 1] += indptr[r]
+    fill = indptr[:-1].copy()
+    cols = np.empty(indptr[n], dtype=np.int64)
+    for f in range(m):
+        for c in range(3):
+            v = faces[f, c]
+            cols[fill[v]] = faces[f, (c + 1) % 3]
+            cols[fill[v] + 1] = faces[f, (c + 2) % 3]
+            fill[v] += 2
+    out_ptr, out, mult = _sort_rows(indptr, cols, n)
+    boundary = np.zeros(n, dtype=np.bool_)
+    for r in range(n):
+        for p in range(out_ptr[r], out_ptr[r + 1]):
+            v = out[p]
+            if mult[p] == (2 if v == r else 1):
+                boundary[r] = True
+                boundary[v] = True
+    return out_ptr, out, boundary
