@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["mesh_rings", "rows_from_pairs"]
+__all__ = ["mesh_rings", "neighbourhood_covariances", "rows_from_pairs"]
 
 
 @njit(cache=True)
@@ -100,3 +100,31 @@ def mesh_rings(
                 boundary[r] = True
                 boundary[v] = True
     return out_ptr, out, boundary
+
+
+@njit(cache=True)
+def neighbourhood_covariances(
+    X: NDArray[np.float64], idx: NDArray[np.int64]
+) -> NDArray[np.float64]:  # pragma: no cover
+    """``sum_a (x_a - mean)(x_a - mean)^T`` over the rows ``idx[p]`` of ``X``, per point ``p``
+    (shape ``(n, s, s)``), without the ``(n, k, s)`` gather."""
+    n, k = idx.shape
+    s = X.shape[1]
+    out = np.zeros((n, s, s))
+    mu = np.zeros(s)
+    for p in range(n):
+        mu[:] = 0.0
+        for a in range(k):
+            for c in range(s):
+                mu[c] += X[idx[p, a], c]
+        mu /= k
+        for a in range(k):
+            q = idx[p, a]
+            for c in range(s):
+                dc = X[q, c] - mu[c]
+                for e in range(c, s):
+                    out[p, c, e] += dc * (X[q, e] - mu[e])
+        for c in range(s):
+            for e in range(c + 1, s):
+                out[p, e, c] = out[p, c, e]
+    return out
