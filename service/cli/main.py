@@ -83,6 +83,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns = build_parser(full=() if command is None else (command,)).parse_args(args)
         except SystemExit as exc:  # --help / --version
             return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
+        if ns.command in ("smooth", "info"):
+            _threads()
         module = importlib.import_module(_COMMANDS[ns.command], __package__)
         return int(module.run(ns, err))
     except KeyboardInterrupt:
@@ -91,6 +93,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OUTPUT
     except Exception as exc:
         return _report(exc, ns, err)
+
+
+def _threads() -> None:
+    """The numerical libraries' thread count: ``GEOSMOOTH_THREADS``, default 1 (docs/threads.md)."""
+    from service.core.linalg.threads import use_default_threads
+
+    try:
+        use_default_threads(os.environ)
+    except ValueError as exc:
+        raise CliError(str(exc), EXIT_USAGE) from None
 
 
 def _report(exc: Exception, ns: argparse.Namespace | None, err: TextIO) -> int:
