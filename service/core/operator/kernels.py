@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["mesh_rings", "neighbourhood_covariances", "rows_from_pairs"]
+__all__ = ["mesh_rings", "neighbourhood_covariances", "polar_hull_fans", "rows_from_pairs"]
 
 
 @njit(cache=True)
@@ -128,3 +128,91 @@ def neighbourhood_covariances(
             for e in range(c + 1, s):
                 out[p, e, c] = out[p, c, e]
     return out
+
+
+@njit(cache=True)
+def polar_hull_fans(
+    q: NDArray[np.float64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:  # pragma: no cover
+    """Delaunay 1-rings of the origin among planar neighbours, one point at a time.
+
+    The gift-wrapping march of ``delaunay._polar_hull_fans`` (same candidates, same tie rules:
+    smallest turn rounded to 12 decimals, the farthest among collinear ones), compiled: no
+    ``(n, m)`` temporaries per step. Returns the fans (``-1`` padded, rotated to start after
+    the origin for open fans), their sizes and the open-fan flags.
+    """
+    n, m, _ = q.shape
+    fans = np.full((n, m), -1, dtype=np.int64)
+    count = np.zeros(n, dtype=np.int64)
+    open_fan = np.zeros(n, dtype=np.bool_)
+    cand = np.zeros((m + 1, 2))
+    cvalid = np.zeros(m + 1, dtype=np.bool_)
+    on_hull = np.zeros(m + 1, dtype=np.bool_)
+    order = np.empty(m + 1, dtype=np.int64)
+    key = np.empty(m + 1)
+    ang = np.empty(m + 1)
+    dist = np.empty(m + 1)
+    two_pi = 2.0 * np.pi
+    for p in range(n):
+        start, best, any_valid = 0, -1.0, False
+        for a in range(m):
+            r2 = q[p, a, 0] * q[p, a, 0] + q[p, a, 1] * q[p, a, 1]
+            cvalid[a] = r2 > 0
+            if r2 > 0:
+                any_valid = True
+                cand[a, 0], cand[a, 1] = 2.0 * q[p, a, 0] / r2, 2.0 * q[p, a, 1] / r2
+                nrm = cand[a, 0] * cand[a, 0] + cand[a, 1] * cand[a, 1]
+                if nrm > best:
+                    best, start = nrm, a
+            else:
+                cand[a, 0], cand[a, 1] = 0.0, 0.0
+        cand[m, 0], cand[m, 1] = 0.0, 0.0
+        cvalid[m] = True
+        if not any_valid:
+            continue
+        on_hull[:] = False
+        on_hull[start] = True
+        order[0] = start
+        length = 1
+        cur = start
+        d0, d1 = -cand[start, 1], cand[start, 0]
+        for _step in range(1, m + 1):
+            scale = 0.0
+            for a in range(m + 1):
+                v0, v1 = cand[a, 0] - cand[cur, 0], cand[a, 1] - cand[cur, 1]
+                dist[a] = v0 * v0 + v1 * v1
+                scale = max(scale, dist[a])
+                x = np.arctan2(d0 * v1 - d1 * v0, d0 * v0 + d1 * v1)
+                r = np.fmod(x, two_pi)
+                if r != 0 and r < 0:
+                    r += two_pi
+                ang[a] = r
+            scale = max(scale, 1e-300)
+            nxt = 0
+            for a in range(m + 1):
+                if not cvalid[a] or dist[a] <= 1e-24 * scale:
+                    ang[a] = np.inf
+                key[a] = np.rint(ang[a] * 1e12) / 1e12 - dist[a] / scale * 1e-13
+                if key[a] < key[nxt]:
+                    nxt = a
+            if nxt == start or on_hull[nxt] or not np.isfinite(ang[nxt]):
+                break
+            on_hull[nxt] = True
+            order[length] = nxt
+            length += 1
+            d0, d1 = cand[nxt, 0] - cand[cur, 0], cand[nxt, 1] - cand[cur, 1]
+            cur = nxt
+        if on_hull[m]:
+            open_fan[p] = True
+            shift = 0
+            for a in range(length):
+                if order[a] == m:
+                    shift = a + 1
+            for a in range(length - 1):
+                fans[p, a] = order[(a + shift) % length]
+            count[p] = length - 1
+        else:
+            for a in range(length):
+                fans[p, a] = order[a]
+            count[p] = length
+    return fans, count, open_fan
