@@ -140,7 +140,7 @@ def cloud_delaunay_neighborhoods(
         chains = np.column_stack([rows[both], prev[both], nxt[both]]).astype(np.int64)
         return Neighborhoods(n, adj, _EMPTY3, chains, has_prev ^ has_next, "delaunay")
     # tangent-plane coordinates and fans in chunks: O(chunk k s) temporaries, not O(n k s)
-    fans = np.empty(idx.shape, dtype=np.int64)
+    fans = np.empty((n, int(idx.shape[1])), dtype=np.int64)
     count = np.empty(n, dtype=np.int64)
     open_fan = np.empty(n, dtype=bool)
     for a in range(0, n, 65536):
