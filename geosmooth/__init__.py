@@ -101,7 +101,9 @@ def smooth(
         ``(0, phi(0))``: :class:`TauOutOfRange` carries the range), solver failure.
     """
     from service import core
+    from service.core.linalg.threads import use_default_threads
 
+    use_default_threads(os.environ)  # GEOSMOOTH_THREADS, default 1 (docs/threads.md)
     doc, rebuild = adapt(geometry, faces=faces, edges=edges)
     result = core.smooth(doc.geometry, _params(params, values), progress=progress)
     smoothed = rebuild(result.points)

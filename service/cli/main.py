@@ -18,9 +18,7 @@ from collections.abc import Sequence
 from typing import TextIO
 
 from service.cli.errors import CliError, exit_code_of, fail, message_of
-from service.cli.params import option_name
-from service.cli.parser import build_parser
-from service.core.params import SmoothingParams
+from service.cli.parser import build_parser, command_of
 from service.exit_codes import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE
 
 __all__ = ["main"]
@@ -42,6 +40,9 @@ def _debug() -> bool:
 
 def _where(exc: BaseException, ns: argparse.Namespace | None) -> str | None:
     """What a typed error is about: ``--option`` for a parameter, else the input file."""
+    from service.cli.params import option_name
+    from service.core.params import SmoothingParams
+
     field = str(getattr(exc, "field", "") or "")
     name = field.removeprefix("params.")
     if field.startswith("params.") and name in SmoothingParams.model_fields:
@@ -78,17 +79,30 @@ def main(argv: Sequence[str] | None = None) -> int:
             ns = argparse.Namespace(command="worker", worker_args=args[1:])
             return int(importlib.import_module(".worker", __package__).run(ns, err))
         try:
-            ns = build_parser().parse_args(args)
+            command = command_of(args)
+            ns = build_parser(full=() if command is None else (command,)).parse_args(args)
         except SystemExit as exc:  # --help / --version
             return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
-        command = importlib.import_module(_COMMANDS[ns.command], __package__)
-        return int(command.run(ns, err))
+        if ns.command in ("smooth", "info"):
+            _threads()
+        module = importlib.import_module(_COMMANDS[ns.command], __package__)
+        return int(module.run(ns, err))
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         return EXIT_OUTPUT
     except Exception as exc:
         return _report(exc, ns, err)
+
+
+def _threads() -> None:
+    """The numerical libraries' thread count: ``GEOSMOOTH_THREADS``, default 1 (docs/threads.md)."""
+    from service.core.linalg.threads import use_default_threads
+
+    try:
+        use_default_threads(os.environ)
+    except ValueError as exc:
+        raise CliError(str(exc), EXIT_USAGE) from None
 
 
 def _report(exc: Exception, ns: argparse.Namespace | None, err: TextIO) -> int:

@@ -2,6 +2,8 @@
 
 The smoothing options come from :mod:`service.cli.params` (generated from the model); the
 format choices from the io registry; the exit statuses from :mod:`service.exit_codes`.
+Commands other than the one being run get a stub parser (name and one-line help), so that
+``geosmooth --help`` loads neither pydantic nor numpy (``python -X importtime``).
 """
 
 from __future__ import annotations
@@ -9,15 +11,13 @@ from __future__ import annotations
 import argparse
 import os
 import textwrap
-from collections.abc import Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import NoReturn
 
 from service.cli.errors import CliError
-from service.cli.output import writer_options
-from service.cli.params import add_smoothing_options
 from service.exit_codes import EXIT_CODES, EXIT_USAGE, SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
 
-__all__ = ["build_parser", "version"]
+__all__ = ["build_parser", "command_of", "version"]
 
 _EXAMPLES = (
     "geosmooth smooth bunny.ply -o bunny-smooth.ply --tau 2e-4 --report report.json",
@@ -26,6 +26,16 @@ _EXAMPLES = (
     "geosmooth serve --port 8000",
     "geosmooth submit bunny.ply --server http://127.0.0.1:8000 -o out.ply --tau 2e-4",
 )
+
+
+#: One-line help of each command (shown by ``geosmooth --help``).
+_HELP = {
+    "smooth": "smooth a file",
+    "info": "describe a file and the smoothing budgets it admits (nothing is smoothed)",
+    "serve": "run the HTTP service",
+    "submit": "smooth a file on a running geosmooth server",
+    "worker": "run a worker of the distributed (Redis + RQ) job queue",
+}
 
 
 #: Help of the writer options (``service.io.write_geometry``'s keyword arguments).
@@ -112,7 +122,7 @@ def _add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None
 def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
     sm = sub.add_parser(
         "smooth",
-        help="smooth a file",
+        help=_HELP["smooth"],
         description=_wrap(
             "Smooth a mesh, polyline network or point cloud. The output keeps the "
             "input's vertex count, order and connectivity."
@@ -123,6 +133,9 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
     sm.add_argument(
         "input", metavar="INPUT", help="input file ('-' reads stdin; the format is sniffed)"
     )
+    from service.cli.output import writer_options
+    from service.cli.params import add_smoothing_options
+
     add_smoothing_options(sm)
     _add_result_options(sm, local=True)
     more = sm.add_argument_group("input and output details")
@@ -155,7 +168,7 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
 def _add_info(sub: argparse._SubParsersAction[_Parser]) -> None:
     inf = sub.add_parser(
         "info",
-        help="describe a file and the smoothing budgets it admits (nothing is smoothed)",
+        help=_HELP["info"],
         description=_wrap(
             "Print, as JSON, what INPUT is (points, dimension, kind, faces, edges, bounding "
             "box, mean spacing) and the smoothing budgets it admits: phi(0), the valid ranges "
@@ -169,6 +182,8 @@ def _add_info(sub: argparse._SubParsersAction[_Parser]) -> None:
     inf.add_argument(
         "input", metavar="INPUT", help="input file ('-' reads stdin; the format is sniffed)"
     )
+    from service.cli.params import add_smoothing_options
+
     add_smoothing_options(inf)
     more = inf.add_argument_group("input details")
     more.add_argument(
@@ -187,7 +202,7 @@ def _add_info(sub: argparse._SubParsersAction[_Parser]) -> None:
 def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:
     sv = sub.add_parser(
         "serve",
-        help="run the HTTP service",
+        help=_HELP["serve"],
         description="Run the HTTP service (embedded job queue, no Redis needed).",
         epilog=_epilog(SERVE_EXIT_CODES),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -213,7 +228,7 @@ def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:
 def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:
     su = sub.add_parser(
         "submit",
-        help="smooth a file on a running geosmooth server",
+        help=_HELP["submit"],
         description=_wrap(
             "Upload INPUT to a geosmooth server, follow the job and download the result. "
             "Ctrl-C cancels the job on the server."
@@ -227,6 +242,8 @@ def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:
         "--api-key", metavar="KEY", default=os.environ.get("GEOSMOOTH_API_KEY"),
         help="API key of the server [default: $GEOSMOOTH_API_KEY]",
     )  # fmt: skip
+    from service.cli.params import add_smoothing_options
+
     add_smoothing_options(su)
     _add_result_options(su, local=False)
 
@@ -234,7 +251,7 @@ def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:
 def _add_worker(sub: argparse._SubParsersAction[_Parser]) -> None:
     wk = sub.add_parser(
         "worker",
-        help="run a worker of the distributed (Redis + RQ) job queue",
+        help=_HELP["worker"],
         description=_wrap(
             "Run one RQ worker for GEOSMOOTH_QUEUE=rq (GEOSMOOTH_REDIS_URL, the blob store and "
             "the limits come from the same GEOSMOOTH_* settings as 'serve'). Options: "
@@ -245,8 +262,31 @@ def _add_worker(sub: argparse._SubParsersAction[_Parser]) -> None:
     wk.add_argument("worker_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)  # see main
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``geosmooth`` argument parser: smooth, info, serve, submit and worker."""
+#: command -> builder of its full parser
+_COMMANDS: dict[str, Callable[[argparse._SubParsersAction[_Parser]], None]] = {
+    "smooth": _add_smooth,
+    "info": _add_info,
+    "serve": _add_serve,
+    "submit": _add_submit,
+    "worker": _add_worker,
+}
+
+
+def command_of(args: Collection[str]) -> str | None:
+    """The command named in ``args`` (the first argument that is not an option), if any."""
+    first = next((a for a in args if not a.startswith("-")), None)
+    return first if first in _COMMANDS else None
+
+
+def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The ``geosmooth`` argument parser: smooth, info, serve, submit and worker.
+
+    Parameters
+    ----------
+    full : collection of str, optional
+        Commands whose options are built; the others get a stub (name and help only, enough
+        for ``geosmooth --help``). Default: all.
+    """
     parser = _Parser(
         prog="geosmooth",
         description=_wrap(
@@ -258,9 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"geosmooth {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    _add_smooth(sub)
-    _add_info(sub)
-    _add_serve(sub)
-    _add_submit(sub)
-    _add_worker(sub)
+    for name, add in _COMMANDS.items():
+        if full is None or name in full:
+            add(sub)
+        else:
+            sub.add_parser(name, help=_HELP[name])
     return parser

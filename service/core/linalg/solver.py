@@ -315,8 +315,8 @@ class Direct(LinearSolver):
         """
         assert self.lam_factored is not None
         scale = max(1.0, self.lam_factored / lam)
-        d = np.sqrt(self.d2)[:, None]
-        return lambda Rk, Zk: scale * float(np.linalg.norm(d * Zk))
+        d2 = self.d2
+        return lambda Rk, Zk: scale * math.sqrt(float(np.einsum("ij,ij,i->", Zk, Zk, d2)))
 
     def _cg_steps(self, lam: float, R: Array, x0: Array | None, offset: Array | None) -> float:
         """Predicted CG steps preconditioned by the current factor (``inf``: none usable).

@@ -40,7 +40,14 @@ __all__ = [
 
 #: The parameters an operator depends on.
 BUILD_FIELDS = (
-    "laplacian", "weights", "neighborhood", "k", "sigma_h", "sigma_f", "presmooth", "junctions"
+    "laplacian",
+    "weights",
+    "neighborhood",
+    "k",
+    "sigma_h",
+    "sigma_f",
+    "presmooth",
+    "junctions",
 )
 
 

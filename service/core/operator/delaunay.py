@@ -7,7 +7,8 @@ the projection is its neighbourhood. The 1-ring of a point ``p`` among its proje
 ``p`` exactly when its half-plane ``{x : x . q_j <= |q_j|^2 / 2}`` bounds the Voronoi cell of
 ``p``, i.e. when the polar point ``a_j = 2 q_j / |q_j|^2`` is a vertex of the convex hull of
 ``{0} U {a_j}``. The hulls of all points are found together by a gift-wrapping march vectorised
-over the points, which also yields the neighbours in angular order (the fan).
+per point (compiled, ``kernels.polar_hull_fans``), which also yields the neighbours in angular
+order (the fan).
 
 Defined in any dimension ``s`` (the projection makes it two-dimensional); the local frames cost
 ``O(n (k^2 s + k^3))`` (linear in ``s``).
@@ -44,15 +45,18 @@ def _local_frames(
     dirs : ndarray, shape (n, s, 2)
         Unit directions as columns.
     """
-    nbh = np.concatenate([points[:, None, :], points[idx]], axis=1)  # (n, k+1, s)
-    centered = nbh - nbh.mean(axis=1, keepdims=True)
-    size, s = nbh.shape[1], nbh.shape[2]
-    if s <= size:
-        cov = np.einsum("nki,nkj->nij", centered, centered) / size
-        evals, evecs = np.linalg.eigh(cov)  # ascending
+    size, s = idx.shape[1] + 1, points.shape[1]
+    if s <= size:  # compiled covariances: no (n, k+1, s) gather
+        from service.core.operator.kernels import neighbourhood_covariances
+
+        own = np.column_stack([np.arange(len(points)), idx]).astype(np.int64)
+        cov = neighbourhood_covariances(np.ascontiguousarray(points, dtype=np.float64), own)
+        evals, evecs = np.linalg.eigh(cov / size)  # ascending
         top = evecs[:, :, ::-1][:, :, :2]
         vals = evals[:, ::-1][:, :2]
     else:
+        nbh = np.concatenate([points[:, None, :], points[idx]], axis=1)  # (n, k+1, s)
+        centered = nbh - nbh.mean(axis=1, keepdims=True)
         gram = np.einsum("nki,nli->nkl", centered, centered)
         evals, U = np.linalg.eigh(gram)
         vals = evals[:, ::-1][:, :2] / size
@@ -83,68 +87,9 @@ def _polar_hull_fans(
     open_fan : ndarray of bool, shape (n,)
         True where the origin is on the hull (the point lies on the cloud's border).
     """
-    n, m, _ = q.shape
-    r2 = np.einsum("nmi,nmi->nm", q, q)
-    valid = r2 > 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(valid[..., None], 2.0 * q / r2[..., None], 0.0)
-    # candidate set: the m polar points plus the origin (slot m)
-    cand = np.concatenate([a, np.zeros((n, 1, 2))], axis=1)
-    cvalid = np.concatenate([valid, np.ones((n, 1), dtype=bool)], axis=1)
-    norms = np.where(cvalid, np.einsum("nmi,nmi->nm", cand, cand), -1.0)
-    norms[:, m] = -1.0
-    start = np.argmax(norms, axis=1)
-    rows = np.arange(n)
-    has_any = valid.any(axis=1)
-    cur = start.copy()
-    sp_ = cand[rows, start]
-    direction = np.column_stack([-sp_[:, 1], sp_[:, 0]])  # CCW tangent of the circle |x| = |start|
-    on_hull = np.zeros((n, m + 1), dtype=bool)
-    on_hull[rows[has_any], start[has_any]] = True
-    order = np.full((n, m + 1), -1, dtype=np.int64)
-    order[:, 0] = np.where(has_any, start, -1)
-    active = has_any.copy()
-    for step in range(1, m + 1):  # at most m + 1 hull vertices: slots 0..m
-        if not active.any():
-            break
-        ar = rows[active]
-        c = cand[ar, cur[ar]]
-        d = direction[ar]
-        v = cand[ar] - c[:, None, :]
-        cross = d[:, None, 0] * v[..., 1] - d[:, None, 1] * v[..., 0]
-        dot = np.einsum("ni,nmi->nm", d, v)
-        ang = np.mod(np.arctan2(cross, dot), 2 * np.pi)
-        dist = np.einsum("nmi,nmi->nm", v, v)
-        scale = np.maximum(dist.max(axis=1, keepdims=True), 1e-300)
-        bad = ~cvalid[ar] | (dist <= 1e-24 * scale)
-        ang = np.where(bad, np.inf, ang)
-        # smallest turn; among (near-)collinear candidates the farthest one
-        key = np.round(ang, 12) - dist / scale * 1e-13
-        nxt = np.argmin(key, axis=1)
-        done = (nxt == start[ar]) | on_hull[ar, nxt] | ~np.isfinite(ang[np.arange(ar.size), nxt])
-        go = ar[~done]
-        on_hull[go, nxt[~done]] = True
-        order[go, step] = nxt[~done]
-        direction[go] = cand[go, nxt[~done]] - cand[go, cur[go]]
-        cur[go] = nxt[~done]
-        active[ar[done]] = False
-    open_fan = on_hull[:, m]
-    # rotate each fan to start right after the origin (open fans), then drop the origin slot
-    lengths = (order >= 0).sum(axis=1)
-    fans = np.full((n, m), -1, dtype=np.int64)
-    count = np.zeros(n, dtype=np.int64)
-    for length in np.unique(lengths[lengths > 0]):
-        for with_origin in (False, True):
-            sel = np.flatnonzero((lengths == length) & (open_fan == with_origin))
-            if sel.size == 0:
-                continue
-            o = order[sel, :length]
-            if with_origin:
-                shift = np.argmax(o == m, axis=1) + 1
-                roll = (np.arange(length)[None, :] + shift[:, None]) % length
-                o = np.take_along_axis(o, roll, axis=1)[:, : length - 1]
-            fans[sel, : o.shape[1]] = o
-            count[sel] = o.shape[1]
+    from service.core.operator.kernels import polar_hull_fans
+
+    fans, count, open_fan = polar_hull_fans(np.ascontiguousarray(q, dtype=np.float64))
     return fans, count, open_fan
 
 
@@ -179,12 +124,12 @@ def cloud_delaunay_neighborhoods(
         empty = pair_adjacency(np.zeros(0, np.int64), np.zeros(0, np.int64), n)
         return Neighborhoods(n, empty, NO_TRIPLES, NO_TRIPLES, np.zeros(n, dtype=bool), "delaunay")
     evals, evecs = _local_frames(points, idx)
-    rel = points[idx] - points[:, None, :]  # (n, k, s)
     curve_like = s == 1 or float(np.median(evals[:, 1] / np.maximum(evals[:, 0], 1e-300))) < (
         line_ratio
     )
     rows = np.arange(n)
     if curve_like:
+        rel = points[idx] - points[:, None, :]  # (n, k, s)
         t = np.einsum("nks,ns->nk", rel, evecs[:, :, 0])
         t = np.where(dist > 0, t, np.nan)
         neg = np.where(t < 0, t, -np.inf)
@@ -199,12 +144,16 @@ def cloud_delaunay_neighborhoods(
         both = has_prev & has_next
         chains = np.column_stack([rows[both], prev[both], nxt[both]]).astype(np.int64)
         return Neighborhoods(n, adj, NO_TRIPLES, chains, has_prev ^ has_next, "delaunay")
-    q = np.stack(
-        [np.einsum("nks,ns->nk", rel, evecs[:, :, c]) for c in (0, 1)],
-        axis=-1,
-    )
-    q = np.where((dist > 0)[..., None], q, 0.0)
-    fans, count, open_fan = _polar_hull_fans(q)
+    # tangent-plane coordinates and fans in chunks: O(chunk k s) temporaries, not O(n k s)
+    fans = np.empty((n, int(idx.shape[1])), dtype=np.int64)
+    count = np.empty(n, dtype=np.int64)
+    open_fan = np.empty(n, dtype=bool)
+    for a in range(0, n, 65536):
+        b = min(a + 65536, n)
+        rel = points[idx[a:b]] - points[a:b, None, :]  # (chunk, k, s)
+        q = np.einsum("nks,nsc->nkc", rel, evecs[a:b])
+        q[dist[a:b] <= 0] = 0.0
+        fans[a:b], count[a:b], open_fan[a:b] = _polar_hull_fans(q)
     slot_ok = fans >= 0
     nb = np.where(slot_ok, idx[rows[:, None], np.maximum(fans, 0)], -1)
     i = np.repeat(rows, slot_ok.sum(axis=1))

@@ -80,13 +80,14 @@ class Neighborhoods:
 
 
 def pair_adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
-    """Pattern (ones) of the pairs ``(i, j)``, duplicates merged, via integer keys ``i n + j``."""
-    keys = np.sort(i.astype(np.int64) * n + j.astype(np.int64))
-    keys = keys[np.concatenate([[True], keys[1:] != keys[:-1]])] if keys.size else keys
-    rows, cols = np.divmod(keys, n)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
-    return sp.csr_matrix((np.ones(keys.size), cols, indptr), shape=(n, n))
+    """Pattern (ones) of the pairs ``(i, j)``, duplicates merged, rows sorted (compiled
+    counting sort: linear in the number of pairs, see ``kernels.rows_from_pairs``)."""
+    from service.core.operator.kernels import rows_from_pairs
+
+    ii = np.ascontiguousarray(i, dtype=np.int64)
+    jj = np.ascontiguousarray(j, dtype=np.int64)
+    indptr, cols, _ = rows_from_pairs(ii, jj, n)
+    return sp.csr_matrix((np.ones(cols.size), cols, indptr), shape=(n, n))
 
 
 def _row_keys(rows: NDArray[np.int64], n: int) -> NDArray[np.int64]:
@@ -112,6 +113,9 @@ def unique_faces(faces: NDArray[np.int64]) -> NDArray[np.int64]:
     if len(faces) == 0:
         return faces
     key = _row_keys(np.sort(faces, axis=1), int(faces.max()) + 1)
+    srt = np.sort(key)
+    if not (srt[1:] == srt[:-1]).any():  # the common case: one plain sort, no argsort
+        return faces
     _, first, _, _ = unique_keys(key)
     if first.size == len(faces):
         return faces
@@ -180,19 +184,12 @@ def mesh_neighborhoods(
     Neighborhoods
         Boundary vertices are those on an edge used by exactly one (distinct) face.
     """
-    faces = unique_faces(faces)
+    from service.core.operator.kernels import mesh_rings
+
+    faces = np.ascontiguousarray(unique_faces(faces), dtype=np.int64)
     wedges = np.concatenate([faces, faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
-    i = np.concatenate([wedges[:, 0], wedges[:, 0]])
-    j = np.concatenate([wedges[:, 1], wedges[:, 2]])
-    adj = pair_adjacency(i, j, n)
-    # boundary: undirected edges used by exactly one face (integer keys min * n + max)
-    a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
-    b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
-    uniq, _, counts, _ = unique_keys(np.minimum(a, b) * n + np.maximum(a, b))
-    boundary = np.zeros(n, dtype=bool)
-    single = uniq[counts == 1]
-    boundary[single // n] = True
-    boundary[single % n] = True
+    indptr, cols, boundary = mesh_rings(faces, n)
+    adj = sp.csr_matrix((np.ones(cols.size), cols, indptr), shape=(n, n))
     chains = NO_TRIPLES
     if edges is not None and len(edges):
         in_face = np.zeros(n, dtype=bool)

@@ -108,14 +108,14 @@ def normal_frames(
     n = X.shape[0]
     k = min(k, n)
     query = X if at is None else X[at]
+    from service.core.operator.kernels import neighbourhood_covariances
+
     _, idx = cKDTree(X).query(query, k=k)
-    idx = np.asarray(idx).reshape(query.shape[0], k)
+    idx = np.ascontiguousarray(np.asarray(idx).reshape(query.shape[0], k), dtype=np.int64)
     out = np.empty((query.shape[0], X.shape[1], codim))
-    for start in range(0, query.shape[0], 50000):
-        Q = X[idx[start : start + 50000]]
-        Q = Q - Q.mean(axis=1, keepdims=True)
-        _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q))
-        out[start : start + 50000] = vecs[:, :, :codim]  # eigh: ascending variance
+    for start in range(0, query.shape[0], 250000):
+        cov = neighbourhood_covariances(X, idx[start : start + 250000])
+        out[start : start + 250000] = np.linalg.eigh(cov)[1][:, :, :codim]  # ascending variance
     return out
 
 
@@ -176,8 +176,15 @@ def projected_normal_system(
     points, in the order of ``frames``. Same arguments and result as :func:`normal_system`.
     """
     m, _, r = frames.shape
-    rows, cols, vals = _blocks(sp.coo_matrix(L_F), frames, r)
-    A = sp.csr_matrix((vals, (rows, cols)), shape=(m * r, m * r))
+    if r == 1:  # A has the pattern of L_F, entries L_ij (n_i . n_j): scale its data in place
+        A = sp.csr_matrix(L_F, copy=True)
+        A.sum_duplicates()
+        rows = np.repeat(np.arange(m), np.diff(A.indptr))
+        f = frames[:, :, 0]
+        A.data *= np.einsum("ks,ks->k", f[rows], f[A.indices])
+    else:
+        rows, cols, vals = _blocks(sp.coo_matrix(L_F), frames, r)
+        A = sp.csr_matrix((vals, (rows, cols)), shape=(m * r, m * r))
     g = -np.einsum("nsa,ns->na", frames, np.asarray(LP)).reshape(m * r)
     M = (A.T @ A).tocsc()
     M.eliminate_zeros()
@@ -250,9 +257,7 @@ def normal_mode(
     return SmoothingSystem(ns.M, ns.d2, ns.b, ns.U0), lambda U: ns.points(P_F, U)
 
 
-def tangential_ratio(
-    points: NDArray[np.float64], adjacency: sp.csr_matrix, codim: int
-) -> float:
+def tangential_ratio(points: NDArray[np.float64], adjacency: sp.csr_matrix, codim: int) -> float:
     """``rho = sum ||T_i (L_u P)_i||^2 / sum ||N_i^T (L_u P)_i||^2`` of the uniform Laplacian.
 
     How much of the roughness of the input lies along the shape rather than across it: near 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import Delaunay, cKDTree
 
 from service.core.operator.delaunay import cloud_delaunay_neighborhoods
@@ -98,3 +99,44 @@ def test_delaunay_small_k_matches_local_triangulations() -> None:
             first = int(np.flatnonzero(local == i)[0])
             ring = set(local[ind[indptr[first] : indptr[first + 1]]].tolist())
             assert _nbrs(nb.adjacency, i) == ring, (k, i)
+
+
+def _reference_rings(F: np.ndarray, n: int) -> tuple[sp.csr_matrix, np.ndarray]:
+    """Independent build: SciPy's COO -> CSR and np.unique edge counts over distinct faces."""
+    _, first = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
+    F = F[np.sort(first)]
+    a = F.ravel()
+    b = F[:, [1, 2, 0]].ravel()
+    i, j = np.concatenate([a, b]), np.concatenate([b, a])
+    A = sp.coo_matrix((np.ones(i.size), (i, j)), shape=(n, n)).tocsr()
+    A.sum_duplicates()
+    A.sort_indices()
+    edges, counts = np.unique(np.sort(np.column_stack([a, b]), axis=1), axis=0, return_counts=True)
+    boundary = np.zeros(n, dtype=bool)
+    boundary[edges[counts == 1].ravel()] = True
+    return A, boundary
+
+
+def test_compiled_mesh_rings_match_a_scipy_build_with_messy_faces() -> None:
+    rng = np.random.default_rng(5)
+    n = 300
+    F = rng.integers(0, n, size=(900, 3))
+    F = np.concatenate([F, F[:40, [2, 1, 0]], F[40:60], [[3, 3, 7], [8, 9, 9], [5, 5, 5]]])
+    nb = mesh_neighborhoods(F, n + 4)
+    A, boundary = _reference_rings(F, n + 4)
+    assert np.array_equal(nb.adjacency.indptr, A.indptr)
+    assert np.array_equal(nb.adjacency.indices, A.indices)
+    assert np.all(nb.adjacency.data == 1.0)
+    assert np.array_equal(nb.boundary, boundary)
+
+
+def test_adjacency_from_pairs_matches_scipy() -> None:
+    from service.core.operator.neighborhoods import _adjacency
+
+    rng = np.random.default_rng(6)
+    i, j = rng.integers(0, 50, 2000), rng.integers(0, 50, 2000)
+    A = sp.coo_matrix((np.ones(i.size), (i, j)), shape=(60, 60)).tocsr()
+    A.sum_duplicates()
+    A.sort_indices()
+    B = _adjacency(i, j, 60)
+    assert np.array_equal(B.indptr, A.indptr) and np.array_equal(B.indices, A.indices)

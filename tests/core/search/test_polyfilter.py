@@ -8,7 +8,12 @@ from numpy.polynomial import chebyshev as cheb
 
 from service.core import Geometry, ParameterError, SmoothingParams, smooth
 from service.core.operator.build import build_laplacian
-from service.core.search.polyfilter import SincFilter, chebyshev_moments, sinc_deviation
+from service.core.search.polyfilter import (
+    SincFilter,
+    chebyshev_moments,
+    combine,
+    sinc_deviation,
+)
 from tests.core.core_fixtures import noisy_icosphere
 
 
@@ -36,6 +41,31 @@ def test_moments_and_filter_match_the_eigendecomposition() -> None:
     np.testing.assert_allclose(cheb.chebval(x, q) * mu, 1 - cheb.chebval(x, g), atol=1e-12)
     dense = V @ (cheb.chebval(x, q)[:, None] * (V.T @ c))
     np.testing.assert_allclose(sinc_deviation(lambda X: Mt @ X, c, flt), dense, atol=1e-12)
+
+
+def test_kept_chebyshev_vectors_give_the_filter_in_one_pass() -> None:
+    """combine(moments' vectors, q) = q(M_t) c (dense), to single precision, no more products."""
+    Mt, mu, V, c = _dense_case(3)
+    mu_max = 1.05 * mu.max()
+    flt = SincFilter(-0.5, mu_max, 16)
+    keep: list[np.ndarray] = []
+    calls = []
+    _m, products = chebyshev_moments(lambda X: calls.append(1) or Mt @ X, c, mu_max, 15, keep)
+    assert len(keep) == 16 and len(calls) == products == 15
+    x = np.clip(2 * mu / mu_max - 1, -1, 1)
+    dense = V @ (cheb.chebval(x, flt.q())[:, None] * (V.T @ c))
+    out = combine(keep, flt.q())
+    assert np.linalg.norm(out - dense) <= 1e-6 * np.linalg.norm(dense)
+    assert len(calls) == 15
+
+
+def test_windowed_sinc_with_point_weights_meets_tau() -> None:
+    P, F = noisy_icosphere(3, 0.03)
+    w = np.random.default_rng(4).uniform(0.5, 2.0, len(P))
+    res = smooth(Geometry(P, faces=F, weights=w), SmoothingParams(rms=0.01, method="windowed-sinc"))
+    assert res.converged and res.relative_error <= 1e-3
+    phi = float(np.sum(w[:, None] ** 2 * (res.points - P) ** 2))
+    assert phi == pytest.approx(res.phi, rel=1e-8)
 
 
 @pytest.mark.parametrize("fixed", [False, True])

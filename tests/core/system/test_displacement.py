@@ -23,8 +23,9 @@ def _dense_oracle(L, P, N, w2, lam):
             A[c * n : (c + 1) * n, a::r] = Ld * N[:, c, a][None, :]
     g = -(Ld @ P).T.reshape(-1)
     reg = np.sqrt(lam * np.repeat(w2, r))
-    t, *_ = np.linalg.lstsq(np.vstack([A, np.diag(reg)]), np.concatenate([g, np.zeros(n * r)]),
-                            rcond=None)
+    t, *_ = np.linalg.lstsq(
+        np.vstack([A, np.diag(reg)]), np.concatenate([g, np.zeros(n * r)]), rcond=None
+    )
     return P + np.einsum("nsa,na->ns", N, t.reshape(n, r))
 
 
@@ -81,8 +82,11 @@ def test_fixed_points_use_reduced_columns() -> None:
     for c in range(3):
         A[c * free.size : (c + 1) * free.size] = Ld[:, free] * N[free, c, 0][None, :]
     gvec = -(Ld @ g.points).T.reshape(-1)
-    t, *_ = np.linalg.lstsq(np.vstack([A, np.sqrt(lam) * np.eye(free.size)]),
-                            np.concatenate([gvec, np.zeros(free.size)]), rcond=None)
+    t, *_ = np.linalg.lstsq(
+        np.vstack([A, np.sqrt(lam) * np.eye(free.size)]),
+        np.concatenate([gvec, np.zeros(free.size)]),
+        rcond=None,
+    )
     np.testing.assert_allclose(X[free], g.points[free] + N[free, :, 0] * t[:, None], atol=1e-11)
     assert np.array_equal(X[:5], g.points[:5])
 
@@ -107,3 +111,35 @@ def test_projected_system_matches_dense_oracle_in_a_normal_plane() -> None:
     gvec = -np.einsum("nsa,ns->na", N, Ld @ P).reshape(-1)
     ref = np.linalg.solve(A.T @ A + lam * np.diag(np.repeat(w2, 2)), A.T @ gvec)
     np.testing.assert_allclose(U[:, 0], ref, rtol=1e-9, atol=1e-12)
+
+
+def test_projected_system_fast_path_matches_the_block_assembly() -> None:
+    """r = 1: A = L_F scaled by n_i . n_j equals the generic block assembly (dense check)."""
+    from service.core.system.displacement import _blocks
+
+    rng = np.random.default_rng(7)
+    m = 60
+    L = sp.random(m, m, density=0.1, random_state=8, format="csr") + sp.eye(m)
+    frames = rng.normal(size=(m, 3, 1))
+    frames /= np.linalg.norm(frames, axis=1, keepdims=True)
+    LP = rng.normal(size=(m, 3))
+    w2 = rng.uniform(0.5, 2.0, m)
+    ns = projected_normal_system(L, LP, frames, w2)
+    rows, cols, vals = _blocks(sp.coo_matrix(L), frames, 1)
+    A = sp.csr_matrix((vals, (rows, cols)), shape=(m, m)).toarray()
+    dense = L.toarray() * (frames[:, :, 0] @ frames[:, :, 0].T)
+    assert np.allclose(A, dense)
+    g = -np.einsum("ns,ns->n", frames[:, :, 0], LP)
+    assert np.allclose(ns.M.toarray(), dense.T @ dense)
+    assert np.allclose(ns.b.ravel(), dense.T @ g)
+    assert np.array_equal(ns.d2, w2)
+
+
+def test_compiled_covariances_match_numpy() -> None:
+    from service.core.operator.kernels import neighbourhood_covariances
+
+    rng = np.random.default_rng(9)
+    X = rng.normal(size=(40, 3))
+    idx = rng.integers(0, 40, size=(40, 7))
+    Q = X[idx] - X[idx].mean(axis=1, keepdims=True)
+    assert np.allclose(neighbourhood_covariances(X, idx), np.einsum("nki,nkj->nij", Q, Q))
