@@ -131,12 +131,12 @@ def test_compiled_mesh_rings_match_a_scipy_build_with_messy_faces() -> None:
 
 
 def test_adjacency_from_pairs_matches_scipy() -> None:
-    from service.core.operator.neighborhoods import _adjacency
+    from service.core.operator.neighborhoods import pair_adjacency
 
     rng = np.random.default_rng(6)
     i, j = rng.integers(0, 50, 2000), rng.integers(0, 50, 2000)
     A = sp.coo_matrix((np.ones(i.size), (i, j)), shape=(60, 60)).tocsr()
     A.sum_duplicates()
     A.sort_indices()
-    B = _adjacency(i, j, 60)
+    B = pair_adjacency(i, j, 60)
     assert np.array_equal(B.indptr, A.indptr) and np.array_equal(B.indices, A.indices)
