@@ -213,6 +213,19 @@ class Settings(BaseSettings):
     ingest_timeout: float = Field(
         default=600.0, gt=0, description="Seconds the parse and checks of an upload may take."
     )
+    parse_timeout: float = Field(
+        default=45.0,
+        gt=0,
+        description="Seconds the parse and checks of one upload may take before its process is "
+        "killed (413 parse-time-limit); the effective limit is the smaller of this and "
+        "ingest_timeout.",
+    )
+    parse_share: int = Field(
+        default=0,
+        ge=0,
+        description="Uploads one key (or client address) may have parsed at once; more wait for "
+        "their key's turn without holding a slot of the others. 0: half the parse slots.",
+    )
     max_connections: int = Field(
         default=2048, ge=16, description="Open connections; more are closed at once."
     )
