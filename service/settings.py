@@ -267,6 +267,23 @@ class Settings(BaseSettings):
         le=10,
         description="How often GET /v1/jobs/{id}/events reads the job record (seconds).",
     )
+    auth_failure_burst: int = Field(
+        default=20,
+        ge=1,
+        description="Requests with a wrong API key one client address may send before its /v1 "
+        "requests get 429 + Retry-After (a token bucket refilled at auth_failure_rate).",
+    )
+    auth_failure_rate: float = Field(
+        default=0.2,
+        gt=0,
+        description="Wrong API keys per second a client address is allowed in the long run.",
+    )
+    events_max_streams: int = Field(
+        default=32,
+        ge=1,
+        description="Event streams one key (or client address) may hold open at once; more get "
+        "429 + Retry-After.",
+    )
     events_ping_seconds: float = Field(
         default=15.0,
         gt=0,

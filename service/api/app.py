@@ -152,7 +152,12 @@ def _add_guards(app: FastAPI, settings: Settings, keys: KeyRing) -> None:
         max_bytes=settings.max_upload_bytes,
         read_timeout=settings.timeout_body_read,
     )
-    app.add_middleware(AuthGate, keys=keys)
+    app.add_middleware(
+        AuthGate,
+        keys=keys,
+        failure_burst=settings.auth_failure_burst,
+        failure_rate=settings.auth_failure_rate,
+    )
     app.add_middleware(OriginGuard, trusted_origins=origins)
     if origins:
         app.add_middleware(
