@@ -89,9 +89,10 @@ def admit_size(
     size: JobSize | None,
     limit: int | None,
 ) -> None:
-    """Refuse the job if its memory estimate is above ``limit`` (reads the input when the
-    caller did not give its ``size``)."""
-    if limit is None:
+    """Refuse the job if its memory estimate is above ``limit`` or its time estimate above the
+    job time limit (reads the input when the caller did not give its ``size`` and a memory
+    limit is set)."""
+    if size is None and limit is None:
         return
     if size is None:
         from service.io import read_geometry

@@ -71,6 +71,7 @@ class GuardedH11Protocol(H11Protocol):
         self._header_timer: asyncio.TimerHandle | None = None
         self._address = self.client[0] if self.client else "-"
         self._counted = False
+        self._refused: tuple[int, str] | None = None
         mine = self.per_client.get(self._address, 0)
         if mine >= self.max_per_client:
             room = self._evict_idle(self._address)
@@ -81,7 +82,6 @@ class GuardedH11Protocol(H11Protocol):
             self._refused = (429, "this client") if mine >= self.max_per_client else (503, "")
             self._arm_header_timer()
             return
-        self._refused = None
         self.per_client[self._address] = self.per_client.get(self._address, 0) + 1
         self._counted = True
         self.idle[self] = None
