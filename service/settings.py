@@ -202,6 +202,13 @@ class Settings(BaseSettings):
         "(larger clouds: against a closed-form upper bound; building their neighbourhoods twice "
         "would double the cost of a job).",
     )
+    submit_dry_run_points: int = Field(
+        default=5000,
+        ge=0,
+        description="Largest input that is smoothed once at submit, so that a job the engine "
+        "would refuse (too few, identical or collinear points, a budget out of range) gets 422 "
+        "instead of 202 and a failed job; 0: never.",
+    )
     sync_timeout: float = Field(
         default=60.0, gt=0, description="Seconds a POST /v1/smooth may take; then it is stopped."
     )

@@ -170,7 +170,7 @@ class Intake:
             params_required=params_required,
             out_format=out_format,
             exact_tau_max_points=self.settings.submit_exact_tau_points,
-            options=dict(options or {}),
+            options={"dry_run_points": self.settings.submit_dry_run_points, **(options or {})},
         )
         shown = upload.filename or "the upload"
         redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
