@@ -55,11 +55,23 @@ def spool_dir(settings: Settings) -> Path:
     return Path(settings.data_dir) / "spool"
 
 
-def clean_spool(settings: Settings, max_age: float = _SPOOL_MAX_AGE) -> int:
-    """Remove spool files older than ``max_age`` seconds (left by a crash); how many."""
+def clean_spool(settings: Settings, max_age: float | None = None) -> int:
+    """Remove spool files older than ``max_age`` seconds (left by a crash); how many.
+
+    Default: every one when no other live server uses the spool (a crash left them: see
+    :func:`service.jobs.embedded.maintenance.sole_user`; this process registers as a user),
+    else those older than an hour (another server may be receiving them).
+    """
+    from service.jobs.embedded.maintenance import sole_user
+
     removed = 0
     now = time.time()
     directory = spool_dir(settings)
+    if max_age is None:
+        try:
+            max_age = 0.0 if sole_user(directory) else _SPOOL_MAX_AGE
+        except OSError:
+            max_age = _SPOOL_MAX_AGE
     found = directory.is_dir()
     names = [*directory.glob("upload-*"), *directory.glob("download-*")] if found else []
     for path in names:  # uploads, and downloads pinned by a crashed server
