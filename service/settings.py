@@ -202,6 +202,12 @@ class Settings(BaseSettings):
         "(larger clouds: against a closed-form upper bound; building their neighbourhoods twice "
         "would double the cost of a job).",
     )
+    storage_retry_seconds: float = Field(
+        default=30.0,
+        gt=0,
+        description="A job whose run failed for want of space (ENOSPC) is not failed: it goes "
+        "back to the queue and is tried again after this many seconds, until space is back.",
+    )
     submit_dry_run_points: int = Field(
         default=5000,
         ge=0,
