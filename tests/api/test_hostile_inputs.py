@@ -177,3 +177,53 @@ def test_a_full_disk_while_spooling_is_507(
         filler.unlink()
         again = c.post("/v1/jobs", files=upload, data={"params": PARAMS})
         assert again.status_code == 202, again.text
+
+
+# --------------------------------------------------------------------------- CLI: one line
+
+
+def _gpx(lat: str, lon: str) -> bytes:
+    return (
+        '<?xml version="1.0"?>\n<gpx version="1.1" creator="t" '
+        'xmlns="http://www.topografix.com/GPX/1/1"><trk><trkseg>'
+        f'<trkpt lat="{lat}" lon="{lon}"/><trkpt lat="50.0" lon="4.001"/>'
+        '<trkpt lat="50.001" lon="4.002"/></trkseg></trk></gpx>'
+    ).encode()
+
+
+def _las_with_scale(scale: float) -> bytes:
+    import io
+
+    import laspy
+
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = np.array([0.001] * 3), np.zeros(3)
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(0)
+    las.x, las.y, las.z = rng.uniform(0, 1, 50), rng.uniform(0, 1, 50), rng.normal(0, 0.01, 50)
+    buf = io.BytesIO()
+    las.write(buf)
+    data = bytearray(buf.getvalue())
+    data[131:155] = struct.pack("<3d", scale, scale, scale)
+    return bytes(data)
+
+
+@pytest.mark.parametrize(
+    ("name", "data"),
+    [
+        ("lat.gpx", _gpx("1e308", "1e308")),
+        ("nan.gpx", _gpx("nan", "4")),
+        ("pole.gpx", _gpx("91", "4")),
+        ("zero.las", _las_with_scale(0.0)),
+        ("nan.las", _las_with_scale(float("nan"))),
+    ],
+)
+def test_the_cli_error_is_one_line_without_warnings(tmp_path: Path, name: str, data: bytes) -> None:
+    path = tmp_path / name
+    path.write_bytes(data)
+    for args in (["info", str(path)], ["smooth", str(path), "-o", str(tmp_path / f"o-{name}")]):
+        done = _cli(*args)
+        assert done.returncode == 3, (args, done.stderr)  # EXIT_INPUT: a malformed file
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("geosmooth: error:"), done.stderr
+        assert "Warning" not in done.stderr
