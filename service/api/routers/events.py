@@ -198,7 +198,7 @@ def _last_id(value: str | None) -> int:
             "description": "The event stream (ends after the final status).",
             "content": {"text/event-stream": {"schema": _EVENT_SCHEMA, "example": _EXAMPLE}},
         },
-        **problem_responses(404, 429, 503),
+        **problem_responses(404, 503),
     },
 )
 async def job_events(
