@@ -95,9 +95,9 @@ def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True)
             answers = operation.setdefault("responses", {})
             for status in statuses:
                 answers.setdefault(str(status), _spec_answer(status))
-            for status in ("429", "503", "507"):  # their own entries too: Retry-After is sent
-                if status in answers:
-                    answers[status].setdefault("headers", _spec_answer(int(status))["headers"])
+            for code in ("429", "503", "507"):  # their own entries too: Retry-After is sent
+                if code in answers:
+                    answers[code].setdefault("headers", _spec_answer(int(code))["headers"])
             operation["responses"] = dict(sorted(answers.items()))
 
 
