@@ -37,7 +37,7 @@ lint: setup-dev
 test: setup-dev
 	$(BIN)/ruff check .
 	$(BIN)/mypy service geosmooth
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=25
 
 openapi: setup
 	$(BIN)/python -m service.api.openapi_export openapi/openapi.json

@@ -207,6 +207,19 @@ class Settings(BaseSettings):
         "(larger clouds: against a closed-form upper bound; building their neighbourhoods twice "
         "would double the cost of a job).",
     )
+    storage_retry_seconds: float = Field(
+        default=30.0,
+        gt=0,
+        description="A job whose run failed for want of space (ENOSPC) is not failed: it goes "
+        "back to the queue and is tried again after this many seconds, until space is back.",
+    )
+    submit_dry_run_points: int = Field(
+        default=5000,
+        ge=0,
+        description="Largest input that is smoothed once at submit, so that a job the engine "
+        "would refuse (too few, identical or collinear points, a budget out of range) gets 422 "
+        "instead of 202 and a failed job; 0: never.",
+    )
     sync_timeout: float = Field(
         default=60.0, gt=0, description="Seconds a POST /v1/smooth may take; then it is stopped."
     )
@@ -217,6 +230,19 @@ class Settings(BaseSettings):
     )
     ingest_timeout: float = Field(
         default=600.0, gt=0, description="Seconds the parse and checks of an upload may take."
+    )
+    parse_timeout: float = Field(
+        default=45.0,
+        gt=0,
+        description="Seconds the parse and checks of one upload may take before its process is "
+        "killed (413 parse-time-limit); the effective limit is the smaller of this and "
+        "ingest_timeout.",
+    )
+    parse_share: int = Field(
+        default=0,
+        ge=0,
+        description="Uploads one key (or client address) may have parsed at once; more wait for "
+        "their key's turn without holding a slot of the others. 0: half the parse slots.",
     )
     max_connections: int = Field(
         default=2048, ge=16, description="Open connections; more are closed at once."
@@ -258,6 +284,23 @@ class Settings(BaseSettings):
         gt=0,
         le=10,
         description="How often GET /v1/jobs/{id}/events reads the job record (seconds).",
+    )
+    auth_failure_burst: int = Field(
+        default=20,
+        ge=1,
+        description="Requests with a wrong API key one client address may send before its /v1 "
+        "requests get 429 + Retry-After (a token bucket refilled at auth_failure_rate).",
+    )
+    auth_failure_rate: float = Field(
+        default=0.2,
+        gt=0,
+        description="Wrong API keys per second a client address is allowed in the long run.",
+    )
+    events_max_streams: int = Field(
+        default=32,
+        ge=1,
+        description="Event streams one key (or client address) may hold open at once; more get "
+        "429 + Retry-After.",
     )
     events_ping_seconds: float = Field(
         default=15.0,

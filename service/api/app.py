@@ -16,6 +16,7 @@ from service.api.docs import document_common_answers
 from service.api.http.auth import KeyRing
 from service.api.http.context import REQUEST_ID_HEADER, RequestContextMiddleware
 from service.api.http.guards import AuthGate, HostGuard, InFlightLimit, OriginGuard, allowed_hosts
+from service.api.http.headers import SecurityHeaders
 from service.api.http.limits import BodyLimitMiddleware
 from service.api.http.metrics import Metrics
 from service.api.intake.request import Intake, clean_spool
@@ -151,7 +152,12 @@ def _add_guards(app: FastAPI, settings: Settings, keys: KeyRing) -> None:
         max_bytes=settings.max_upload_bytes,
         read_timeout=settings.timeout_body_read,
     )
-    app.add_middleware(AuthGate, keys=keys)
+    app.add_middleware(
+        AuthGate,
+        keys=keys,
+        failure_burst=settings.auth_failure_burst,
+        failure_rate=settings.auth_failure_rate,
+    )
     app.add_middleware(OriginGuard, trusted_origins=origins)
     if origins:
         app.add_middleware(
@@ -177,6 +183,7 @@ def _add_guards(app: FastAPI, settings: Settings, keys: KeyRing) -> None:
     app.add_middleware(HostGuard, hosts=allowed_hosts(settings.allowed_hosts, settings.host))
     app.add_middleware(InFlightLimit, limit=settings.max_requests_in_flight)
     app.add_middleware(RequestContextMiddleware)
+    app.add_middleware(SecurityHeaders)
 
 
 def create_app(settings: Settings | None = None, queue: JobQueue | None = None) -> FastAPI:

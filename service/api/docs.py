@@ -80,7 +80,7 @@ def _spec_answer(status: int) -> dict[str, Any]:
         "description": _DESCRIPTIONS[status],
         "content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": "#/components/schemas/Problem"}}},
     }
-    if status in (429, 503):
+    if status in (429, 503, 507):
         answer["headers"] = {
             "Retry-After": {"description": "Seconds to wait.", "schema": {"type": "integer"}}
         }
@@ -95,23 +95,27 @@ def document_common_answers(spec: dict[str, Any], *, keys_possible: bool = True)
     """Add the answers any operation can give, besides its own, to every operation.
 
     Every request can be malformed or name a foreign ``Host`` (400), stall its body (408),
-    send too large a body (413) or header (431) or hit a bug (500); all but the probes can
-    meet an overloaded server (503). ``/v1`` operations need a key when keys are configured
-    (401) and are rate limited (429); state-changing ones refuse other origins without a key
-    (403).
+    send too large a body (413) or header (431) or hit a bug (500), and come on a connection
+    over the per-client or server bound (429, 503: :mod:`service.api.http.protocol`); all but
+    the probes can meet an overloaded server (503). ``/v1`` operations need a key when keys are
+    configured (401) and are rate limited (429); state-changing ones refuse other origins
+    without a key (403); uploads can meet a full disk (507).
     """
     for path, operations in spec.get("paths", {}).items():
         for method, operation in operations.items():
-            statuses = [400, 408, 413, 431, 500]
-            if path not in _PROBES:
-                statuses.append(503)
+            statuses = [400, 408, 413, 429, 431, 500, 503]
             if path.startswith("/v1/") and keys_possible:
-                statuses += [401, 429]
+                statuses += [401]
             if method in _UNSAFE:
                 statuses.append(403)
+            if method == "post" and path.startswith("/v1/"):
+                statuses.append(507)
             answers = operation.setdefault("responses", {})
             for status in statuses:
                 answers.setdefault(str(status), _spec_answer(status))
+            for code in ("429", "503", "507"):  # their own entries too: Retry-After is sent
+                if code in answers:
+                    answers[code].setdefault("headers", _spec_answer(int(code))["headers"])
             operation["responses"] = dict(sorted(answers.items()))
 
 

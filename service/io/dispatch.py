@@ -60,6 +60,10 @@ def sniff_format(data: bytes, size: int | None = None) -> str | None:
     return sniff(bytes(data[:4096]), len(data) if size is None else size)
 
 
+#: Formats marked binary whose header is text (their ascii bodies are, too).
+_TEXT_HEADERS = frozenset({"ply", "pcd"})
+
+
 def _resolve(source: Source, fmt: str | None, filename: str | None) -> str:
     name = str(filename or source.name or "")
     if fmt is not None:
@@ -115,7 +119,10 @@ def read_geometry(
         A reader option the format does not understand.
     """
     src = Source.of(source)
-    spec = FORMATS[_resolve(src, fmt, filename)]
+    bare = src.without_bom()  # text formats: a UTF-8 BOM is not content
+    spec = FORMATS[_resolve(bare, fmt, filename)]
+    if not spec.binary or spec.name in _TEXT_HEADERS:
+        src = bare
     if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
         raise FormatError("the file is empty", fmt=spec.name)
     given = {k: v for k, v in options.items() if v is not None}

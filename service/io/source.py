@@ -15,7 +15,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["Source"]
+__all__ = ["UTF8_BOM", "Source"]
+
+#: The UTF-8 byte order mark, dropped from the start of text formats (:meth:`Source.without_bom`).
+UTF8_BOM = b"\xef\xbb\xbf"
 
 
 class Source:
@@ -55,6 +58,21 @@ class Source:
             assert self.path is not None
             self._data = self.path.read_bytes()
         return self._data
+
+    def without_bom(self) -> Source:
+        """The content without a leading UTF-8 byte order mark (``self`` when there is none).
+
+        Text files saved by Windows editors start with ``EF BB BF``; a reader that took those
+        bytes for content would misread the first line (an OBJ lost its first vertex).
+        """
+        if self.head(len(UTF8_BOM)) != UTF8_BOM:
+            return self
+        if self._data is not None:
+            return Source(data=self._data[len(UTF8_BOM) :], name=self.name)
+        assert self.path is not None
+        with open(self.path, "rb") as fh:
+            fh.seek(len(UTF8_BOM))
+            return Source(data=fh.read(), name=self.name)
 
     def head(self, n: int = 4096) -> bytes:
         """The first ``n`` bytes."""

@@ -79,9 +79,10 @@ def request_hash(data: JobInput, fmt: str, params: dict[str, Any], **fields: Any
 
 
 def admit_size(job: NewJob, limit: int | None) -> None:
-    """Refuse the job if its memory estimate is above ``limit`` (reads the input only when the
-    job came without its ``size``)."""
-    if limit is None:
+    """Refuse the job if its memory estimate is above ``limit`` or its time estimate above the
+    job time limit (reads the input when the job came without its ``size`` and a memory limit
+    is set)."""
+    if job.size is None and limit is None:
         return
     size = job.size
     if size is None:

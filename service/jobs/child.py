@@ -44,6 +44,10 @@ from service.jobs.limits import limit_memory
 from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
 
+#: A run that failed for want of space goes back to the queue (not counted as a try) and is
+#: tried again after this many seconds, until space comes back (the job is not failed).
+STORAGE_RETRY_SECONDS = float(os.environ.get("GEOSMOOTH_STORAGE_RETRY_SECONDS") or 30.0)
+
 __all__ = ["RunSpec", "load_runner", "main", "set_parent_death_signal"]
 
 _PR_SET_PDEATHSIG = 1
@@ -187,4 +191,10 @@ def _run(spec: RunSpec, store: JobStore) -> None:
     except RunLost:
         return
     except BaseException as exc:
-        store.fail(spec.job_id, spec.owner, spec.attempt, problems.from_exception(exc))
+        problem = problems.from_exception(exc)
+        if problem["code"] == "storage-full":  # retried (not failed) until space is back
+            with contextlib.suppress(Exception):
+                again = time.time() + STORAGE_RETRY_SECONDS
+                if store.requeue(spec.job_id, spec.owner, spec.attempt, False, again):
+                    return
+        store.fail(spec.job_id, spec.owner, spec.attempt, problem)

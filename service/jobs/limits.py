@@ -1,9 +1,9 @@
 """Resource limits of a job: the per-job memory limit and its enforcement.
 
-* **Admission** (:func:`check_admission`): before a job is accepted its peak memory is estimated
-  by the engine (``service.core.linalg.resources.estimate_resources``); above the per-job limit the
-  job
-  is refused with :class:`~service.jobs.errors.JobTooLarge` (422, estimate and limit stated).
+* **Admission** (:func:`check_admission`): before a job is accepted its peak memory and its time
+  are estimated by the engine (``service.core.linalg.resources.estimate_resources``, dimension
+  and codimension included); above the per-job memory limit or the job time limit the job is
+  refused with :class:`~service.jobs.errors.JobTooLarge` (422, estimates and limits stated).
 * **Enforcement** (:func:`limit_memory`): every job process runs under ``RLIMIT_AS`` = its
   address space when the job starts + the per-job limit. An estimate that was wrong makes that one
   job fail with ``out-of-memory`` (``MemoryError``) instead of the machine swapping or the OOM
@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import resource
 from pathlib import Path
@@ -31,6 +32,7 @@ __all__ = [
     "check_admission",
     "default_job_memory",
     "limit_memory",
+    "memory_cap_hit",
 ]
 
 _GIB = 1024**3
@@ -57,31 +59,81 @@ def default_job_memory(workers: int) -> int:
     return max(256 * 1024**2, int(0.8 * physical_memory() / max(1, workers)))
 
 
-def check_admission(size: JobSize, params: SmoothingParams, limit: int | None) -> None:
-    """Refuse a job whose estimated peak memory is above ``limit`` bytes (``None``: no limit).
+def _job_time_limit() -> float | None:
+    """The job time limit of this process's settings (``GEOSMOOTH_JOB_TIMEOUT``), if valid."""
+    from service.settings import ConfigError, get_settings
+
+    try:
+        return float(get_settings().job_timeout)
+    except ConfigError:
+        return None
+
+
+def check_admission(
+    size: JobSize, params: SmoothingParams, limit: int | None, time_limit: float | None = None
+) -> None:
+    """Refuse a job whose estimated peak memory is above ``limit`` bytes (``None``: no limit)
+    or whose estimated time is above ``time_limit`` seconds (default: the job time limit of the
+    settings, at which the job would be stopped anyway).
+
+    The estimate counts the dimension and, for normal displacement, the codimension: every
+    entry of the system is then a ``codim x codim`` block (50 points in 200-D: 198^2 times the
+    entries of the same points in 3-D).
 
     Raises
     ------
     JobTooLarge
-        With the estimate and the limit (bytes and GiB in the message).
+        With the estimates and the limits (bytes, GiB and seconds in the message).
     """
-    if limit is None:
-        return
     from service.core.linalg.resources import estimate_resources
 
+    time_limit = _job_time_limit() if time_limit is None else time_limit
     est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces,
                              memory_limit=limit)  # fmt: skip
-    if est.memory_bytes <= limit:
-        return
-    raise JobTooLarge(
-        f"the job needs about {est.memory_bytes / _GIB:.2f} GiB of memory ({size.n} points,"
-        f" {est.path} solver path), above the per-job limit of {limit / _GIB:.2f} GiB",
-        field="file",
-        estimate_bytes=int(est.memory_bytes),
-        limit_bytes=int(limit),
-        estimate_seconds=float(est.seconds),
-        path=est.path,
-    )
+    extras = {
+        "estimate_bytes": int(est.memory_bytes),
+        "estimate_seconds": float(est.seconds),
+        "path": est.path,
+    }
+    where = f"{size.n} points in {size.dim}-D, {est.path} solver path"
+    if limit is not None and est.memory_bytes > limit:
+        raise JobTooLarge(
+            f"the job needs about {est.memory_bytes / _GIB:.2f} GiB of memory ({where}),"
+            f" above the per-job limit of {limit / _GIB:.2f} GiB",
+            field="file",
+            limit_bytes=int(limit),
+            **extras,
+        )
+    if time_limit is not None and est.seconds > time_limit:
+        raise JobTooLarge(
+            f"the job needs about {est.seconds:.0f} s ({where}), above the job time limit of"
+            f" {time_limit:g} s",
+            field="file",
+            limit_seconds=float(time_limit),
+            **extras,
+        )
+
+
+_MAP_FAILURES = ("failed to map segment", "cannot allocate memory", "out of memory")
+
+
+def memory_cap_hit(exc: BaseException) -> bool:
+    """Whether ``exc`` is the address-space cap being hit: a ``MemoryError``, or a library that
+    could not be loaded (``dlopen``: "failed to map segment from shared object") or mapped
+    (``ENOMEM``) under it; such a job failed for its memory, not for an internal error."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, MemoryError):
+            return True
+        if isinstance(exc, OSError) and exc.errno == errno.ENOMEM:
+            return True
+        if isinstance(exc, ImportError | OSError):
+            text = str(exc).lower()
+            if any(marker in text for marker in _MAP_FAILURES):
+                return True
+        exc = exc.__cause__ or exc.__context__  # type: ignore[assignment]
+    return False
 
 
 def _address_space() -> int:

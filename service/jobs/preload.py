@@ -3,6 +3,10 @@ worker), *for its side effect*: load the engine and run one tiny smoothing, so t
 engine initialises lazily on first use (numba-compiled kernels, solver and format modules,
 caches) is inherited by every job process instead of being redone in each.
 
+It also loads what a job would otherwise load under its address-space cap (numba/llvmlite for
+the symbolic factor count, the GCV path): a library mapped inside the cap took its share of a
+small job's budget, and one that could not be mapped failed the job (see limits.memory_cap_hit).
+
 Measured on the 2-core dev box: a tiny job's run in a fresh fork of a process that only imported
 the engine took 150-370 ms, of which ~60 ms were threadpoolctl's library scan and most of the
 rest first-use initialisation; see service/jobs/README.md.
@@ -13,8 +17,10 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import scipy.sparse as sp
 
 from service.core.geometry import Geometry
+from service.core.linalg.resources import factor_size
 from service.core.linalg.threads import limit_threads
 from service.core.params import SmoothingParams
 from service.core.pipeline import smooth
@@ -34,6 +40,12 @@ def warm_up() -> None:
     doc = GeometryDocument.from_geometry(ring)
     for fmt in ("xyz", "ply"):
         read_geometry(write_geometry(doc, fmt, result.points), fmt)
+    gcv = ring.points[:, :2] + rng.normal(0, 0.01, (n, 2))  # the free-displacement/GCV path
+    smooth(Geometry(gcv, edges=ring.edges), SmoothingParams(tau="gcv"))
+    # numba (llvmlite, ~100 MB of address space) compiles the symbolic factor count of the
+    # memory-aware solver choice: loaded here, before any job's RLIMIT_AS, not under it.
+    pattern = sp.csr_matrix(np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1))
+    factor_size(pattern, None)
 
 
 def apply_thread_limit() -> None:

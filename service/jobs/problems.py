@@ -57,7 +57,9 @@ def from_exception(exc: BaseException) -> dict[str, Any]:
     storage = storage_error(exc)  # a full or read-only disk, an unreachable store
     if storage is not None:
         return _from_typed(storage, storage.title)
-    if isinstance(exc, MemoryError):
+    from service.jobs.limits import memory_cap_hit
+
+    if memory_cap_hit(exc):  # also a library that cannot be loaded under the cap
         return {
             "code": "out-of-memory",
             "title": "Out of memory",

@@ -9,8 +9,10 @@ on the receiving side with :func:`verify_signature` (docs/http-api.md shows the 
 to copy).
 
 SSRF guard: a target whose host resolves to a loopback, private, link-local, multicast, reserved
-or unspecified address is refused (:func:`check_webhook_url`, at submit and again at every
-delivery), unless ``GEOSMOOTH_WEBHOOK_ALLOW_PRIVATE=true``. A delivery connects to the address
+or unspecified address, or to an IPv6 address that embeds one (IPv4-mapped, -compatible,
+-translated, 6to4, NAT64, Teredo: :func:`embedded_ipv4`), is refused (:func:`check_webhook_url`,
+at submit and again at every delivery, after a new DNS resolution), unless
+``GEOSMOOTH_WEBHOOK_ALLOW_PRIVATE=true``. A delivery connects to the address
 that was checked (the ``Host`` header and TLS server name keep the URL's host), so a DNS answer
 that changes between the check and the connection (DNS rebinding) cannot redirect it. Redirects
 are not followed.
@@ -42,6 +44,7 @@ __all__ = [
     "Target",
     "check_webhook_url",
     "deliver",
+    "embedded_ipv4",
     "sign",
     "verify_signature",
 ]
@@ -61,9 +64,38 @@ class Target:
     port: int
 
 
-def _refused(address: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
-    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
-        address = address.ipv4_mapped
+_NAT64 = ipaddress.ip_network("64:ff9b::/96")  # RFC 6052 well-known prefix
+_NAT64_LOCAL = ipaddress.ip_network("64:ff9b:1::/48")  # RFC 8215 local-use translation
+_V4_COMPATIBLE = ipaddress.ip_network("::/96")  # RFC 4291 (deprecated) ::a.b.c.d
+_V4_TRANSLATED = ipaddress.ip_network("::ffff:0:0:0/96")  # RFC 2765 ::ffff:0:a.b.c.d
+
+IPAddress = ipaddress.IPv4Address | ipaddress.IPv6Address
+
+
+def embedded_ipv4(address: IPAddress) -> list[ipaddress.IPv4Address]:
+    """The IPv4 addresses an IPv6 address carries (they decide where a packet ends up).
+
+    IPv4-mapped ``::ffff:0:0/96``, IPv4-compatible ``::/96``, IPv4-translated
+    ``::ffff:0:0:0/96``, 6to4 ``2002::/16``, NAT64 ``64:ff9b::/96`` and ``64:ff9b:1::/48``
+    (last 32 bits), Teredo ``2001::/32`` (server and de-obfuscated client).
+    """
+    if not isinstance(address, ipaddress.IPv6Address):
+        return []
+    low = ipaddress.IPv4Address(int(address) & 0xFFFFFFFF)
+    found: list[ipaddress.IPv4Address] = []
+    if address.ipv4_mapped is not None:
+        found.append(address.ipv4_mapped)
+    if address.sixtofour is not None:
+        found.append(address.sixtofour)
+    if address.teredo is not None:
+        found.extend(address.teredo)
+    nets = (_NAT64, _NAT64_LOCAL, _V4_TRANSLATED, _V4_COMPATIBLE)
+    if any(address in net for net in nets) and int(address) > 1:
+        found.append(low)
+    return found
+
+
+def _refused_one(address: IPAddress) -> bool:
     return (
         address.is_loopback
         or address.is_private
@@ -73,6 +105,11 @@ def _refused(address: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
         or address.is_unspecified
         or not address.is_global
     )
+
+
+def _refused(address: IPAddress) -> bool:
+    """Non-public, or carrying a non-public IPv4 address (6to4, NAT64, Teredo, mapped ...)."""
+    return _refused_one(address) or any(_refused_one(v4) for v4 in embedded_ipv4(address))
 
 
 def check_webhook_url(url: str, settings: Settings) -> Target:

@@ -23,6 +23,7 @@ SERVER_ENV = {
     "GEOSMOOTH_SUBMIT_EXACT_TAU_POINTS": "10000",
     "GEOSMOOTH_RATE_LIMIT": "100000",  # the rate limit has its own tests
     "GEOSMOOTH_RATE_BURST": "100000",
+    "GEOSMOOTH_AUTH_FAILURE_BURST": "100000",  # so is the wrong-key limit
 }
 
 

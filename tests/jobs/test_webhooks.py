@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import time
 from collections.abc import Callable
@@ -11,7 +12,13 @@ import pytest
 from service.jobs import LocalQueue
 from service.jobs.errors import WebhookUrlRejected
 from service.jobs.queue import NewJob
-from service.jobs.webhooks import SIGNATURE_HEADER, check_webhook_url, deliver, sign
+from service.jobs.webhooks import (
+    SIGNATURE_HEADER,
+    check_webhook_url,
+    deliver,
+    embedded_ipv4,
+    sign,
+)
 from service.settings import Settings
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, wait_finished, wait_for
@@ -96,6 +103,40 @@ def test_the_ssrf_guard_refuses_non_public_targets(url: str) -> None:
     with pytest.raises(WebhookUrlRejected) as err:
         check_webhook_url(url, _settings(webhook_allow_private=False))
     assert err.value.status == 422 and err.value.field == "webhook_url"
+
+
+#: IPv6 forms that carry a non-public IPv4 address (the packet would end up at the IPv4 one).
+EMBEDDED = {
+    "http://[2002:7f00:1::]/": "127.0.0.1",  # 6to4
+    "http://[2002:a9fe:a9fe::1]/": "169.254.169.254",  # 6to4, cloud metadata
+    "http://[64:ff9b::7f00:1]/": "127.0.0.1",  # NAT64 well-known prefix
+    "http://[64:ff9b:1::a00:1]/": "10.0.0.1",  # NAT64 local-use prefix
+    "http://[::ffff:127.0.0.1]/": "127.0.0.1",  # IPv4-mapped
+    "http://[::ffff:0:c0a8:1]/": "192.168.0.1",  # IPv4-translated
+    "http://[::127.0.0.1]/": "127.0.0.1",  # IPv4-compatible
+    # Teredo: server 65.54.227.120, client 127.0.0.1 (obfuscated: XOR ffffffff)
+    "http://[2001:0:4136:e378:8000:63bf:80ff:fffe]/": "127.0.0.1",
+}
+
+
+@pytest.mark.parametrize("url", sorted(EMBEDDED))
+def test_the_ssrf_guard_checks_the_ipv4_inside_ipv6(url: str) -> None:
+    with pytest.raises(WebhookUrlRejected) as err:
+        check_webhook_url(url, _settings(webhook_allow_private=False))
+    assert err.value.status == 422 and err.value.field == "webhook_url"
+    host = ipaddress.ip_address(url.split("[", 1)[1].split("]", 1)[0])
+    assert ipaddress.ip_address(EMBEDDED[url]) in embedded_ipv4(host)
+
+
+def test_an_ipv6_form_of_a_public_ipv4_address_passes() -> None:
+    """6to4 of 93.184.216.34 is as public as the address itself (no over-blocking)."""
+    target = check_webhook_url(
+        "http://[2002:5db8:d822::1]/h", _settings(webhook_allow_private=False)
+    )
+    assert target.address == "2002:5db8:d822::1"
+    assert embedded_ipv4(ipaddress.ip_address(target.address)) == [
+        ipaddress.IPv4Address("93.184.216.34")
+    ]
 
 
 def test_public_targets_pass_and_private_ones_when_allowed() -> None:

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import errno
 import re
 import time
 import uuid
@@ -22,6 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api.http.logs import get_logger
 from service.api.problems import problem_from_exception, problem_response
+from service.jobs.errors import StorageFull
 
 __all__ = ["REQUEST_ID_HEADER", "RequestContextMiddleware"]
 
@@ -71,8 +73,8 @@ class RequestContextMiddleware:
             if status["started"]:
                 log.exception("request.error", method=scope["method"], path=scope["path"])
                 raise  # half a response is out: the server must close the connection
-            problem = problem_from_exception(exc)
-            if problem.status >= 500:
+            problem = problem_from_exception(_disk_full(exc) or exc)
+            if problem.status >= 500 and problem.status != 507:
                 log.error("request.error", exc_info=exc, method=scope["method"], path=scope["path"])
                 problem.extensions["request_id"] = request_id
             await problem_response(problem, scope.get("path"))(scope, receive, send_with_id)
@@ -88,3 +90,10 @@ class RequestContextMiddleware:
                 tenant=getattr(principal, "tenant", None),
             )
             structlog.contextvars.clear_contextvars()
+
+
+def _disk_full(exc: BaseException) -> BaseException | None:
+    """ENOSPC/EDQUOT anywhere in a request: the typed 507 ``storage-full`` (never a 500)."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return StorageFull("the server is out of disk space")
+    return None

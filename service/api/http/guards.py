@@ -9,8 +9,11 @@
    origin's page is refused unless it carries an API key (403): no cross-site form post can
    submit, cancel or delete a job.
 5. :class:`AuthGate`: ``/v1/*`` requires a valid key when keys are configured (401), then the
-   key's token bucket (429 + ``Retry-After``); the :class:`~service.api.http.auth.Principal` is left
-   in ``scope["state"]["principal"]`` for the routes and the body limit.
+   key's token bucket (429 + ``Retry-After``); a client address that sent more than
+   ``auth_failure_burst`` wrong keys (refilled at ``auth_failure_rate``/s) gets 429 +
+   ``Retry-After`` for every ``/v1`` request until its allowance is back; the
+   :class:`~service.api.http.auth.Principal` is left in ``scope["state"]["principal"]`` for the
+   routes and the body limit.
 """
 
 from __future__ import annotations
@@ -192,6 +195,12 @@ class TokenBuckets:
         self.max_keys = max_keys
         self._buckets: OrderedDict[str, tuple[float, float]] = OrderedDict()
 
+    def peek(self, key: str, rate: float, burst: int, now: float | None = None) -> float:
+        """The tokens ``key`` has now (``burst`` for an unknown key); takes none."""
+        now = time.monotonic() if now is None else now
+        tokens, last = self._buckets.get(key, (float(burst), now))
+        return min(float(burst), tokens + (now - last) * rate)
+
     def take(self, key: str, rate: float, burst: int, now: float | None = None) -> float:
         """Take one token; 0 if granted, else the seconds until one is available."""
         now = time.monotonic() if now is None else now
@@ -211,10 +220,36 @@ class TokenBuckets:
 class AuthGate:
     """Authenticate ``/v1/*`` requests (401) and apply the key's rate limit (429)."""
 
-    def __init__(self, app: ASGIApp, keys: KeyRing, buckets: TokenBuckets | None = None) -> None:
+    def __init__(
+        self,
+        app: ASGIApp,
+        keys: KeyRing,
+        buckets: TokenBuckets | None = None,
+        failure_burst: int = 20,
+        failure_rate: float = 0.2,
+    ) -> None:
         self.app = app
         self.keys = keys
         self.buckets = buckets or TokenBuckets()
+        self.failures = TokenBuckets()
+        self.failure_burst = failure_burst
+        self.failure_rate = failure_rate
+
+    def _guessing(self, client: str | None) -> ApiProblem | None:
+        """429 for a client address whose wrong keys used up its allowance (its next wrong key
+        would take a token it does not have): every ``/v1`` request of it waits, a valid key's
+        too, so the answers tell a guesser nothing."""
+        tokens = self.failures.peek(f"addr:{client}", self.failure_rate, self.failure_burst)
+        if tokens >= 1.0:
+            return None
+        wait = math.ceil((1.0 - tokens) / self.failure_rate)
+        return ApiProblem(
+            429,
+            "too many requests with a wrong API key from this address",
+            code="too-many-auth-failures",
+            headers={"Retry-After": str(wait)},
+            retry_after=wait,
+        )
 
     def _principal(self, scope: Scope) -> Principal | ApiProblem:
         key = presented_key(Headers(scope=scope))
@@ -243,9 +278,17 @@ class AuthGate:
             await self.app(scope, receive, send)
             return
         gated = scope["path"].startswith("/v1/") or scope["path"] == "/v1"
+        client = (scope.get("client") or (None,))[0]
+        if gated and self.keys.enabled:
+            blocked = self._guessing(client)
+            if blocked is not None:
+                await _refuse(blocked, scope, receive, send)
+                return
         principal = self._principal(scope)
         if isinstance(principal, ApiProblem):
             if gated:
+                if principal.code == "invalid-api-key":
+                    self.failures.take(f"addr:{client}", self.failure_rate, self.failure_burst)
                 await _refuse(principal, scope, receive, send)
                 return
             principal = self.keys.anonymous((scope.get("client") or (None,))[0])

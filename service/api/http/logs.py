@@ -35,6 +35,27 @@ _LEVELS = {
 }
 
 
+class _CurrentStderr(logging.StreamHandler):  # type: ignore[type-arg]
+    """A handler that writes to ``sys.stderr`` *as it is when a record is emitted*.
+
+    ``StreamHandler(sys.stderr)`` keeps the stream object it was given: when that object is
+    replaced and closed (pytest's output capture, a daemon reattaching its streams), every later
+    record from a background thread (queue sweeper, webhook deliveries) failed with
+    "--- Logging error --- ValueError: I/O operation on closed file" and a traceback.
+    """
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+
+    @property  # type: ignore[override]
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:  # StreamHandler.__init__ assigns it
+        pass
+
+
 def _shared_processors(*, foreign: bool) -> list[Any]:
     extra = [structlog.stdlib.ExtraAdder()] if foreign else []  # stdlib's extra={...}
     return [
@@ -75,7 +96,7 @@ def configure_logging(level: str = "info", fmt: str = "json") -> None:
         foreign_pre_chain=_shared_processors(foreign=True),
         processors=[structlog.stdlib.ProcessorFormatter.remove_processors_meta, *final],
     )
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _CurrentStderr()
     handler.setFormatter(formatter)
     root = logging.getLogger()
     root.handlers = [handler]

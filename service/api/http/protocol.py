@@ -71,14 +71,16 @@ class GuardedH11Protocol(H11Protocol):
         self._header_timer: asyncio.TimerHandle | None = None
         self._address = self.client[0] if self.client else "-"
         self._counted = False
+        self._refused: tuple[int, str] | None = None
         mine = self.per_client.get(self._address, 0)
         if mine >= self.max_per_client:
             room = self._evict_idle(self._address)
         else:
             room = len(self.connections) <= self.max_connections or self._evict_idle(None)
-        if not room:
+        if not room:  # answered once its request header has come (see _refuse)
             self.refusals.add(len(self.connections))
-            transport.abort()
+            self._refused = (429, "this client") if mine >= self.max_per_client else (503, "")
+            self._arm_header_timer()
             return
         self.per_client[self._address] = self.per_client.get(self._address, 0) + 1
         self._counted = True
@@ -104,7 +106,27 @@ class GuardedH11Protocol(H11Protocol):
             self._header_timer.cancel()
             self._header_timer = None
 
+    def _refuse(self) -> None:
+        """Answer a connection over the bounds: 429 (its address is at its bound) or 503
+        (the server is full), ``Retry-After`` and ``Connection: close``, then close it.
+
+        Sent after the request header has arrived, so that the client reads the answer
+        instead of a reset."""
+        status, who = self._refused or (503, "")
+        detail = (
+            f"too many open connections from {who}; close some (e.g. event streams) and retry"
+            if status == 429
+            else "the server has too many open connections; retry shortly"
+        )
+        code = "too-many-connections" if status == 429 else "server-busy"
+        _write_problem(self.transport, status, detail, code, retry_after=_RETRY_AFTER)
+
     def data_received(self, data: bytes) -> None:
+        if self._refused is not None:
+            if b"\r\n\r\n" in data or b"\n\n" in data or len(data) > 16384:
+                self._disarm_header_timer()
+                self._refuse()
+            return
         if self.conn.their_state is h11.IDLE:
             self._arm_header_timer()
         super().data_received(data)
@@ -163,6 +185,34 @@ class GuardedH11Protocol(H11Protocol):
         except h11.LocalProtocolError:  # the response had already started
             pass
         self.transport.close()
+
+
+_RETRY_AFTER = 2
+
+
+def _write_problem(
+    transport: asyncio.BaseTransport, status: int, detail: str, code: str, retry_after: int
+) -> None:
+    """A complete problem+json answer written straight to ``transport``, which is then closed."""
+    title = {429: "Too Many Requests", 503: "Service Unavailable"}[status]
+    body = json.dumps(
+        {
+            "type": f"urn:geosmooth:problem:{code}",
+            "title": title,
+            "status": status,
+            "detail": detail,
+            "code": code,
+            "retry_after": retry_after,
+        }
+    ).encode()
+    head = (
+        f"HTTP/1.1 {status} {title}\r\ncontent-type: application/problem+json\r\n"
+        f"content-length: {len(body)}\r\nretry-after: {retry_after}\r\n"
+        "x-content-type-options: nosniff\r\nconnection: close\r\n\r\n"
+    ).encode()
+    assert isinstance(transport, asyncio.WriteTransport)
+    transport.write(head + body)
+    transport.close()
 
 
 def guarded_protocol(max_connections: int, max_per_client: int, header_timeout: float) -> type[Any]:

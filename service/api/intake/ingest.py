@@ -340,6 +340,9 @@ def check_job(req: IngestRequest) -> NewJob:
     JSON file next to the spooled body, written once every check passed."""
     parsed = parse_request(req, req.limits.max_points)
     check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
+    from service.api.intake.dryrun import dry_run  # 422 for what the engine would refuse
+
+    dry_run(parsed.document.geometry, parsed.params, int(req.options.get("dry_run_points", 0)))
     if "geometry" in parsed.extra:
         inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
         inline.write_text(json.dumps(parsed.extra["geometry"], separators=(",", ":")))

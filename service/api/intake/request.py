@@ -5,10 +5,12 @@ function of :mod:`service.api.intake.ingest` they need. The body is streamed to 
 (:mod:`service.api.intake.uploads`), then parsed and checked in a worker process
 (:mod:`service.api.intake.isolation`) with
 
-* a time limit (``ingest_timeout``; ``sync_timeout`` for ``POST /v1/smooth``),
+* a time limit (``parse_timeout``, at most ``ingest_timeout``; ``sync_timeout`` for
+  ``POST /v1/smooth``); the process is killed at its deadline and when the client disconnects,
 * an address-space budget: ``INGEST_BASE_BYTES + INGEST_FACTOR x body`` for parsing (the io
   readers keep their peak near 3x the file), ``sync_memory_bytes`` for a synchronous solve,
-* at most ``ingest_concurrency`` of them at once (``workers`` solves for ``/v1/smooth``).
+* at most ``max(2, workers)`` of them at once (``workers`` solves for ``/v1/smooth``), of which
+  one key (or client address) holds at most ``parse_share`` (:meth:`Intake.fair_slot`).
 
 Inline JSON bodies are parsed with the standard library's ``json`` (about 10-15x the body in
 Python objects), so they are bounded separately by ``MAX_JSON_BODY_BYTES``; larger inputs are
@@ -18,8 +20,8 @@ uploaded as files (multipart), which the io readers parse with bounded memory.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import asynccontextmanager, contextmanager
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -54,11 +56,23 @@ def spool_dir(settings: Settings) -> Path:
     return Path(settings.data_dir) / "spool"
 
 
-def clean_spool(settings: Settings, max_age: float = _SPOOL_MAX_AGE) -> int:
-    """Remove spool files older than ``max_age`` seconds (left by a crash); how many."""
+def clean_spool(settings: Settings, max_age: float | None = None) -> int:
+    """Remove spool files older than ``max_age`` seconds (left by a crash); how many.
+
+    Default: every one when no other live server uses the spool (a crash left them: see
+    :func:`service.jobs.embedded.maintenance.sole_user`; this process registers as a user),
+    else those older than an hour (another server may be receiving them).
+    """
+    from service.jobs.embedded.maintenance import sole_user
+
     removed = 0
     now = time.time()
     directory = spool_dir(settings)
+    if max_age is None:
+        try:
+            max_age = 0.0 if sole_user(directory) else _SPOOL_MAX_AGE
+        except OSError:
+            max_age = _SPOOL_MAX_AGE
     found = directory.is_dir()
     names = [*directory.glob("upload-*"), *directory.glob("download-*")] if found else []
     for path in names:  # uploads, and downloads pinned by a crashed server
@@ -85,9 +99,30 @@ class Intake:
     def __init__(self, settings: Settings, isolation: Isolation | None = None) -> None:
         self.settings = settings
         self.isolation = isolation or Isolation()
-        self.ingest_limiter = anyio.CapacityLimiter(max(2, settings.workers))
+        slots = max(2, settings.workers)
+        self.ingest_limiter = anyio.CapacityLimiter(slots)
         self.sync_limiter = anyio.CapacityLimiter(settings.workers)
+        self.parse_share = settings.parse_share or max(1, slots // 2)
         self._sync_active: dict[str, int] = {}
+        self._shares: dict[str, anyio.CapacityLimiter] = {}
+
+    @asynccontextmanager
+    async def fair_slot(self, bucket: str, limiter: anyio.CapacityLimiter) -> AsyncIterator[None]:
+        """A slot of ``limiter`` once ``bucket`` has fewer than its share of them in use.
+
+        A key's uploads beyond its share wait on the key's own limiter, not in the shared
+        queue, so one key's slow parses leave the other slots to the other keys.
+        """
+        share = self._shares.get(bucket)
+        if share is None:
+            share = self._shares[bucket] = anyio.CapacityLimiter(self.parse_share)
+        try:
+            async with share, limiter:
+                yield
+        finally:
+            stats = share.statistics()
+            if not stats.borrowed_tokens and not stats.tasks_waiting:
+                self._shares.pop(bucket, None)
 
     @contextmanager
     def sync_slot(self, bucket: str, limit: int) -> Iterator[None]:
@@ -148,7 +183,7 @@ class Intake:
             params_required=params_required,
             out_format=out_format,
             exact_tau_max_points=self.settings.submit_exact_tau_points,
-            options=dict(options or {}),
+            options={"dry_run_points": self.settings.submit_dry_run_points, **(options or {})},
         )
         shown = upload.filename or "the upload"
         redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
@@ -157,15 +192,19 @@ class Intake:
             limiter, timeout = self.sync_limiter, self.settings.sync_timeout
             budget: int = self.settings.sync_memory_bytes
         else:
-            limiter, timeout = self.ingest_limiter, self.settings.ingest_timeout
+            limiter = self.ingest_limiter
+            timeout = min(self.settings.ingest_timeout, self.settings.parse_timeout)
             budget = INGEST_BASE_BYTES + INGEST_FACTOR * upload.size
-        async with limiter:
-            return await self.isolation.run(
+        async with self.fair_slot(principal.bucket, limiter):
+            answer = await self.isolation.run(
                 func,
                 req,
                 timeout=timeout,
                 memory_bytes=budget,
                 what=mode,
                 redact=redact,
-                disconnect=request.receive if mode == "sync" else None,
+                disconnect=request.receive,
             )
+        if answer is None and mode == "ingest":  # the client left: its parse was killed
+            raise ApiProblem(400, "the client closed the request", code="client-closed-request")
+        return answer

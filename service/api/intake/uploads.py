@@ -14,6 +14,7 @@ the server's memory. Bytes are counted as they arrive by
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import Request
 
 from service.api.errors import ApiProblem
+from service.jobs.errors import storage_error
 
 if TYPE_CHECKING:
     from python_multipart.multipart import MultipartCallbacks
@@ -188,24 +190,34 @@ async def _multipart(request: Request, boundary: bytes, spool_dir: Path) -> Uplo
     except FormParserError as exc:
         upload.discard()
         raise _invalid("body", f"malformed multipart body: {exc}", 400) from None
-    except BaseException:
+    except BaseException as exc:
         upload.discard()
+        _raise_storage(exc)
         raise
     finally:
-        parts.close()
+        with contextlib.suppress(OSError):  # ENOSPC on the last flush: answered above
+            parts.close()
+
+
+def _raise_storage(exc: BaseException) -> None:
+    """An ``OSError`` of the spool (ENOSPC, EDQUOT, EROFS ...) as its typed 507/503."""
+    typed = storage_error(exc) if isinstance(exc, OSError) else None
+    if typed is not None:
+        raise typed from None
 
 
 async def _json_body(request: Request, spool_dir: Path) -> Upload:
     upload = Upload("json")
-    upload.path, sink = _spool(spool_dir, ".json")
     try:
+        upload.path, sink = _spool(spool_dir, ".json")
         with sink:
             async for chunk in request.stream():
                 sink.write(chunk)
                 upload.size += len(chunk)
         return upload
-    except BaseException:
+    except BaseException as exc:
         upload.discard()
+        _raise_storage(exc)
         raise
 
 
@@ -217,6 +229,8 @@ async def receive_upload(request: Request, spool_dir: Path) -> Upload:
     ApiProblem
         415 for another content type, 400 for a malformed multipart body, 422 for unknown,
         repeated or missing parts, 413 for an oversized small part.
+    StorageError
+        507 when the spool is out of space (ENOSPC, EDQUOT), 503 when it cannot be written.
     """
     ctype, options = parse_options_header(request.headers.get("content-type"))
     media = ctype.decode("latin-1")

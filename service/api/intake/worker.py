@@ -21,6 +21,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from service.api.errors import ApiProblem, typed_problem
+from service.jobs.errors import storage_error
 
 __all__ = ["child_main"]
 
@@ -89,7 +90,7 @@ def _outcome(func: Callable[[Any], Any], arg: Any, budget: int | None) -> tuple[
         )
         return "problem", problem.to_wire()
     except BaseException as exc:
-        typed = typed_problem(exc)
+        typed = typed_problem(storage_error(exc) or exc)
         if typed is not None:
             return "problem", typed.to_wire()
         return "internal", f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"

@@ -13,7 +13,9 @@ backend, and sends what changed:
 Every event has an increasing ``id:``; a client that reconnects with ``Last-Event-ID`` gets ids
 that continue from it (and the current state again). ``: ping`` comments keep idle connections
 open (every ``events_ping_seconds``, default 15 s). The stream stops reading the queue as soon
-as the client disconnects.
+as the client disconnects. One key (or client address) holds at most ``events_max_streams``
+streams (default 32); one more is answered 429 with ``Retry-After`` (and a connection over the
+server's connection bounds 429/503 with ``Retry-After``, :mod:`service.api.http.protocol`).
 
 Programs can read it with any SSE client; the web page uses ``fetch()`` and a stream reader so
 that it can send the ``Authorization`` header (``EventSource`` cannot).
@@ -29,9 +31,11 @@ import anyio
 from fastapi import APIRouter, Header, Request
 from sse_starlette import EventSourceResponse, ServerSentEvent
 from starlette.concurrency import run_in_threadpool
+from starlette.types import Receive, Scope, Send
 
-from service.api.deps import JobDep, QueueDep, SettingsDep
+from service.api.deps import JobDep, PrincipalDep, QueueDep, SettingsDep
 from service.api.docs import problem_responses
+from service.api.errors import ApiProblem
 from service.jobs.queue import JobQueue, JobRecord
 
 __all__ = ["job_event_stream", "router"]
@@ -116,6 +120,58 @@ async def job_event_stream(
     # The job was deleted meanwhile (e.g. its TTL ran out): nothing more will happen to it.
 
 
+class StreamSlots:
+    """Open event streams per rate-limit bucket (key, or client address without keys)."""
+
+    def __init__(self) -> None:
+        self.open: dict[str, int] = {}
+
+    def take(self, bucket: str, limit: int) -> None:
+        """Count a new stream of ``bucket``; 429 + ``Retry-After`` when it holds ``limit``."""
+        if self.open.get(bucket, 0) >= limit:
+            raise ApiProblem(
+                429,
+                f"this key already has {limit} event streams open; close one, or poll "
+                "GET /v1/jobs/{id}",
+                code="too-many-streams",
+                headers={"Retry-After": str(_RETRY_AFTER)},
+                retry_after=_RETRY_AFTER,
+                max_streams=limit,
+            )
+        self.open[bucket] = self.open.get(bucket, 0) + 1
+
+    def release(self, bucket: str) -> None:
+        left = self.open.get(bucket, 1) - 1
+        if left > 0:
+            self.open[bucket] = left
+        else:
+            self.open.pop(bucket, None)
+
+
+_RETRY_AFTER = 5
+
+
+class _CountedStream(EventSourceResponse):
+    """An event stream that gives its slot back however it ends (also before its first event)."""
+
+    def __init__(self, release: Callable[[], None], *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._release = release
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        try:
+            await super().__call__(scope, receive, send)
+        finally:
+            self._release()
+
+
+def _stream_slots(request: Request) -> StreamSlots:
+    state = request.app.state
+    if not hasattr(state, "event_streams"):
+        state.event_streams = StreamSlots()
+    return state.event_streams  # type: ignore[no-any-return]
+
+
 def _last_id(value: str | None) -> int:
     try:
         return max(0, int(value or 0))
@@ -150,11 +206,14 @@ async def job_events(
     job: JobDep,
     queue: QueueDep,
     settings: SettingsDep,
+    principal: PrincipalDep,
     last_event_id: Annotated[
         str | None,
         Header(description="Id of the last event received (reconnection); ids continue after it."),
     ] = None,
 ) -> EventSourceResponse:
+    slots = _stream_slots(request)
+    slots.take(principal.bucket, settings.events_max_streams)
     stream = job_event_stream(
         queue,
         job,
@@ -162,7 +221,8 @@ async def job_events(
         disconnected=request.is_disconnected,
         start_id=_last_id(last_event_id),
     )
-    return EventSourceResponse(
+    return _CountedStream(
+        lambda: slots.release(principal.bucket),
         stream,
         ping=settings.events_ping_seconds,
         sep=_SEP,

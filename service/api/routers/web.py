@@ -22,6 +22,7 @@ from fastapi.responses import FileResponse, HTMLResponse
 from starlette.staticfiles import StaticFiles
 
 from service.api.deps import SettingsDep
+from service.api.http.headers import CSP
 from service.api.problems import ApiProblem
 from service.io.registry import FORMATS, format_for_name
 
@@ -38,25 +39,6 @@ _FAVICON = "/static/favicon.svg"
 
 router = APIRouter(include_in_schema=False)
 _static = StaticFiles(directory=STATIC_DIR, check_dir=False)
-
-#: Content-Security-Policy of the HTML pages: the browser itself refuses every other origin.
-#: (ReDoc 2.5.4 shows its logo from its CDN as an <img>; this policy is what stops that request,
-#: and the bundle then hides the image.) Inline scripts: FastAPI's docs pages and the page's
-#: import map; inline styles: Swagger UI, ReDoc and three.js set them.
-CSP = "; ".join(
-    [
-        "default-src 'self'",
-        "script-src 'self' 'unsafe-inline'",
-        "style-src 'self' 'unsafe-inline'",
-        "img-src 'self' data: blob:",
-        "font-src 'self' data:",
-        "connect-src 'self'",
-        "worker-src 'self' blob:",
-        "frame-ancestors 'self'",
-        "base-uri 'self'",
-        "form-action 'self'",
-    ]
-)
 
 
 def _html(response: Response) -> Response:

@@ -56,6 +56,25 @@ def _neighbours(kind: str, params: SmoothingParams | None) -> tuple[float, int]:
     return (7.0 if delaunay else k + 1.0), k
 
 
+def _normal_unknowns(n: int, dim: int, kind: str, params: SmoothingParams | None) -> int:
+    """Unknowns per point of the system: the codimension with normal displacement, else 1
+    (free displacement solves for the ``dim`` coordinates as right-hand sides of one matrix).
+
+    As :func:`service.core.system.displacement.resolve_displacement` decides: ``auto`` is
+    normal for meshes and clouds (not with ``tau="gcv"`` or windowed-sinc), free for curves.
+    """
+    mode = params.displacement if params is not None else "auto"
+    if mode == "auto":
+        free_only = params is not None and (
+            params.method == "windowed-sinc" or params.tau_rule == "gcv"
+        )
+        mode = "free" if free_only or kind == "curve" else "normal"
+    if mode != "normal":
+        return 1
+    manifold = {"mesh": 2, "curve": 1}.get(kind, min(2, dim - 1))
+    return max(dim - manifold, 1)
+
+
 def _build_bytes(n: int, dim: int, kind: str, params: SmoothingParams | None, faces: int) -> float:
     """Input and output points, neighbourhood build temporaries, weights and L (three copies:
     L, L_F and its transpose), per the measurements in service/core/README.md."""
@@ -103,11 +122,19 @@ def estimate_resources(
     nnz_row, k = _neighbours(kind, params)
     faces = n_faces if n_faces is not None else (2 * n if kind == "mesh" else 0)
     build = _build_bytes(n, dim, kind, params, faces)
-    nnz_m = n * min(nnz_row**2, 3.0 * nnz_row**1.5)
+    nnz_m = n * min(nnz_row**2, 3.0 * nnz_row**1.5, float(n))
     log_n = max(math.log2(max(n, 2)), 1.0)
     entries = 5.0 * n if kind == "curve" else (10.5 if kind == "mesh" else 14.0) * n * log_n
+    entries = min(entries, n * (n + 1) / 2.0)  # a factor is at most dense
+    # Normal displacement: r unknowns per point, every entry an r x r block (eq. of
+    # displacement.projected_normal_system), built from an einsum over the dim coordinates.
+    r = _normal_unknowns(n, dim, kind, params)
+    blocks = r * r
+    build += 3 * 8.0 * n * nnz_row * blocks if r > 1 else 0.0
+    nnz_m *= blocks
+    entries *= blocks
     direct = build + 36.0 * nnz_m + entries * _BYTES_PER_FACTOR_ENTRY + 8.0 * n * dim * 8
-    matfree = build + 8.0 * n * dim * 12
+    matfree = build + 8.0 * n * dim * 12 + (36.0 * nnz_m if r > 1 else 0.0)
     solver = params.solver if params is not None else "auto"
     dense = nnz_m > DENSE_ROWS * n
     too_big = memory_limit is not None and 1.3 * direct > memory_limit
@@ -115,10 +142,12 @@ def estimate_resources(
         "matrix-free" if solver == "cg" or (solver == "auto" and (dense or too_big)) else "direct"
     )
     flops_build = n * (60.0 * nnz_row + (400.0 * (k + 1) if kind == "cloud" else 0.0))
+    flops_build += n * nnz_row * dim * blocks * (4.0 if r > 1 else 0.0)  # blocks N_i^T N_j
+    unknowns = n * r
     if path == "direct":
-        work = 2.5 * entries**2 / n / 3e9 + 4 * 12.0 * entries * dim / 1e9
+        work = 2.5 * entries**2 / unknowns / 3e9 + 4 * 12.0 * entries * dim / 1e9
     else:
-        work = 250 * 4.0 * n * nnz_row * dim / 5e8  # ~250 products with L_F^T L_F
+        work = 250 * 4.0 * n * nnz_row * dim * r / 5e8  # ~250 products with L_F^T L_F
     seconds = flops_build / 1e8 + work
     mem = direct if path == "direct" else matfree
     return ResourceEstimate(int(1.3 * mem), float(seconds), path)

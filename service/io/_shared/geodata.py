@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.io._shared.geo import LocalFrame
+from service.io.errors import FormatError
 
 __all__ = ["GeoFrame", "decimals", "near"]
 
@@ -36,6 +37,17 @@ def near(lon: float, before: float) -> float:
     """``lon`` on the side of the antimeridian ``before`` is (within [-180, 180])."""
     out = before + ((lon - before + 180.0) % 360.0 - 180.0)
     return out + 360.0 if out < -180.0 else out - 360.0 if out > 180.0 else out
+
+
+def _check_degrees(lat: NDArray[np.float64], lon: NDArray[np.float64]) -> None:
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(lat) <= 90.0) | ~(np.abs(lon) <= 360.0)  # NaN fails both
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise FormatError(
+            f"point {i} has latitude {lat[i]:g} and longitude {lon[i]:g}: geographic degrees"
+            f" must lie in [-90, 90] and [-360, 360] ({int(bad.sum())} such points)"
+        )
 
 
 @dataclass(frozen=True)
@@ -61,7 +73,10 @@ class GeoFrame:
         has_ele: bool,
         geographic: bool,
     ) -> GeoFrame:
-        """The frame for these coordinates."""
+        """The frame for these coordinates (``FormatError`` for a latitude outside
+        [-90, 90] or a longitude outside [-360, 360] when they are geographic)."""
+        if geographic:
+            _check_degrees(lat, lon)
         return cls(LocalFrame.about(lat, lon) if geographic else None, has_ele)
 
     def points(

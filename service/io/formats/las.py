@@ -24,6 +24,7 @@ names and the other numeric attributes as extra bytes.
 from __future__ import annotations
 
 import contextlib
+import math
 import struct
 from dataclasses import dataclass
 from typing import Any, BinaryIO
@@ -67,6 +68,8 @@ def _laspy_errors(fmt: str) -> Any:
 
 
 def _decimals(scale: float) -> int | None:
+    if not (math.isfinite(scale) and scale > 0):
+        return None
     k = -np.log10(scale)
     return round(k) if scale > 0 and abs(k - round(k)) < 1e-9 and round(k) >= 0 else None
 
@@ -83,6 +86,13 @@ def _precheck(head: bytes, size: int, fmt: str) -> None:
         start, n_evlrs = struct.unpack_from("<QI", head, 235)
         if n_evlrs and (start > size or n_evlrs * 60 > size - start):
             problem = f"{n_evlrs} extended VLRs cannot fit after byte {start}"
+    if problem is None and len(head) >= 179:
+        scales = zip("xyz", struct.unpack_from("<3d", head, 131), strict=True)
+        offsets = zip("xyz", struct.unpack_from("<3d", head, 155), strict=True)
+        bad = [f"{a} scale {v!r}" for a, v in scales if not math.isfinite(v) or v == 0]
+        bad += [f"{a} offset {v!r}" for a, v in offsets if not math.isfinite(v)]
+        if bad:  # every coordinate would be the offset, or NaN
+            problem = f"{', '.join(bad)} (scales must be finite and non-zero)"
     if problem is not None:
         raise FormatError(f"{fmt.upper()}: malformed header: {problem}", fmt=fmt)
 

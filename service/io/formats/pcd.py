@@ -127,7 +127,10 @@ def _body(data: bytes, pos: int, encoding: str, dt: np.dtype[Any], n: int) -> An
         csize, usize = struct.unpack("<II", data[pos : pos + 8])
         if usize != n * dt.itemsize or pos + 8 + csize > len(data):
             raise _fail(f"binary_compressed sizes ({csize}, {usize}) do not match {n} points")
-        raw = lzf.decompress(data[pos + 8 : pos + 8 + csize], usize) if usize else b""
+        try:
+            raw = lzf.decompress(data[pos + 8 : pos + 8 + csize], usize) if usize else b""
+        except (ValueError, SystemError):  # "error in compressed data"
+            raw = None
         if raw is None or len(raw) != usize:
             raise _fail("binary_compressed body does not decompress (corrupt LZF data)")
         rec = np.empty(n, dtype=dt)

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from service.jobs import admit
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.blobs import DirectoryBlobs
+from service.jobs.distributed.epoch import Epoch
 from service.jobs.files import is_job_id
 from service.jobs.limits import default_job_memory
 from service.jobs.notify import Notifier
@@ -76,6 +77,7 @@ class RQQueue:
         self._started = False
         self._last_reconcile = 0.0
         self._last_prune = 0.0
+        self.epoch = Epoch(backend.redis, f"{backend.store.prefix}:epoch")
 
     @classmethod
     def from_settings(cls, settings: Settings) -> RQQueue:
@@ -94,6 +96,8 @@ class RQQueue:
         self._started = True
         self._stop.clear()
         self.notifier.start()
+        with contextlib.suppress(Exception):
+            self.epoch.check()
         with contextlib.suppress(Exception):
             self.backend.remove_orphans()
         self._sweeper = threading.Thread(target=self._sweep_loop, name="geosmooth-rq-sweep",
@@ -269,6 +273,7 @@ class RQQueue:
         checks = {"broker": "ok", "storage": self.blobs.health(), "workers": "ok"}
         try:
             self.backend.redis.ping()
+            checks["broker"] = self.epoch.check()
             from rq import Worker
 
             if not Worker.count(queue=self.backend.queue):
@@ -284,6 +289,7 @@ class RQQueue:
     def sweep(self) -> None:
         """One maintenance pass (see :mod:`service.jobs.distributed.backend`)."""
         backend = self.backend
+        self.epoch.check()  # a Redis that came back empty is logged at once
         backend.recover()
         backend.enqueue_due()
         if time.monotonic() - self._last_reconcile >= self.reconcile_interval:

@@ -27,12 +27,49 @@ if TYPE_CHECKING:
     from service.jobs.files import JobFiles
     from service.jobs.notify import Notifier
 
-__all__ = ["HOST", "LIVE_OWNERS", "ORPHAN_AGE", "Maintenance", "owner_dead", "pid_alive"]
+__all__ = [
+    "HOST",
+    "LIVE_OWNERS",
+    "ORPHAN_AGE",
+    "Maintenance",
+    "owner_dead",
+    "pid_alive",
+    "sole_user",
+]
 
 log = logging.getLogger("geosmooth.jobs")
 HOST = socket.gethostname()
 LIVE_OWNERS: set[str] = set()  # owners of the queues started in this process
 ORPHAN_AGE = 600.0
+
+
+_HELD: list[int] = []  # lock files of the directories this process uses (kept open)
+
+
+def sole_user(directory: Path, name: str = ".live") -> bool:
+    """Register this process as a user of ``directory``; whether no other live process is one.
+
+    Every user holds a shared ``flock`` on ``directory/name`` for its whole life (the kernel
+    drops it when the process dies, SIGKILL included). Before taking it, an exclusive lock is
+    tried: granted means nobody else holds one, so whatever a crash left in the directory
+    (partial uploads, orphan job directories) belongs to no live process and can go at once;
+    refused means other servers share it, and their files in flight are left to the age rule.
+    """
+    import fcntl
+
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / name
+    if not path.exists():
+        path.touch()
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)  # read-only: a remount ro stays possible
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        alone = True
+    except OSError:
+        alone = False
+    fcntl.flock(fd, fcntl.LOCK_SH)
+    _HELD.append(fd)
+    return alone
 
 
 def pid_alive(pid: int) -> bool:
@@ -142,7 +179,11 @@ class Maintenance:
             self._webhooks_due,
         ]  # fmt: skip
         if initial:
-            steps.append(self._remove_orphans)
+            try:
+                alone = sole_user(self.files.root)
+            except OSError:  # e.g. a read-only store: leave orphans to the age rule
+                alone = False
+            steps.append(lambda: self._remove_orphans(0.0 if alone else ORPHAN_AGE))
         for step in steps:
             try:
                 step()
@@ -159,9 +200,14 @@ class Maintenance:
     def _keep_reserve(self) -> None:
         self.store.keep_reserve(self.reserve_bytes, self.min_free_bytes)
 
-    def _remove_orphans(self) -> None:
-        for job_id in self.files.orphans(self.store.ids(), ORPHAN_AGE):
+    def _remove_orphans(self, min_age: float = ORPHAN_AGE) -> None:
+        """Job directories without a record: at any age when no other live process uses the
+        store (:func:`sole_user`), else older than :data:`ORPHAN_AGE`."""
+        removed = self.files.orphans(self.store.ids(), min_age)
+        for job_id in removed:
             self.files.remove(job_id)
+        if removed:
+            log.warning("removed %d orphan job director(y/ies) left by a crash", len(removed))
 
     def _remove_strays(self) -> None:
         if time.monotonic() - self._last_strays < ORPHAN_AGE and self._last_strays > 0:

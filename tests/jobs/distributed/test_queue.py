@@ -242,12 +242,13 @@ def test_the_worker_that_finished_a_job_posts_its_webhook(cluster: dict[str, Any
     verify = documented_verifier()
     with Receiver([502, 200]) as hook:
         rec = queue.submit(NewJob.check(script("ok"), "json", PARAMS, webhook_url=hook.url()))
-        done = wait_finished(queue, rec.id, 20)
-        wait_for(lambda: len(hook.deliveries) == 2, timeout=15)
+        done = wait_finished(queue, rec.id, 120)  # generous: a busy machine is slow, not wrong
+        wait_for(lambda: len(hook.deliveries) == 2, timeout=120)
+        # the state is written after the 200 is read: wait for it, do not race it
+        wait_for(lambda: queue.store.raw(rec.id)["webhook_state"] == "delivered", timeout=60)  # type: ignore[index]
     last = hook.deliveries[-1]
     assert verify(WEBHOOK_SECRET, last.body, last.headers["Geosmooth-Signature"])
     assert json.loads(last.body) == done.public_dict()
-    assert queue.store.raw(rec.id)["webhook_state"] == "delivered"  # type: ignore[index]
 
 
 def test_ttl_expiry_removes_records_and_blobs(cluster: dict[str, Any]) -> None:

@@ -139,6 +139,8 @@ def test_cancel_from_another_process_kills_the_job(make_queue: MakeQueue) -> Non
 
 
 def test_orphan_directories_are_removed_on_start(make_queue: MakeQueue) -> None:
+    """Another live process uses the store: only old orphans go (a young one may be its submit
+    in flight). Nobody else: every orphan goes (a crash left it)."""
     queue = make_queue(start=False)
     kept = queue.submit(NewJob.check(script("ok"), "json", PARAMS)).id
     orphan = queue.files.root / ("f" * 32)
@@ -146,9 +148,23 @@ def test_orphan_directories_are_removed_on_start(make_queue: MakeQueue) -> None:
     old = time.time() - 3600
     os.utime(orphan, (old, old))
     young = queue.files.root / ("e" * 32)
-    young.mkdir()  # may be a submit in flight in another process: kept
-    queue.start()
-    assert not orphan.exists() and young.exists() and queue.files.dir(kept).exists()
+    young.mkdir()
+    holder = subprocess.Popen(  # a live user of the store (holds its shared lock)
+        [sys.executable, "-c", "import sys, time\n"
+         "from pathlib import Path\n"
+         "from service.jobs.embedded.maintenance import sole_user\n"
+         f"sole_user(Path({str(queue.files.root)!r})); print('held', flush=True)\n"
+         "time.sleep(600)\n"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        queue.start()
+        assert not orphan.exists() and young.exists() and queue.files.dir(kept).exists()
+    finally:
+        holder.kill()
+        holder.wait(10)
+    # (nobody else: tests/api/test_crash_leftovers.py, a server restarted after a SIGKILL)
 
 
 def test_job_files_refuse_anything_but_job_ids(tmp_path: Path) -> None:
