@@ -354,12 +354,14 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/smooth``: smooth and write the answer to a file next to the spool file."""
     from service.core import smooth
     from service.io import write_geometry
+    from service.io.dispatch import check_output
 
     parsed = parse_request(req, min(req.limits.sync_max_points, req.limits.max_points))
+    fmt = req.out_format or parsed.fmt
+    check_output(parsed.document, fmt)  # 422 naming ``format``, before smoothing
     check_tau(parsed.document.geometry, parsed.params, 0, analyse=False)
     result = smooth(parsed.document.geometry, parsed.params)
     report = finite(result.report())
-    fmt = req.out_format or parsed.fmt
     out = Path(req.work_dir) / (Path(req.path).stem + f".result.{fmt}")
     if fmt == "json":
         geometry = write_geometry(parsed.document, "json", result.points).strip()
