@@ -354,4 +354,10 @@ def output_notes(doc: GeometryDocument, fmt: str) -> list[str]:
     notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
     if lost:
         notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
+    frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
+    if frame is not None and not spec.geographic_only:  # metres about the data's centre
+        notes.append(
+            f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
+            " not longitude/latitude (write GPX or GeoJSON to keep them)"
+        )
     return notes

@@ -16,7 +16,6 @@ import json
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -387,8 +386,8 @@ def test_every_writable_format_has_a_reader() -> None:
         assert fmt in READERS or FORMATS[fmt].read is not None
 
 
-def test_refusal_notes_and_cli_exit(tmp_path: Path) -> None:
-    """An OBJ mesh as GPX: refused, never written, and notes about kept columns stay true."""
+def test_output_notes_stay_true() -> None:
+    """Notes about kept columns only where true; geographic input written planar says so."""
     from service.io.dispatch import output_notes
 
     cloud = _cloud()
@@ -396,3 +395,6 @@ def test_refusal_notes_and_cli_exit(tmp_path: Path) -> None:
     notes = output_notes(cloud, "obj")
     assert not any(n.startswith("kept") for n in notes)
     assert "OBJ keeps no red, green, blue: not written" in notes
+    track = _track()
+    assert not any("not longitude/latitude" in n for n in output_notes(track, "geojson"))
+    assert any("not longitude/latitude" in n for n in output_notes(track, "ply"))
