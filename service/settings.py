@@ -11,7 +11,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
-from pydantic import Field, SecretStr, ValidationError
+from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.params import MAX_ITERATIONS_BOUND, MAX_K, SPECTRUM_MAX_POINTS
@@ -274,8 +274,11 @@ class Settings(BaseSettings):
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         default="info", description="Log level."
     )
-    log_format: Literal["json", "console"] = Field(
-        default="json", description="``json``: one JSON object per line; ``console``: text."
+    log_format: Literal["auto", "json", "console"] = Field(
+        default="auto",
+        description="``json``: one JSON object per line; ``console``: text; ``auto``: on a "
+        "terminal one human line with the page's and the docs' addresses, then warnings as "
+        "text; elsewhere (a service manager, a container, a pipe) JSON.",
     )
 
     # --- web page and job events (service/api/routers/events.py) ---
@@ -307,6 +310,37 @@ class Settings(BaseSettings):
         gt=0,
         description="Interval of the keep-alive ``: ping`` comments of the events stream.",
     )
+
+    # --- checks of values whose type alone does not say enough (one line each, see
+    # load_settings: the message names the variable and the forms it accepts) ---
+
+    @field_validator("storage_url")
+    @classmethod
+    def _storage_url(cls, value: str | None) -> str | None:
+        if value is None or not value.strip():
+            return None
+        if value.startswith("s3://") and value[5:].strip("/"):
+            return value
+        hint = (
+            " (a directory is GEOSMOOTH_DATA_DIR's business: leave GEOSMOOTH_STORAGE_URL unset)"
+            if "://" not in value
+            else ""
+        )
+        raise ValueError(f"must be s3://bucket[/prefix] or unset{hint}")
+
+    @field_validator("redis_url")
+    @classmethod
+    def _redis_url(cls, value: str) -> str:
+        if value.startswith(("redis://", "rediss://", "unix://")):
+            return value
+        raise ValueError("must be redis://host:port/db, rediss://... or unix:///path.sock")
+
+    @field_validator("data_dir")
+    @classmethod
+    def _data_dir(cls, value: Path) -> Path:
+        if value.exists() and not value.is_dir():
+            raise ValueError("must be a directory (or a path where one can be created)")
+        return value
 
 
 def default(name: str) -> Any:
@@ -363,4 +397,5 @@ def load_settings(**overrides: Any) -> Settings:
         env = f"GEOSMOOTH_{name.upper()}"
         value = overrides.get(name, os.environ.get(env, err.get("input")))
         shown = "***" if "key" in name else repr(value)
-        raise ConfigError(f"{env}={shown}: {err['msg']}", field=env) from None
+        why = " ".join(str(err["msg"]).removeprefix("Value error, ").split())
+        raise ConfigError(f"{env}={shown}: {why}", field=env) from None

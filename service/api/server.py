@@ -30,7 +30,17 @@ from service.api.http.protocol import guarded_protocol
 from service.exit_codes import EXIT_ADDRESS
 from service.settings import ConfigError, Settings, load_settings
 
-__all__ = ["AddressUnavailable", "InsecureBind", "check_bind", "is_loopback", "main", "serve"]
+__all__ = [
+    "AddressUnavailable",
+    "InsecureBind",
+    "announcement",
+    "base_url",
+    "check_bind",
+    "is_loopback",
+    "log_mode",
+    "main",
+    "serve",
+]
 
 log = get_logger("geosmooth.api")
 #: Listen backlog (the kernel caps it at net.core.somaxconn): a deep accept queue, so a
@@ -42,12 +52,47 @@ _ACCEPT_BATCH = 64
 
 
 class _Server(uvicorn.Server):
-    """uvicorn's server, with the deep listen queue restored after its startup."""
+    """uvicorn's server, with the deep listen queue restored after its startup, and the
+    ``announce`` line (if any) printed once it is ready."""
+
+    announce: str | None = None
 
     async def startup(self, sockets: list[socket.socket] | None = None) -> None:
         await super().startup(sockets=sockets)
         for sock in sockets or []:
             sock.listen(_BACKLOG)  # uvicorn set it to the accept batch size
+        if self.started and self.announce:
+            print(self.announce, file=sys.stderr, flush=True)
+
+
+def base_url(host: str, port: int) -> str:
+    """The address to open in a browser (``localhost`` for the any-address binds)."""
+    name = host.strip().strip("[]")
+    if name in ("", "0.0.0.0", "::"):
+        name = "localhost"
+    elif ":" in name:
+        name = f"[{name}]"
+    return f"http://{name}:{port}"
+
+
+def announcement(host: str, port: int) -> str:
+    """The one human line of ``geosmooth serve`` on a terminal."""
+    url = base_url(host, port)
+    return f"geosmooth is serving {url}/ (API docs: {url}/docs); press Ctrl-C to stop"
+
+
+def log_mode(settings: Settings, terminal: bool) -> tuple[str, str, bool]:
+    """(log format, log level, whether to print the human line) for ``settings``.
+
+    ``log_format="auto"``: on a terminal, the human line and text logs of warnings and errors
+    (unless ``GEOSMOOTH_LOG_LEVEL`` says otherwise); elsewhere JSON, as ``log_format="json"``.
+    """
+    if settings.log_format != "auto":
+        return settings.log_format, settings.log_level, False
+    if not terminal:
+        return "json", settings.log_level, False
+    level = settings.log_level if "log_level" in settings.model_fields_set else "warning"
+    return "console", level, True
 
 
 class InsecureBind(ConfigError):
@@ -179,7 +224,8 @@ def serve(
     given = {"host": host, "port": port, "workers": workers, "data_dir": data_dir}
     overrides = {**settings_overrides, **{k: v for k, v in given.items() if v is not None}}
     settings = load_settings(**overrides)
-    configure_logging(settings.log_level, settings.log_format)
+    fmt, level, human = log_mode(settings, sys.stderr.isatty())
+    configure_logging(level, fmt)
     keys = KeyRing.from_settings(settings)
     check_bind(settings.host, keys.enabled, insecure_no_auth or settings.insecure_no_auth)
     _raise_open_files_limit(settings.max_connections + 1024)
@@ -194,7 +240,9 @@ def serve(
         keys=len(keys),
         workers=settings.workers,
     )
-    _Server(uvicorn_config(app, settings)).run(sockets=[sock])
+    server = _Server(uvicorn_config(app, settings))
+    server.announce = announcement(settings.host, settings.port) if human else None
+    server.run(sockets=[sock])
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -205,9 +253,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--data-dir", default=None)
     parser.add_argument("--insecure-no-auth", action="store_true")
+    parser.add_argument("--log-format", choices=("auto", "json", "console"), default=None)
     ns = parser.parse_args(argv)
+    extra = {"log_format": ns.log_format} if ns.log_format else {}
     try:
-        serve(ns.host, ns.port, ns.workers, ns.data_dir, insecure_no_auth=ns.insecure_no_auth)
+        serve(
+            ns.host,
+            ns.port,
+            ns.workers,
+            ns.data_dir,
+            insecure_no_auth=ns.insecure_no_auth,
+            **extra,
+        )
     except ConfigError as exc:
         print(f"geosmooth serve: {exc.message}", file=sys.stderr)
         return int(exc.exit_code)

@@ -223,6 +223,13 @@ def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:
         help="serve a non-loopback address without API keys (anyone who reaches the port may "
         "submit, read and delete jobs) [default: $GEOSMOOTH_INSECURE_NO_AUTH or off]",
     )
+    sv.add_argument(
+        "--log-format",
+        choices=("auto", "json", "console"),
+        default=None,
+        help="json: one JSON object per line; console: text; auto: one human line with the "
+        "page's address on a terminal, JSON elsewhere [default: $GEOSMOOTH_LOG_FORMAT or auto]",
+    )
 
 
 def _add_submit(sub: argparse._SubParsersAction[_Parser]) -> None:

@@ -5,6 +5,10 @@ the environment (a bad ``GEOSMOOTH_*`` variable is one line naming it, exit stat
 non-loopback address without API keys (exit status 2 unless ``--insecure-no-auth``) and the
 address itself (in use or not permitted: exit status 11, where uvicorn would exit with its own
 status 3, which ``geosmooth`` documents as "input file missing").
+
+On a terminal it prints one human line with the page's and the docs' addresses once the
+server is ready (and logs warnings as text); elsewhere, or with ``--log-format json``, it logs
+JSON lines (``GEOSMOOTH_LOG_FORMAT`` is the same setting).
 """
 
 from __future__ import annotations
@@ -27,8 +31,16 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     from service.api.server import serve
     from service.settings import ConfigError
 
+    extra = {"log_format": ns.log_format} if getattr(ns, "log_format", None) else {}
     try:
-        serve(ns.host, ns.port, ns.workers, ns.data_dir, insecure_no_auth=ns.insecure_no_auth)
+        serve(
+            ns.host,
+            ns.port,
+            ns.workers,
+            ns.data_dir,
+            insecure_no_auth=ns.insecure_no_auth,
+            **extra,
+        )
     except ConfigError as exc:
         raise CliError(exc.message, int(exc.exit_code)) from exc
     except SystemExit as exc:  # uvicorn's own exit: its startup failed (the log says why)

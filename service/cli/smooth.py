@@ -172,6 +172,7 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     from service import core
     from service.core.errors import TauOutOfRange
     from service.io import FormatError, write_geometry
+    from service.io.dispatch import check_output, output_notes
 
     started = time.perf_counter()
     params, out_fmt = _check_options(ns)
@@ -179,6 +180,7 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
     geometry = _with_fixed(doc, fixed)
     out_fmt = out_fmt or doc.source_format
+    check_output(doc, out_fmt)  # a format that cannot hold this input: refused before smoothing
 
     progress = ProgressDisplay(err, enabled=not ns.quiet)
     try:
@@ -206,6 +208,13 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
             wall_seconds=time.perf_counter() - started,
         )
         write_json_report(ns.report, report)
-    show_summary(progress, report, ns, params, started, details=_details(doc), notes=doc.notes)
+    show_summary(
+        progress,
+        report,
+        ns,
+        params,
+        started,
+        details=_details(doc),
+        notes=output_notes(doc, out_fmt),
+    )
     return EXIT_OK
-

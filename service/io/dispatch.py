@@ -3,6 +3,10 @@
 Every format is an entry of :data:`~service.io.registry.FORMATS`; the format of an input comes
 from the explicit name, else the file name's extension, else the content (magic numbers, then
 the text formats' first lines). Writers get the plain document of :mod:`service.io._shared.plain`.
+
+What a format can hold is data of the registry (``kinds``, ``geographic_only``, ``max_dims``,
+``attributes``, ``coordinates``); :func:`check_output` is the one place that checks a document
+against it, used by the CLI and the API before smoothing and by every write.
 """
 
 from __future__ import annotations
@@ -14,15 +18,29 @@ from typing import Any, BinaryIO
 
 from numpy.typing import ArrayLike
 
+from service.exit_codes import EXIT_OUTPUT
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
-from service.io.registry import FORMATS, format_for_name, get_format, sniff, supported_text
+from service.io.registry import (
+    FORMATS,
+    Format,
+    format_for_name,
+    get_format,
+    sniff,
+    supported_text,
+)
 from service.io.source import Source
 
 __all__ = [
     "FORMATS",
+    "OutputRefused",
+    "check_output",
     "detect_format",
+    "formats_for",
+    "input_kinds",
+    "is_geographic",
+    "output_notes",
     "read_geometry",
     "save_geometry",
     "sniff_format",
@@ -206,9 +224,147 @@ def save_geometry(
         named = format_for_name(str(dest)) if isinstance(dest, str | os.PathLike) else None
         fmt = named.name if named is not None else doc.source_format
     spec = get_format(fmt)
+    check_output(doc, spec.name, points)
     plain = _plain(doc, points, normals, precision, ply_ascii)
     if isinstance(dest, str | os.PathLike):
         with open(dest, "wb") as fh:
             spec.write_to(plain, fh)
     else:
         spec.write_to(plain, dest)
+
+
+class OutputRefused(FormatError):
+    """The output format cannot hold this input; the message names the formats that can."""
+
+    code = "output-format-refused"
+    field = "format"
+    title = "Output format cannot hold this input"
+    status = 422
+    exit_code = EXIT_OUTPUT
+
+
+_KIND_WORDS = {"mesh": "faces", "polyline": "lines", "cloud": "a point cloud"}
+
+
+def input_kinds(doc: GeometryDocument) -> frozenset[str]:
+    """What writing ``doc`` needs: ``"mesh"`` (faces), ``"polyline"`` (edges), else ``"cloud"``."""
+    g = doc.geometry
+    kinds = set()
+    if g.faces is not None and len(g.faces):
+        kinds.add("mesh")
+    if g.edges is not None and len(g.edges):
+        kinds.add("polyline")
+    return frozenset(kinds or {"cloud"})
+
+
+def is_geographic(doc: GeometryDocument) -> bool:
+    """Whether ``doc`` holds longitude/latitude read from a geographic format (GPX, GeoJSON)."""
+    frame = getattr(doc.layout, "frame", None)
+    if frame is None or not hasattr(frame, "back"):
+        return False
+    if frame.frame is not None or doc.source_format == "gpx":
+        return True
+    from service.io.formats.geojson import _geographic
+
+    pts = doc.geometry.points
+    return pts.shape[1] >= 2 and _geographic(doc.layout.obj, pts[:, 0], pts[:, 1], None)  # type: ignore[attr-defined]
+
+
+def _same_family(doc: GeometryDocument, spec: Format) -> bool:
+    """Whether the writer gets the input's own layout (the file written back in its format)."""
+    source = doc.source_format
+    return source == spec.name or {source, spec.name} == {"las", "laz"}
+
+
+def _float32_loss(doc: GeometryDocument, spec: Format, points: ArrayLike | None) -> float:
+    """Half a float32 step at the coordinates ``spec`` stores, if that loses input precision.
+
+    0 when nothing the input had is lost: the input was float32, or the step stays within
+    1e-6 of the extent and the input's own resolution (its decimals, for text input).
+    """
+    import numpy as np
+
+    if spec.coordinates == "float64" or np.dtype(doc.precision.dtype) == np.float32:
+        return 0.0
+    pts = np.asarray(doc.geometry.points if points is None else points, dtype=np.float64)
+    if not pts.size:
+        return 0.0
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    if spec.coordinates == "float32-offset":
+        pts = pts - (lo + hi) / 2
+    half = float(np.spacing(np.float32(np.max(np.abs(pts))))) / 2
+    allowed = 1e-6 * float(np.max(hi - lo))
+    for spec_text in doc.precision.text or ():
+        if spec_text.startswith("%.") and spec_text.endswith("f"):
+            allowed = max(allowed, 0.5 * 10.0 ** -int(spec_text[2:-1]))
+    return half if half > allowed else 0.0
+
+
+def _problem(doc: GeometryDocument, spec: Format, points: ArrayLike | None = None) -> str | None:
+    """Why ``spec`` cannot hold ``doc`` (``None``: it can)."""
+    if _same_family(doc, spec):
+        return None
+    missing = sorted(input_kinds(doc) - spec.kinds)
+    if missing:
+        held = " or ".join(_KIND_WORDS[k] for k in sorted(spec.kinds))
+        return f"{spec.title} holds {held}, not {_KIND_WORDS[missing[0]]}"
+    dim = doc.geometry.dim
+    if dim < spec.min_dims or (spec.max_dims is not None and dim > spec.max_dims):
+        most = "any number of" if spec.max_dims is None else f"at most {spec.max_dims}"
+        return (
+            f"{spec.title} stores at least {spec.min_dims} and {most} coordinates per point; "
+            f"this geometry has {dim} coordinates per point"
+        )
+    if spec.geographic_only and not is_geographic(doc):
+        return (
+            f"{spec.title} holds longitude/latitude, and this {doc.source_format.upper()} input "
+            "has planar coordinates (read it from GPX or GeoJSON to write it there)"
+        )
+    loss = _float32_loss(doc, spec, points)
+    if loss:
+        return (
+            f"{spec.title} stores float32 coordinates, which would move these points by up to "
+            f"{loss:.3g} (more than the input's precision)"
+        )
+    return None
+
+
+def formats_for(doc: GeometryDocument) -> list[str]:
+    """The writable formats that can hold ``doc``, in registry order."""
+    return [f.name for f in FORMATS.values() if f.write is not None and _problem(doc, f) is None]
+
+
+def check_output(doc: GeometryDocument, fmt: str, points: ArrayLike | None = None) -> None:
+    """Refuse an output format that cannot hold ``doc`` (before smoothing, and at every write).
+
+    Raises
+    ------
+    OutputRefused
+        One line: why, and the formats that can hold this input.
+    UnsupportedFormat
+        ``fmt`` is not a writable format.
+    """
+    spec = get_format(fmt)
+    why = _problem(doc, spec, points)
+    if why is not None:
+        can = ", ".join(formats_for(doc))
+        tail = f"write {can} instead" if can else "no format geosmooth writes can hold it"
+        raise OutputRefused(f"cannot write {spec.name}: {why}; {tail}", fmt=spec.name)
+
+
+def output_notes(doc: GeometryDocument, fmt: str) -> list[str]:
+    """The reader's notes that stay true for a file written in ``fmt``, and what it drops."""
+    spec = get_format(fmt)
+    if _same_family(doc, spec):
+        return list(doc.notes)
+    lost = [name for name in doc.attributes if not spec.keeps(name)]
+    notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
+    if lost:
+        notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
+    frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
+    if frame is not None and not spec.geographic_only:  # metres about the data's centre
+        notes.append(
+            f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
+            " not longitude/latitude (write GPX or GeoJSON to keep them)"
+        )
+    return notes

@@ -21,7 +21,20 @@ from typing import Any, BinaryIO
 
 from service.io.errors import UnsupportedFormat
 
-__all__ = ["FORMATS", "Format", "format_for_name", "get_format", "sniff", "supported_text"]
+__all__ = [
+    "ALL_KINDS",
+    "FORMATS",
+    "Format",
+    "format_for_name",
+    "get_format",
+    "sniff",
+    "supported_text",
+]
+
+#: The kinds of input a format can hold (see :attr:`Format.kinds`).
+ALL_KINDS = frozenset({"mesh", "polyline", "cloud"})
+_CLOUD = frozenset({"cloud"})
+_COLOURS = ("red", "green", "blue", "alpha")
 
 Reader = Callable[..., Any]
 Writer = Callable[..., None]
@@ -66,6 +79,21 @@ class Format:
         ``sniff(head, size) -> bool``: whether the first bytes look like this format.
     binary : bool
         Whether files are binary (``False``: text).
+    kinds : frozenset of str
+        What a file of this format can hold: ``"mesh"`` (faces), ``"polyline"`` (edges,
+        polylines), ``"cloud"`` (points only). A document needing a kind not listed is refused
+        before smoothing (:func:`service.io.dispatch.check_output`).
+    geographic_only : bool
+        Coordinates are longitude/latitude (WGS84): only documents read from a geographic
+        format can be written.
+    min_dims, max_dims : int, int or None
+        Fewest and most coordinates per point (``None``: any number).
+    attributes : "all" or tuple of str
+        Per-vertex attributes a file of this format written from *another* format keeps
+        (``"all"``: every numeric one; a file written back in its own format keeps everything).
+    coordinates : {"float64", "float32", "float32-offset"}
+        Widest coordinate type: ``float32`` formats are refused for georeferenced double input
+        (precision they cannot keep); ``float32-offset`` stores float32 about a double offset.
     """
 
     name: str
@@ -78,11 +106,21 @@ class Format:
     weld_default: bool = False
     sniff: Sniffer | None = None
     binary: bool = False
+    kinds: frozenset[str] = ALL_KINDS
+    geographic_only: bool = False
+    min_dims: int = 2
+    max_dims: int | None = 3
+    attributes: str | tuple[str, ...] = "all"
+    coordinates: str = "float64"
 
     @property
     def extension(self) -> str:
         """The canonical extension (``"ply"``)."""
         return self.extensions[0]
+
+    def keeps(self, attribute: str) -> bool:
+        """Whether a file written from another format keeps this per-vertex attribute."""
+        return self.attributes == "all" or attribute in self.attributes
 
     def write_to(self, plain: Any, out: BinaryIO) -> None:
         """Write ``plain`` to ``out``; :class:`UnsupportedFormat` for read-only formats."""
@@ -194,6 +232,7 @@ _TABLE: dict[str, Format] = {
             "OBJ",
             writer=("formats.obj.write", "write_obj"),
             sniff=_obj,
+            attributes=_COLOURS[:3],
         ),
         _f(
             "xyz",
@@ -203,9 +242,19 @@ _TABLE: dict[str, Format] = {
             "XYZ",
             options=("xyz_dims",),
             sniff=_xyz,
+            kinds=_CLOUD,
+            max_dims=None,
         ),
-        _f("json", "formats.json.codec", "application/json", ("json",), "geosmooth JSON",
-        sniff=_json),
+        _f(
+            "json",
+            "formats.json.codec",
+            "application/json",
+            ("json",),
+            "geosmooth JSON",
+            sniff=_json,
+            min_dims=1,
+            max_dims=None,
+        ),
         _f(
             "stl",
             "formats.stl",
@@ -215,6 +264,9 @@ _TABLE: dict[str, Format] = {
             weld_default=True,
             sniff=lambda h, s: _stl_binary(h, s) or _stl_ascii(h, s),
             binary=True,
+            kinds=frozenset({"mesh"}),
+            attributes=(),
+            coordinates="float32",
         ),
         _f(
             "off",
@@ -223,6 +275,8 @@ _TABLE: dict[str, Format] = {
             ("off",),
             "OFF",
             sniff=lambda h, s: bool(_OFF.match(h)),
+            kinds=frozenset({"mesh", "cloud"}),
+            attributes=(),
         ),
         _f(
             "glb",
@@ -233,10 +287,30 @@ _TABLE: dict[str, Format] = {
             weld_default=True,
             sniff=lambda h, s: h[:4] == b"glTF",
             binary=True,
+            kinds=frozenset({"mesh", "cloud"}),
+            attributes=(*_COLOURS, "color"),
+            coordinates="float32-offset",
         ),
-        _f("las", "formats.las", "application/vnd.las", ("las",), "LAS", sniff=_las, binary=True),
-        _f("laz", "formats.las", "application/vnd.laszip", ("laz",), "LAZ", sniff=_laz,
-        binary=True),
+        _f(
+            "las",
+            "formats.las",
+            "application/vnd.las",
+            ("las",),
+            "LAS",
+            sniff=_las,
+            binary=True,
+            kinds=_CLOUD,
+        ),
+        _f(
+            "laz",
+            "formats.las",
+            "application/vnd.laszip",
+            ("laz",),
+            "LAZ",
+            sniff=_laz,
+            binary=True,
+            kinds=_CLOUD,
+        ),
         _f(
             "pcd",
             "formats.pcd",
@@ -245,6 +319,7 @@ _TABLE: dict[str, Format] = {
             "PCD",
             sniff=lambda h, s: bool(_PCD.match(h)),
             binary=True,
+            kinds=_CLOUD,
         ),
         _f(
             "e57",
@@ -254,6 +329,8 @@ _TABLE: dict[str, Format] = {
             "E57",
             sniff=lambda h, s: h[:8] == b"ASTM-E57",
             binary=True,
+            kinds=_CLOUD,
+            attributes=("intensity", *_COLOURS[:3]),
         ),
         _f(
             "gpx",
@@ -263,6 +340,9 @@ _TABLE: dict[str, Format] = {
             "GPX",
             options=("geographic",),
             sniff=_gpx,
+            kinds=frozenset({"polyline"}),
+            geographic_only=True,
+            attributes=(),
         ),
         _f(
             "geojson",
@@ -272,6 +352,9 @@ _TABLE: dict[str, Format] = {
             "GeoJSON",
             options=("geographic",),
             sniff=_geojson,
+            kinds=frozenset({"polyline"}),
+            geographic_only=True,
+            attributes=(),
         ),
         _f(
             "dxf",
@@ -280,6 +363,7 @@ _TABLE: dict[str, Format] = {
             ("dxf",),
             "DXF",
             sniff=lambda h, s: bool(_DXF.match(h)) or h.startswith(b"AutoCAD Binary DXF"),
+            attributes=(),
         ),
     )
 }

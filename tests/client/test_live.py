@@ -57,13 +57,15 @@ def test_smooth_a_file_with_progress(live: LiveServer, tmp_path: Path) -> None:
         report = result.report
         after = parse_points(result.download(), "ply")
         converted = parse_points(result.download("obj"), "obj")
-        saved = result.save(tmp_path / "out.xyz")
+        saved = result.save(tmp_path / "out.json")
+        with pytest.raises(InvalidInput, match="cannot write xyz: XYZ holds a point cloud"):
+            result.download("xyz")  # a mesh as XYZ: refused (422 naming format), not scrambled
     assert seen[0].status == "queued" and seen[-1].status == "succeeded"
     assert result.job.filename == "sphere.ply" and result.job.format == "ply"
     assert report.converged and abs(report.phi - 0.05) / 0.05 <= 1e-3
     assert report.phi == pytest.approx(phi(pts, after), rel=1e-9)  # phi from the two files
     np.testing.assert_array_equal(converted, after)
-    np.testing.assert_array_equal(parse_points(saved.read_bytes(), "xyz"), after)
+    np.testing.assert_array_equal(parse_points(saved.read_bytes(), "json"), after)
 
 
 def test_smooth_arrays_and_a_mapping(live: LiveServer) -> None:
@@ -167,7 +169,7 @@ def test_async_client(live: LiveServer) -> None:
             result = await client.smooth({"points": pts, "faces": faces}, tau=0.01,
                                          progress=seen.append)  # fmt: skip
             arrays = await result.arrays()
-            assert (await result.report()).phi == pytest.approx(phi(pts, arrays.points))
+            assert result.report.phi == pytest.approx(phi(pts, arrays.points))
             assert seen[-1].status == "succeeded"
             with pytest.raises(BadRequest):
                 await client.submit(b"0 0 0\n1 1\n", fmt="xyz", tau=1)

@@ -135,7 +135,7 @@ def test_async_wait_follows_events() -> None:
         async with AsyncClient(server.url, retry=FAST) as client:
             seen: list[Any] = []
             result = await client.smooth(b"0 0 0\n", fmt="xyz", tau=0.25, progress=seen.append)
-            assert (await result.report()).converged is True
+            assert result.report.converged is True
             return seen
 
     with ScriptedServer(ROUTES) as server:

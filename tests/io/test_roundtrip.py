@@ -7,11 +7,13 @@ import pytest
 
 from service.core.geometry import Geometry
 from service.io import (
+    FORMATS,
     FormatError,
     GeometryDocument,
     read_geometry,
     write_geometry,
 )
+from service.io.dispatch import OutputRefused, input_kinds
 
 # formats that store any float64 exactly (precision="float64"); the others are tested per
 # format in test_io_formats.py with their own precision (float32, LAS scales, degrees, ...)
@@ -27,6 +29,13 @@ def _awkward_points(n: int, s: int, seed: int = 0) -> np.ndarray:
     return pts
 
 
+def _held(doc: GeometryDocument, fmt: str) -> GeometryDocument:
+    """``doc``, or its points alone where ``fmt`` holds no faces/lines (XYZ, PCD: refused)."""
+    if input_kinds(doc) <= FORMATS[fmt].kinds:
+        return doc
+    return GeometryDocument.from_geometry(Geometry(doc.geometry.points))
+
+
 def _mesh_doc() -> GeometryDocument:
     text = (
         b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 3 1 0\n"
@@ -38,7 +47,7 @@ def _mesh_doc() -> GeometryDocument:
 
 @pytest.mark.parametrize("fmt", EXACT)
 def test_points_round_trip_bit_identical(fmt: str) -> None:
-    doc = _mesh_doc()
+    doc = _held(_mesh_doc(), fmt)
     back = read_geometry(write_geometry(doc, fmt, precision="float64"), fmt)
     assert back.geometry.points.tobytes() == doc.geometry.points.tobytes()
 
@@ -89,11 +98,9 @@ def test_ply_encodings(ascii_ply: bool) -> None:
     assert np.array_equal(back.geometry.faces, doc.geometry.faces)
 
 
-def test_xyz_drops_connectivity_but_keeps_points() -> None:
-    doc = _mesh_doc()
-    back = read_geometry(write_geometry(doc, "xyz", precision="float64"), "xyz")
-    assert back.geometry.kind == "cloud"
-    assert np.array_equal(back.geometry.points, doc.geometry.points)
+def test_xyz_refuses_connectivity() -> None:
+    with pytest.raises(OutputRefused, match="XYZ holds a point cloud, not faces; write ply, obj"):
+        write_geometry(_mesh_doc(), "xyz", precision="float64")
 
 
 @pytest.mark.parametrize("s", [1, 2, 5])
@@ -135,7 +142,7 @@ def test_2d_points_get_z_zero(fmt: str) -> None:
 @pytest.mark.parametrize("s", [1, 4])
 def test_ply_obj_refuse_other_dimensions(fmt: str, s: int) -> None:
     doc = GeometryDocument.from_geometry(Geometry(np.zeros((3, s))))
-    with pytest.raises(FormatError, match=f"{s} coordinates per point.*JSON or XYZ"):
+    with pytest.raises(FormatError, match=f"{s} coordinates per point.*write (xyz, )?json instead"):
         write_geometry(doc, fmt)
 
 
@@ -147,7 +154,7 @@ def test_xyz_refuses_1d() -> None:
 
 @pytest.mark.parametrize("fmt", EXACT)
 def test_write_given_points(fmt: str) -> None:
-    doc = _mesh_doc()
+    doc = _held(_mesh_doc(), fmt)
     moved = doc.geometry.points * 3.0 + 1e-9
     back = read_geometry(write_geometry(doc, fmt, moved, precision="float64"), fmt)
     assert np.array_equal(back.geometry.points, moved)
@@ -167,12 +174,15 @@ def test_weld_round_trip_keeps_vertex_count_and_order(fmt: str) -> None:
     assert doc.geometry.n == 4
     assert doc.weld is not None and doc.weld.index.tolist() == [0, 1, 2, 1, 3, 2]
     smoothed = doc.geometry.points + np.array([0.25, 0.5, 0.125])
+    if "mesh" not in FORMATS[fmt].kinds:  # XYZ, PCD: faces refused
+        with pytest.raises(OutputRefused, match="not faces"):
+            write_geometry(doc, fmt, smoothed)
+        return
     data = write_geometry(doc, fmt, smoothed)
     back = read_geometry(data, fmt)
     assert back.geometry.n == 6
     assert np.array_equal(back.geometry.points, smoothed[doc.weld.index])
-    if fmt not in ("xyz", "pcd"):
-        assert back.geometry.faces.tolist() == [[0, 1, 2], [3, 4, 5]]
+    assert back.geometry.faces.tolist() == [[0, 1, 2], [3, 4, 5]]
 
 
 def test_comments_survive_ply_and_obj() -> None:

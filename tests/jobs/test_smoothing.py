@@ -110,9 +110,8 @@ def test_malformed_file_fails_with_a_format_problem(real_queue: LocalQueue) -> N
 
 
 def test_tau_out_of_range_fails_with_the_valid_range(real_queue: LocalQueue) -> None:
-    rec = real_queue.submit(
-        NewJob.check(as_bytes(noisy_ring(50), "xyz"), "xyz", SmoothingParams(tau=1e6))
-    )
+    cloud = Geometry(noisy_ring(50).points)  # XYZ holds points only (the ring's edges: refused)
+    rec = real_queue.submit(NewJob.check(as_bytes(cloud, "xyz"), "xyz", SmoothingParams(tau=1e6)))
     done = wait_finished(real_queue, rec.id, timeout=30)
     assert done.status is JobStatus.FAILED
     problem = done.problem

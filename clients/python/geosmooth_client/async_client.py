@@ -263,4 +263,4 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         except BaseException:  # cancelled, timed out, unreachable: leave no job running
             await asyncio.shield(self._cancel_quietly(job.id))
             raise
-        return AsyncResult(self, raise_for_status(job))
+        return await AsyncResult.create(self, raise_for_status(job))

@@ -131,21 +131,37 @@ class Result:
 
 
 class AsyncResult:
-    """A succeeded job of an :class:`AsyncClient` (the methods of :class:`Result`, awaited)."""
+    """A succeeded job of an :class:`AsyncClient`: the attributes of :class:`Result` (``job``,
+    ``id``, ``report``) as they are, its methods (``download``, ``save``, ``geometry``,
+    ``arrays``) awaited.
 
-    def __init__(self, client: _AsyncFetcher, job: Job) -> None:
+    ``await client.smooth(...)`` builds it with :meth:`create`, which fetches the report if the
+    job did not carry it, so ``result.report.phi`` works as with the sync client.
+    """
+
+    def __init__(self, client: _AsyncFetcher, job: Job, report: Report | None = None) -> None:
         self.job = job
         self._client = client
-        self._report = job.report
+        self._report = report if report is not None else job.report
+
+    @classmethod
+    async def create(cls, client: _AsyncFetcher, job: Job) -> AsyncResult:
+        """The result of ``job``, with its report (fetched once if the job did not carry it)."""
+        report = job.report if job.report is not None else await client.report(job.id)
+        return cls(client, job, report)
 
     @property
     def id(self) -> str:
         return self.job.id
 
-    async def report(self) -> Report:
-        """The diagnostics (fetched once if the job did not carry them)."""
+    @property
+    def report(self) -> Report:
+        """The diagnostics, as :attr:`Result.report` (an attribute, not a coroutine)."""
         if self._report is None:
-            self._report = await self._client.report(self.job.id)
+            raise RuntimeError(
+                "this AsyncResult has no report: build it with 'await AsyncResult.create(...)'"
+                " (AsyncClient.smooth does)"
+            )
         return self._report
 
     async def download(self, fmt: str | None = None) -> bytes:

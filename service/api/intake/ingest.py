@@ -358,12 +358,14 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/smooth``: smooth and write the answer to a file next to the spool file."""
     from service.core import smooth
     from service.io import write_geometry
+    from service.io.dispatch import check_output
 
     parsed = parse_request(req, min(req.limits.sync_max_points, req.limits.max_points))
+    fmt = req.out_format or parsed.fmt
+    check_output(parsed.document, fmt)  # 422 naming ``format``, before smoothing
     check_tau(parsed.document.geometry, parsed.params, 0, analyse=False)
     result = smooth(parsed.document.geometry, parsed.params)
     report = finite(result.report())
-    fmt = req.out_format or parsed.fmt
     out = Path(req.work_dir) / (Path(req.path).stem + f".result.{fmt}")
     if fmt == "json":
         geometry = write_geometry(parsed.document, "json", result.points).strip()
@@ -374,6 +376,43 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
     return {"path": str(out), "fmt": fmt, "report": report, "input_fmt": parsed.fmt}
 
 
+def _bound_only(geometry: Any, params: SmoothingParams, exact_max_points: int) -> bool:
+    """Whether ``POST /v1/jobs`` checks this input against the closed-form bound of phi(0)
+    only (a cloud above ``exact_max_points`` without fixed points): ``POST /v1/info`` then
+    does the same, so it accepts every input a job accepts within the same memory budget."""
+    fixed = geometry.fixed is not None or params.fix_boundary
+    return bool(geometry.kind == "cloud" and geometry.n > exact_max_points and not fixed)
+
+
+def _outline(geometry: Any) -> dict[str, Any]:
+    """:func:`~service.core.info.describe`'s answer with the centroid bound as ``phi0``
+    (``phi0_exact`` false) and no neighbourhood graph, noise estimate or suggestion: those
+    cost as much as the job's first stage, which computes them (the automatic tau)."""
+    import numpy as np
+
+    from service.core.info import mean_spacing
+    from service.core.search.tau_range import centroid_bound
+
+    phi0, weight = centroid_bound(geometry)
+    pts = geometry.points
+    return {
+        "n_points": geometry.n,
+        "dimension": geometry.dim,
+        "kind": geometry.kind,
+        "n_faces": 0,
+        "n_edges": None,
+        "bbox": {"min": pts.min(axis=0).tolist(), "max": pts.max(axis=0).tolist()},
+        "mean_spacing": mean_spacing(geometry),
+        "phi0": phi0,
+        "phi0_exact": False,
+        "tau_range": [0.0, phi0],
+        "rms_range": [0.0, float(np.sqrt(phi0 / weight)) if weight > 0 else 0.0],
+        "sigma_estimate": None,
+        "suggested_tau": None,
+        "suggested_rms": None,
+    }
+
+
 def describe_input(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/info``: :func:`service.core.info.describe` of the input, plus what the reader
     saw (``format``, ``filename``, ``n_polylines``, ``notes``, ``weld``) and, with the option
@@ -381,7 +420,12 @@ def describe_input(req: IngestRequest) -> dict[str, Any]:
     from service.core.info import describe
 
     parsed = parse_request(req)
-    info = describe(parsed.document.geometry, parsed.params)
+    geometry = parsed.document.geometry
+    if _bound_only(geometry, parsed.params, req.exact_tau_max_points):
+        info = _outline(geometry)  # what POST /v1/jobs checks for this input, no more
+    else:
+        info = describe(geometry, parsed.params)
+        info["phi0_exact"] = True
     info.update(
         input_format=parsed.fmt,
         format=parsed.fmt,  # deprecated name of input_format

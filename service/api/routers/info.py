@@ -5,6 +5,9 @@ Takes the same request as ``POST /v1/smooth`` (multipart ``file`` [+ ``params``,
 weights and fixed points change ``phi(0)``; ``tau``/``rms``/``lam`` are ignored). Answers
 :func:`service.core.info.describe` plus what the reader saw (format, polylines, notes).
 
+``GET /v1/limits`` answers the bounds that apply to the caller's key (the web page states them
+from there, so the page and the API take the same inputs).
+
 ``?preview=true`` adds the geometry for display (the web page's 3-D viewer): positions as
 little-endian float32 relative to ``origin`` (the bounding-box centre, so that large coordinates
 keep their precision), faces and line segments as uint32, each base64-encoded, all in the
@@ -19,12 +22,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 
-from service.api.deps import IntakeDep, PrincipalDep
+from service.api.deps import IntakeDep, PrincipalDep, SettingsDep
 from service.api.docs import JOB_SUBMIT_OPENAPI, problem_responses
 from service.api.intake.ingest import describe_input
 from service.api.schemas import GEOMETRY_EXAMPLE
 
-__all__ = ["Info", "Preview", "router"]
+__all__ = ["Info", "LimitsAnswer", "Preview", "router"]
 
 router = APIRouter(prefix="/v1", tags=["smooth"])
 
@@ -96,10 +99,20 @@ class Info(BaseModel):
     dimension: int = Field(description="Coordinates per point.")
     kind: str = Field(description="mesh, curve or cloud.")
     n_faces: int = Field(description="Triangles.")
-    n_edges: int = Field(description="Neighbour pairs (mesh, curve or neighbourhood edges).")
+    n_edges: int | None = Field(
+        description="Neighbour pairs (mesh, curve or neighbourhood edges); null for large "
+        "clouds, whose neighbourhoods the job builds."
+    )
     bbox: dict[str, list[float]] = Field(description="Bounding box ``{min, max}``.")
     mean_spacing: float = Field(description="Mean edge length or nearest-neighbour distance.")
     phi0: float = Field(description="phi(0) of eq. (14): the largest meaningful tau.")
+    phi0_exact: bool = Field(
+        default=True,
+        description="False for point clouds above the exact-analysis size (setting "
+        "``submit_exact_tau_points``): ``phi0`` is then the closed-form upper bound "
+        "sum w_i^2 |p_i - p_w|^2 that ``POST /v1/jobs`` checks too, and the noise estimate and "
+        "suggestions are left to the job (its automatic tau), as their cost is the job's.",
+    )
     tau_range: list[float] = Field(description="Valid tau: the open interval (0, phi(0)).")
     rms_range: list[float] = Field(description="Valid rms: the open interval it maps to.")
     sigma_estimate: float | None = Field(description="Estimated noise level, when available.")
@@ -184,3 +197,57 @@ async def info(
     finally:
         upload.discard()
     return answer or {}
+
+
+class LimitsAnswer(BaseModel):
+    """The bounds of the caller's key: what ``POST /v1/jobs``, ``/v1/smooth`` and ``/v1/info``
+    accept (``/v1/info`` takes every input ``/v1/jobs`` takes)."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "max_upload_bytes": 268435456,
+                    "max_points": 2000000,
+                    "max_faces": 4000000,
+                    "sync_max_points": 20000,
+                    "max_k": 64,
+                    "max_iterations": 200,
+                    "max_spectrum_points": 3000,
+                    "max_active_jobs": 100,
+                    "exact_analysis_points": 50000,
+                }
+            ]
+        }
+    )
+
+    max_upload_bytes: int = Field(description="Largest request body (413 above).")
+    max_points: int = Field(description="Largest input of POST /v1/jobs and /v1/info (points).")
+    max_faces: int = Field(description="Largest input of POST /v1/jobs (faces).")
+    sync_max_points: int = Field(description="Largest input of POST /v1/smooth (points).")
+    max_k: int = Field(description="Largest params.k.")
+    max_iterations: int = Field(description="Largest params.max_iterations.")
+    max_spectrum_points: int = Field(description="Largest input with params.spectrum.")
+    max_active_jobs: int = Field(description="Queued plus running jobs of the key.")
+    exact_analysis_points: int = Field(
+        description="Largest point cloud whose phi(0) is computed exactly at submit and by "
+        "POST /v1/info (larger ones: the closed-form bound, phi0_exact false)."
+    )
+
+
+@router.get(
+    "/limits",
+    response_model=LimitsAnswer,
+    summary="The bounds that apply to this key",
+    description=(
+        "The sizes and parameter bounds of the caller's key (a keys file can set them per key; "
+        "otherwise the ``GEOSMOOTH_*`` settings of the same names). The web page states them."
+    ),
+    responses=problem_responses(401, 403),
+)
+async def limits(principal: PrincipalDep, settings: SettingsDep) -> dict[str, Any]:
+    bounds = principal.limits
+    names = [name for name in LimitsAnswer.model_fields if hasattr(bounds, name)]
+    answer: dict[str, Any] = {name: getattr(bounds, name) for name in names}
+    answer["exact_analysis_points"] = settings.submit_exact_tau_points
+    return answer

@@ -88,7 +88,8 @@ async def sample(name: str) -> FileResponse:
 
 @router.get("/app/config.json")
 async def config(settings: SettingsDep) -> dict[str, Any]:
-    """What the page needs from the server: formats (from the io registry), samples, limits."""
+    """What the page needs from the server: formats (from the io registry: what each can hold),
+    samples, and the default limits (the page states the key's own from ``GET /v1/limits``)."""
     formats = [
         {
             "name": f.name,
@@ -96,6 +97,8 @@ async def config(settings: SettingsDep) -> dict[str, Any]:
             "extensions": list(f.extensions),
             "media_type": f.media_type,
             "writable": f.write is not None,
+            "kinds": sorted(f.kinds),
+            "geographic_only": f.geographic_only,
         }
         for f in FORMATS.values()
     ]

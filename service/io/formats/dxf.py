@@ -16,6 +16,11 @@ arcs keeps its entity (and all its attributes) with new vertices; other chains b
 LWPOLYLINE (2D, at the chain's elevation) or 3D POLYLINE on the first source entity's layer,
 colour and linetype, and their source entities are deleted. Unchanged points give back the
 input file byte for byte.
+
+Documents of other formats get a new R2010 drawing in DXF's own idiom: faces as one ``MESH``
+entity (shared vertices, every vertex in file order, double precision), polylines as
+LWPOLYLINE (flat) or 3D POLYLINE, standalone edges as ``LINE`` entities, and points in no face or
+line (a point cloud) as ``POINT`` entities.
 """
 
 from __future__ import annotations
@@ -235,21 +240,15 @@ def write_dxf(plain: PlainDocument, out: BinaryIO) -> None:
     if isinstance(layout, DxfLayout) and not plain.moved:
         out.write(layout.data)
         return
+    pts = plain.points if plain.dim == 3 else np.column_stack([plain.points, np.zeros(plain.n)])
     if isinstance(layout, DxfLayout):
         doc = _load(layout.data)
-        chains = layout.chains
-        simple = layout.simple
+        msp = doc.modelspace()
+        groups = [pl.indices for pl in plain.polylines]
+        for (handles, closed), idx, keep in zip(layout.chains, groups, layout.simple, strict=True):
+            _replace(doc, msp, handles, pts[idx], closed, keep)
     else:
-        import ezdxf
-
-        doc = ezdxf.new("R2010")
-        chains = [([], pl.closed) for pl in plain.polylines] or [([], False)]
-        simple = [False] * len(chains)
-    msp = doc.modelspace()
-    pts = plain.points if plain.dim == 3 else np.column_stack([plain.points, np.zeros(plain.n)])
-    groups = [pl.indices for pl in plain.polylines] or [np.arange(plain.n)]
-    for (handles, closed), idx, keep in zip(chains, groups, simple, strict=True):
-        _replace(doc, msp, handles, pts[idx], closed, keep)
+        doc = _fresh(plain, pts)
     text = io.StringIO()
     doc.write(text)
     out.write(text.getvalue().encode(doc.output_encoding, errors="replace"))
@@ -286,3 +285,28 @@ def _replace(
         e = doc.entitydb.get(h)
         if e is not None:
             msp.delete_entity(e)
+
+
+def _fresh(plain: PlainDocument, pts: NDArray[np.float64]) -> Any:
+    """A new drawing: MESH for faces, polylines, LINEs, POINTs for the rest (see the docstring)."""
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    msp = doc.modelspace()
+    used = np.zeros(plain.n, dtype=bool)
+    if plain.faces is not None and len(plain.faces):
+        mesh = msp.add_mesh()
+        with mesh.edit_data() as data:
+            data.vertices = pts.tolist()
+            data.faces = np.asarray(plain.faces).tolist()
+        used[:] = True
+    for pl in plain.polylines:
+        _replace(doc, msp, [], pts[pl.indices], pl.closed, False)
+        used[pl.indices] = True
+    if plain.standalone_edges is not None:
+        for a, b in np.asarray(plain.standalone_edges).tolist():
+            msp.add_line(pts[a].tolist(), pts[b].tolist())
+        used[np.asarray(plain.standalone_edges).reshape(-1)] = True
+    for i in np.flatnonzero(~used).tolist():
+        msp.add_point(pts[i].tolist())
+    return doc

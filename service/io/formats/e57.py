@@ -13,17 +13,22 @@ Writing
 -------
 A document read from E57 is written as the same scans (names, poses, fields) with each valid
 point moved back into its scan's frame; spherical scans are written as cartesian ones. Other
-documents become one scan (``intensity``, ``red green blue`` attributes as E57 fields). pye57
-writes coordinates as single-precision floats (``E57_SINGLE``), so E57 output is float32 in each
-scan's frame whatever ``precision`` says.
+documents become one scan (``intensity``, ``red green blue`` attributes as E57 fields).
+Coordinates are written as double-precision floats (``E57_DOUBLE``): pye57 0.4 hard-codes
+``E57_SINGLE`` for its point prototype, which moved georeferenced points (5.6e6 m) by up to
+0.25 m, so the write runs with pye57's ``libe57`` module seen through a proxy whose
+``E57_SINGLE`` is ``E57_DOUBLE`` (nothing else changes; the buffers were double already).
 libE57 needs a real file, so bytes go through a temporary file.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import tempfile
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -158,6 +163,33 @@ def _scans_of(plain: PlainDocument) -> list[tuple[str, Any, Any, dict[str, Any]]
     return [("geosmooth", np.array([1.0, 0, 0, 0]), np.zeros(3), data)]
 
 
+_DOUBLE_LOCK = threading.Lock()
+
+
+class _DoublePrecision:
+    """pye57's ``libe57`` with ``E57_SINGLE`` meaning ``E57_DOUBLE``."""
+
+    def __init__(self, lib: Any) -> None:
+        self._lib = lib
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._lib, "E57_DOUBLE" if name == "E57_SINGLE" else name)
+
+
+@contextlib.contextmanager
+def _double_coordinates() -> Iterator[None]:
+    """pye57's writer with double-precision point fields, for the time of one write."""
+    import pye57.e57 as module
+
+    with _DOUBLE_LOCK:
+        lib = module.libe57
+        module.libe57 = _DoublePrecision(lib)  # type: ignore[assignment]
+        try:
+            yield
+        finally:
+            module.libe57 = lib
+
+
 def write_e57(plain: PlainDocument, out: BinaryIO) -> None:
     """Write a plain document as E57 (see the module docstring)."""
     import pye57
@@ -167,8 +199,9 @@ def write_e57(plain: PlainDocument, out: BinaryIO) -> None:
     os.unlink(name)
     try:
         e57 = pye57.E57(name, mode="w")
-        for scan_name, rot, trans, data in _scans_of(plain):
-            e57.write_scan_raw(data, name=scan_name, rotation=rot, translation=trans)
+        with _double_coordinates():
+            for scan_name, rot, trans, data in _scans_of(plain):
+                e57.write_scan_raw(data, name=scan_name, rotation=rot, translation=trans)
         e57.close()
         with open(name, "rb") as fh:
             while chunk := fh.read(1 << 20):

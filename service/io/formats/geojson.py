@@ -202,16 +202,23 @@ def write_geojson(plain: PlainDocument, out: BinaryIO) -> None:
 
 
 def _fresh(plain: PlainDocument) -> dict[str, Any]:
-    if plain.dim not in (2, 3):
-        raise FormatError("GeoJSON holds 2D or 3D positions", fmt="geojson")
-    pts = plain.points.tolist()
-    groups = plain.polylines or []
+    """GPX tracks as LineStrings in longitude/latitude(/elevation), one Feature each.
+
+    Only geographic input reaches this (:func:`service.io.dispatch.check_output`).
+    """
+    frame = getattr(plain.layout, "frame", None)
+    if not isinstance(frame, GeoFrame) or plain.dim not in (2, 3):
+        raise FormatError(
+            "GeoJSON holds longitude/latitude read from GPX or GeoJSON", fmt="geojson"
+        )
+    lon, lat, ele = frame.back(plain.points)
+    digits = getattr(plain.layout, "digits", 9)  # the input's decimals (GPX: degrees, elevation)
+    d, de = digits if isinstance(digits, tuple) else (digits, digits)
+    cols = [np.round(lon, d), np.round(lat, d)] + ([] if ele is None else [np.round(ele, de)])
+    pts = np.column_stack(cols).tolist()
     features = []
-    for pl in groups:
+    for pl in plain.polylines:
         idx = pl.indices.tolist() + ([int(pl.indices[0])] if pl.closed else [])
         geom = {"type": "LineString", "coordinates": [pts[i] for i in idx]}
-        features.append({"type": "Feature", "properties": {}, "geometry": geom})
-    if not groups:
-        geom = {"type": "MultiPoint", "coordinates": pts}
         features.append({"type": "Feature", "properties": {}, "geometry": geom})
     return {"type": "FeatureCollection", "features": features}

@@ -14,7 +14,10 @@ Writing
 A document read from GLB is written as its scene with new vertex positions (mapped back through
 each node's inverse transform; other instances of a shared geometry move with it); trimesh
 recomputes the normals it exports. Other documents become one mesh (or point cloud) with
-``red green blue [alpha]`` attributes as vertex colours.
+``red green blue [alpha]`` attributes as vertex colours. glTF positions are float32, so that
+mesh is stored about the centre of its bounding box, which becomes its node's translation
+(a double in the glTF JSON): georeferenced coordinates (5.6e6 m) keep float32's resolution
+of the extent (~6e-8 of it) instead of moving by up to 0.25 m.
 """
 
 from __future__ import annotations
@@ -99,6 +102,18 @@ def read_glb(source: Source, *, weld: bool = True) -> GeometryDocument:
     )
 
 
+def _bytes(colors: NDArray[Any]) -> NDArray[np.uint8]:
+    """Colour channels as bytes (trimesh reads float channels as 0..1): 16-bit values scaled,
+    floats within [0, 1] taken as fractions, others as 0..255."""
+    v = colors.astype(np.float64)
+    top = float(v.max()) if v.size else 0.0
+    if top > 255:
+        v *= 255.0 / 65535.0
+    elif colors.dtype.kind == "f" and top <= 1.0:
+        v *= 255.0
+    return np.clip(np.rint(v), 0, 255).astype(np.uint8)
+
+
 def _export(scene: Any) -> bytes:
     try:
         data = scene.export(file_type="glb")
@@ -127,9 +142,15 @@ def write_glb(plain: PlainDocument, out: BinaryIO) -> None:
     attrs = plain.attributes
     if all(c in attrs for c in ("red", "green", "blue")):
         channels = [attrs[c] for c in ("red", "green", "blue", "alpha") if c in attrs]
-        colors = np.column_stack(channels)
+        colors = _bytes(np.column_stack(channels))
+    centre = (pts.min(axis=0) + pts.max(axis=0)) / 2 if plain.n else np.zeros(3)
+    local = pts - centre
     if plain.faces is not None and len(plain.faces):
-        geom: Any = trimesh.Trimesh(pts, plain.faces, vertex_colors=colors, process=False)
+        geom: Any = trimesh.Trimesh(local, plain.faces, vertex_colors=colors, process=False)
     else:
-        geom = trimesh.PointCloud(pts, colors=colors)
-    out.write(_export(trimesh.Scene(geom)))
+        geom = trimesh.PointCloud(local, colors=colors)
+    placed = np.eye(4)
+    placed[:3, 3] = centre
+    scene = trimesh.Scene()
+    scene.add_geometry(geom, transform=placed)
+    out.write(_export(scene))

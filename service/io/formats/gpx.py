@@ -12,7 +12,9 @@ Writing
 -------
 The input file with new latitude, longitude (and elevation) numbers spliced in place, rounded to
 the decimals the input used, every other byte unchanged (output size = input size). Should the
-point elements not be matched one to one, gpxpy writes the tree instead.
+point elements not be matched one to one, gpxpy writes the tree instead. GeoJSON lines become
+one track (a segment per line); planar input is refused before smoothing (GPX holds
+longitude/latitude only).
 """
 
 from __future__ import annotations
@@ -174,22 +176,25 @@ def write_gpx(plain: PlainDocument, out: BinaryIO) -> None:
 
 
 def _fresh(plain: PlainDocument, out: BinaryIO) -> None:
-    """Other documents: x = longitude, y = latitude (degrees), z = elevation, one track."""
+    """A GeoJSON document as one track: a segment per polyline (closed ones end where they start).
+
+    Only geographic input reaches this (:func:`service.io.dispatch.check_output`): the points go
+    back to longitude/latitude/elevation through the frame they were read with.
+    """
     import gpxpy.gpx
 
-    if plain.dim not in (2, 3):
-        raise FormatError("GPX holds 2D or 3D points (longitude, latitude[, elevation])", fmt="gpx")
+    frame = getattr(plain.layout, "frame", None)
+    if not isinstance(frame, GeoFrame) or plain.dim not in (2, 3):
+        raise FormatError("GPX holds longitude/latitude read from GPX or GeoJSON", fmt="gpx")
+    lon, lat, ele = frame.back(plain.points)
     gpx = gpxpy.gpx.GPX()
     track = gpxpy.gpx.GPXTrack()
     gpx.tracks.append(track)
-    pts = plain.points
-    groups = [pl.indices for pl in plain.polylines] or [np.arange(plain.n)]
-    for idx in groups:
+    for pl in plain.polylines:
         seg = gpxpy.gpx.GPXTrackSegment()
-        for i in idx.tolist():
-            ele = float(pts[i, 2]) if plain.dim == 3 else None
-            seg.points.append(
-                gpxpy.gpx.GPXTrackPoint(float(pts[i, 1]), float(pts[i, 0]), elevation=ele)
-            )
+        idx = pl.indices.tolist() + ([int(pl.indices[0])] if pl.closed else [])
+        for i in idx:
+            h = None if ele is None else float(ele[i])
+            seg.points.append(gpxpy.gpx.GPXTrackPoint(float(lat[i]), float(lon[i]), elevation=h))
         track.segments.append(seg)
     out.write(gpx.to_xml().encode("utf-8"))

@@ -19,7 +19,12 @@ Writing
 -------
 The input's header and encoding, every record as read except new coordinates and normals; ASCII
 values with the input's digits. Other documents: ``x y z`` (float32 or float64 by
-``precision``), normals, numeric attributes as fields, ``DATA binary``.
+``precision``: float64 input such as georeferenced text stays float64), normals, numeric
+attributes as fields, ``DATA binary``. Colours ``red green blue [alpha]`` (PLY, XYZ, E57, LAS)
+become PCL's packed field: ``rgb`` (``F 4``: the bits of ``0x00RRGGBB`` read as a float32) or,
+with alpha, ``rgba`` (``U 4``: ``0xAARRGGBB``), which PCL, Open3D and pypcd4 read as colours.
+Channels are 8-bit: values above 255 (16-bit LAS colours) are scaled by 255/65535, float
+channels in [0, 1] by 255.
 """
 
 from __future__ import annotations
@@ -290,6 +295,31 @@ def write_pcd(plain: PlainDocument, out: BinaryIO) -> None:
     write_rows(out, cols, n=len(rec))
 
 
+_RGB = ("red", "green", "blue")
+
+
+def _channel(values: NDArray[Any]) -> NDArray[np.uint32]:
+    """One colour channel as 8-bit values (see the module docstring)."""
+    v = np.asarray(values, dtype=np.float64)
+    top = float(np.max(v)) if v.size else 0.0
+    if top > 255:
+        v = v * (255.0 / 65535.0)
+    elif v.dtype.kind == "f" and np.asarray(values).dtype.kind == "f" and top <= 1.0:
+        v = v * 255.0
+    return np.clip(np.rint(v), 0, 255).astype(np.uint32)
+
+
+def _packed(attrs: dict[str, NDArray[Any]]) -> tuple[str, NDArray[Any]] | None:
+    """PCL's packed colour field (``rgb`` float32 bits, or ``rgba`` uint32), if coloured."""
+    if not all(c in attrs and attrs[c].ndim == 1 for c in _RGB):
+        return None
+    r, g, b = (_channel(attrs[c]) for c in _RGB)
+    word = (r << 16) | (g << 8) | b
+    if "alpha" in attrs and attrs["alpha"].ndim == 1:
+        return "rgba", word | (_channel(attrs["alpha"]) << 24)
+    return "rgb", word.view(np.float32)
+
+
 def _fresh(plain: PlainDocument) -> tuple[NDArray[Any], list[str]]:
     pts = as_xyz(plain.points, "pcd")
     cdt = plain.coordinate_dtype()
@@ -297,6 +327,10 @@ def _fresh(plain: PlainDocument) -> tuple[NDArray[Any], list[str]]:
     if plain.normals is not None:
         fields += [(c, np.float32) for c in _NORMALS]
     attrs = {k: v for k, v in plain.attributes.items() if v.dtype.kind in "iuf" and v.ndim <= 2}
+    colour = _packed(attrs)
+    if colour is not None:
+        attrs = {k: v for k, v in attrs.items() if k not in (*_RGB, "alpha")}
+        attrs = {colour[0]: colour[1], **attrs}
     fields += [(k, v.dtype, v.shape[1:]) if v.ndim == 2 else (k, v.dtype) for k, v in attrs.items()]
     rec = np.empty(plain.n, dtype=fields)
     for j, c in enumerate(("x", "y", "z")):

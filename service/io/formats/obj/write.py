@@ -8,7 +8,8 @@ columns unchanged; ``vn`` lines are recomputed from the new geometry per corner 
 the
 faces (``normals="drop"``).
 
-Other documents are written as ``v`` lines (2D points get ``z = 0``), ``vn`` (with ``f a//a``)
+Other documents are written as ``v`` lines (2D points get ``z = 0``; ``red green blue``
+attributes as the ``v x y z r g b`` colour extension, fractions in [0, 1]), ``vn`` (with ``f a//a``)
 when they carry normals, ``f`` triangles, one ``l`` per polyline (closed ones repeat their first
 index) and one ``l a b`` per standalone edge.
 """
@@ -119,12 +120,25 @@ def _template(plain: PlainDocument, layout: ObjLayout, out: BinaryIO) -> None:
     out.write(_strip_normals(rest) if drop else rest)
 
 
+def _colour_columns(attrs: dict[str, NDArray[Any]]) -> list[tuple[NDArray[Any], str]]:
+    """``red green blue`` as the ``v x y z r g b`` extension's fractions in [0, 1] (8-bit
+    channels / 255, 16-bit ones / 65535, fractions as they are), or nothing."""
+    names = ("red", "green", "blue")
+    if not all(c in attrs and attrs[c].ndim == 1 for c in names):
+        return []
+    rgb = np.column_stack([attrs[c] for c in names]).astype(np.float64)
+    top = float(rgb.max()) if rgb.size else 0.0
+    scale = 65535.0 if top > 255 else 255.0 if top > 1 or rgb.dtype.kind in "iu" else 1.0
+    return [(rgb[:, j] / scale, "%.6g") for j in range(3)]
+
+
 def _generated(plain: PlainDocument, out: BinaryIO) -> None:
     pts = as_xyz(plain.points, "obj")
     out.write("".join(f"# {c}\n" for c in header_comments(plain.comments)).encode("utf-8"))
     specs = plain.coordinate_specs()
     specs = specs + specs[-1:] if len(specs) == 2 else specs
-    write_rows(out, [(pts[:, j], specs[j]) for j in range(3)], prefix="v ")
+    cols = [(pts[:, j], specs[j]) for j in range(3)] + _colour_columns(plain.attributes)
+    write_rows(out, cols, prefix="v ")
     normals = plain.normals
     if normals is not None:
         spec = _normal_spec(plain)

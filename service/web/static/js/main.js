@@ -23,6 +23,7 @@ function paramsSchema(spec) {
 async function init() {
   const [config, spec] = await Promise.all([apiJson("/app/config.json"), apiJson("/openapi.json")]);
   state.config = config;
+  state.limits = await apiJson("/v1/limits").catch(() => config); // the key's bounds (401: the defaults)
   const schema = paramsSchema(spec);
   state.form = new SchemaForm($("#params-fields"), schema, spec);
   $("#params-intro").textContent = (schema.description || "").split("\n\n")[0];
@@ -32,7 +33,7 @@ async function init() {
     if (f.writable) $("#download-format").append(new Option(f.title, f.name));
   }
   $("#file-input").accept = config.formats.flatMap((f) => f.extensions.map((e) => `.${e}`)).join(",");
-  $("#format-hint").textContent = `Formats: ${config.formats.map((f) => f.title).join(", ")}; up to ${fmt(config.max_points)} points.`;
+  $("#format-hint").textContent = `Formats: ${config.formats.map((f) => f.title).join(", ")}. ${limitsText(state.limits)}`;
   for (const s of config.samples) $("#sample-select").append(new Option(s.name, s.url));
   state.formats = names;
   wireInput();
@@ -45,6 +46,13 @@ async function init() {
   state.jobs = new JobList((job) => openJob(job));
   state.jobs.refresh();
   document.body.dataset.ready = "true";
+}
+
+/** The bounds the server applies to this page's key, as one sentence (from GET /v1/limits). */
+function limitsText(limits) {
+  const mib = (b) => (b >= 2 ** 20 ? `${fmt(Math.round(b / 2 ** 20))} MiB` : `${fmt(b)} bytes`);
+  const faces = limits.max_faces ? ` and ${fmt(limits.max_faces)} faces` : "";
+  return `This server takes inputs of up to ${fmt(limits.max_points)} points${faces}, in files of up to ${mib(limits.max_upload_bytes)}.`;
 }
 
 function wireInput() {
@@ -88,6 +96,12 @@ async function loadInput(file, name) {
   $("#submit").disabled = true;
   $("#info").hidden = true;
   $("#info-file").textContent = `${name}: reading…`;
+  const maxBytes = state.limits?.max_upload_bytes;
+  if (maxBytes && file.size > maxBytes) {
+    showProblem(new ProblemError({ status: 413, title: "Request Entity Too Large", field: "file",
+      detail: `${name} has ${fmt(file.size)} bytes; this server takes files of up to ${fmt(maxBytes)} bytes` }), "file");
+    return;
+  }
   let info;
   try {
     info = await apiJson("/v1/info?preview=true", { method: "POST", body: inputForm(file, name) });
@@ -122,7 +136,9 @@ function showInfo(info, name) {
     ["dimension", `${info.dimension}-D`, info.kind === "mesh" ? "faces" : "polylines", fmt(info.kind === "mesh" ? info.n_faces : info.n_polylines)],
     ["neighbour pairs", fmt(info.n_edges), "mean spacing", fmt(info.mean_spacing)],
     ["bounding box", bbox, "format", info.input_format ?? info.format],
-    ["φ(0)", fmt(info.phi0), "valid τ", `(0, ${fmt(info.tau_range[1])})`],
+    info.phi0_exact === false
+      ? ["φ(0) ≤", `${fmt(info.phi0)} (closed-form bound; the job computes φ(0))`, "valid τ", `(0, ≤ ${fmt(info.tau_range[1])})`]
+      : ["φ(0)", fmt(info.phi0), "valid τ", `(0, ${fmt(info.tau_range[1])})`],
     ["noise estimate σ", fmt(info.sigma_estimate), "valid rms", `(0, ${fmt(info.rms_range[1])})`],
   ];
   if (info.noise) rows.push(["noise", info.noise]);
@@ -133,8 +149,9 @@ function showInfo(info, name) {
   fillTable($("#info-table"), rows);
   $("#info-file").textContent = name;
   $("#info-notes").replaceChildren(...(info.notes || []).map((n) => Object.assign(document.createElement("li"), { textContent: n })));
-  state.form.setHint("tau", `valid: 0 < τ < ${fmt(info.tau_range[1])}`);
-  state.form.setHint("rms", `valid: 0 < rms < ${fmt(info.rms_range[1])}`);
+  const lt = info.phi0_exact === false ? "< at most" : "<"; // a bound: the job checks the exact range
+  state.form.setHint("tau", `valid: 0 < τ ${lt} ${fmt(info.tau_range[1])}`);
+  state.form.setHint("rms", `valid: 0 < rms ${lt} ${fmt(info.rms_range[1])}`);
   $("#info").hidden = false;
 }
 
@@ -179,7 +196,7 @@ async function onStatus(job) {
   state.jobs.refresh();
   if (job.status === "succeeded") {
     showReport(job.report);
-    enableDownloads(job);
+    enableDownloads(job, state.config.formats);
     try {
       await loadResultView(job, current.input);
     } catch (err) { showProblem(err, "result"); }

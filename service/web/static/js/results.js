@@ -1,8 +1,8 @@
 // The results of a succeeded job: the report as a readable table, downloads, the spectrum.
 
-import { apiFetch } from "./api.js";
+import { apiFetch, ProblemError } from "./api.js";
 import { drawSpectrum } from "./plot.js";
-import { $, fillTable, filenameFrom, fmt, saveBlob, seconds } from "./ui.js";
+import { $, clearErrors, fillTable, filenameFrom, fmt, saveBlob, seconds, showProblem } from "./ui.js";
 
 export function showReport(report) {
   const t = report.timings || {};
@@ -67,17 +67,41 @@ export function clearReport() {
   $("#download-report").disabled = true;
 }
 
+const KIND = { mesh: "mesh", curve: "polyline", cloud: "cloud" };
+const GEOGRAPHIC = new Set(["gpx", "geojson"]);
+
+/**
+ * Offer the formats that can hold `job`'s result (the registry's `kinds` and `geographic_only`
+ * from /app/config.json; the server refuses the others with 422 all the same).
+ */
+function offerFormats(select, job, formats) {
+  const kind = KIND[job.report?.kind];
+  for (const option of select.options) {
+    const f = (formats || []).find((x) => x.name === option.value);
+    const holds = !f || !kind || !f.kinds || f.kinds.includes(kind) || f.name === (job.input_format ?? job.format);
+    const geo = !f?.geographic_only || GEOGRAPHIC.has(job.input_format ?? job.format);
+    option.disabled = !(holds && geo);
+    option.title = option.disabled ? `${f.title} cannot hold this ${job.report?.kind}` : "";
+  }
+}
+
 /** Enable the download buttons for `job` (a succeeded Job). */
-export function enableDownloads(job) {
+export function enableDownloads(job, formats = null) {
   const select = $("#download-format");
   const input = job.input_format ?? job.format;
+  offerFormats(select, job, formats);
   if (input && [...select.options].some((o) => o.value === input)) select.value = input;
   $("#download-result").disabled = false;
   $("#download-report").disabled = false;
   $("#download-result").onclick = async () => {
     const fmtName = select.value;
-    const response = await apiFetch(`${job.links.result}?output_format=${encodeURIComponent(fmtName)}`);
-    saveBlob(await response.blob(), filenameFrom(response, `result.${fmtName}`));
+    clearErrors($("#results-section"));
+    try { // the whole result, in any format that can hold it (422 names the ones that can)
+      const response = await apiFetch(`${job.links.result}?output_format=${encodeURIComponent(fmtName)}`);
+      saveBlob(await response.blob(), filenameFrom(response, `result.${fmtName}`));
+    } catch (err) {
+      showProblem(err.problem ? new ProblemError({ ...err.problem, field: "result" }) : err, "result");
+    }
   };
   $("#download-report").onclick = async () => {
     const response = await apiFetch(job.links.report);
