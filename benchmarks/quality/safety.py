@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.quality.cases import make_case, make_shape
+from benchmarks.shapes import data_dir
 from service.core import Geometry, SmoothingParams, smooth
 
 SHAPES = ["sphere-2.5K", "torus-5.8K", "box", "fandisk", "spot", "circle-2d", "trefoil-3d",
@@ -38,7 +39,7 @@ NOISES = ["normal-0.1", "iso-0.25", "aniso-0.5"]
 FILES = ["featuretype.ply", "ne_110m_coastline.obj", "ne_110m_coastline.geojson", "wrench.dxf",
          "fandisk.obj", "spot.obj", "bunny.ply", "bun_zipper_res4.ply", "korita-zbevnica.gpx",
          "turbineblade.ply", "blackVase_decimated.ply"]
-DATA = "/work/shared/data/"
+DATA = f"{data_dir()}/"
 SHAPE_WORDS = ("destroyed", "flattened", "shrank", "turned over", "folded over")
 
 

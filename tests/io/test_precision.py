@@ -25,9 +25,10 @@ import pytest
 
 from service.io import FORMATS, GeometryDocument, read_geometry, write_geometry
 from service.io.dispatch import OutputRefused, check_output
+from tests.io.conftest import shared_data_dir
 from tests.io.test_cross_format import READERS, _corners, _ours
 
-DATA = Path("/work/shared/data")
+DATA = shared_data_dir() or Path("shared-data-not-found")
 UTM = np.array([665000.0, 5648000.0, 240.0])
 
 
