@@ -71,6 +71,7 @@ def run_case(name: str, inp: str, extra: dict[str, Any]) -> dict[str, Any]:
     use_default_threads(os.environ)
     kind, _, arg = inp.partition(":")
     g, sigma, truth = INPUTS[kind](arg)
+    assert truth is not None  # synthetic inputs only
     params = dict(extra)
     if params.get("rms") == "peer":
         params["rms"] = LEVELS["peer"] * sigma
@@ -135,8 +136,11 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         cmd = [sys.executable, "-m", "benchmarks.speed.table", "--one", name]
         done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=3600)
-        row = json.loads(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else {
-            "name": name, "status": f"error: {(done.stderr.strip().splitlines() or ['?'])[-1]}"}  # fmt: skip
+        if done.returncode == 0:
+            row = json.loads(done.stdout.strip().splitlines()[-1])
+        else:
+            tail = (done.stderr.strip().splitlines() or ["?"])[-1]
+            row = {"name": name, "status": f"error: {tail}"}
         print(json.dumps({k: row.get(k) for k in ("name", "cpu", "wall", "ratio_open3d")}),
               flush=True)  # fmt: skip
         rows.append(row)

@@ -61,7 +61,7 @@ def use_default_threads(environ: Mapping[str, str]) -> int:
     """Apply :func:`default_threads` of ``environ`` once per process (later calls keep it)."""
     if not _applied:
         _applied.append(default_threads(environ.get(THREADS_ENV)))
-        limit_threads(_applied[0])
+        limit_threads(_applied[0], load=False)  # libraries loaded later read the variables
     return _applied[0]
 
 
@@ -72,18 +72,21 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
     return max(1, cores // max(workers, 1))
 
 
-def limit_threads(threads: int) -> Any:
+def limit_threads(threads: int, load: bool = True) -> Any:
     """Cap every loaded BLAS/OpenMP pool (numpy's, scipy's, CHOLMOD's) at ``threads``.
 
-    Loads the engine's libraries first (threadpoolctl only sees loaded ones) and also sets the
-    usual variables for libraries loaded later and for child processes. Returns the
-    ``threadpoolctl`` limiter (keep it to restore, or drop it: the limits stay).
+    With ``load``, loads the engine's libraries first (threadpoolctl only sees loaded ones);
+    either way it sets the usual variables, which libraries loaded later (OpenBLAS, libgomp read
+    them when they load) and child processes follow. Returns the ``threadpoolctl`` limiter (keep
+    it to restore, or drop it: the limits stay).
     """
-    import numpy  # noqa: F401
-    import scipy.sparse.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits
 
-    from service.core.linalg import solver  # noqa: F401  (loads CHOLMOD and its BLAS / OpenMP)
+    if load:
+        import numpy  # noqa: F401
+        import scipy.sparse.linalg  # noqa: F401
+
+        from service.core.linalg import solver  # noqa: F401  (CHOLMOD and its BLAS / OpenMP)
 
     for name in _ENV:
         os.environ[name] = str(threads)

@@ -92,6 +92,57 @@ class SincFilter:
         return np.asarray(cheb.chebinterpolate(q, max(self.degree - 1, 0)))
 
 
+class _Recurrence:
+    """The Chebyshev vectors ``v_j = T_j(x(M_t)) c`` and moments, extended on demand (a filter
+    of twice the degree continues the recurrence instead of starting over)."""
+
+    def __init__(
+        self,
+        apply_op: Callable[[Array], Array],
+        c: Array,
+        mu_max: float,
+        keep: list[NDArray[np.float32]] | None,
+    ) -> None:
+        self.apply_op, self.scale, self.keep = apply_op, 2.0 / mu_max, keep
+        v = self.x_of(c)
+        self.v_prev, self.v, self.j, self.products = c, v, 1, 1
+        m0, m1 = _dot(c, c), _dot(c, v)
+        self.m = [m0, m1, 2.0 * _dot(v, v) - m0]
+        if keep is not None:
+            keep += [c.astype(np.float32), v.astype(np.float32)]
+
+    def x_of(self, V: Array) -> Array:
+        out = np.asarray(self.apply_op(V), dtype=np.float64)
+        out *= self.scale  # x(M_t) = M_t / (mu_max / 2) - I
+        out -= V
+        return out
+
+    def extend(self, count: int) -> Array:
+        """Moments ``m_0 .. m_2count`` (one product per new step, in place)."""
+        while self.j < count:
+            v_next = self.x_of(self.v)
+            v_next *= 2.0
+            v_next -= self.v_prev
+            self.products += 1
+            self.m += [
+                2.0 * _dot(self.v, v_next) - self.m[1],
+                2.0 * _dot(v_next, v_next) - self.m[0],
+            ]
+            if self.keep is not None:
+                self.keep.append(v_next.astype(np.float32))
+            self.v_prev, self.v, self.j = self.v, v_next, self.j + 1
+        return np.array(self.m[: 2 * count + 1])
+
+    def drop_vectors(self) -> None:
+        if self.keep is not None:
+            self.keep.clear()
+            self.keep = None
+
+
+def _dot(a: Array, b: Array) -> float:
+    return float(np.einsum("ij,ij->", a, b))
+
+
 def chebyshev_moments(
     apply_op: Callable[[Array], Array],
     c: Array,
@@ -108,34 +159,9 @@ def chebyshev_moments(
 
     Returns the moments and the products done (``count``).
     """
-    scale = 2.0 / mu_max  # x(M_t) = M_t / (mu_max / 2) - I
-
-    def dot(a: Array, b: Array) -> float:
-        return float(np.einsum("ij,ij->", a, b))
-
-    def x_of(V: Array) -> Array:
-        out = np.asarray(apply_op(V), dtype=np.float64)
-        out *= scale
-        out -= V
-        return out
-
-    m = np.zeros(2 * count + 1)
-    v_prev, v = c, x_of(c)
-    m[0], m[1] = dot(c, c), dot(c, v)
-    if keep is not None:
-        keep += [c.astype(np.float32), v.astype(np.float32)]
-    if count >= 1:
-        m[2] = 2.0 * dot(v, v) - m[0]
-    for j in range(2, count + 1):
-        v_next = x_of(v)
-        v_next *= 2.0
-        v_next -= v_prev
-        m[2 * j - 1] = 2.0 * dot(v, v_next) - m[1]
-        m[2 * j] = 2.0 * dot(v_next, v_next) - m[0]
-        if keep is not None:
-            keep.append(v_next.astype(np.float32))
-        v_prev, v = v, v_next
-    return m, max(count, 1)
+    rec = _Recurrence(apply_op, c, mu_max, keep)
+    moments = rec.extend(max(count, 1))
+    return moments[: 2 * count + 1], rec.products
 
 
 def combine(vectors: list[NDArray[np.float32]], coef: Array) -> Array:
@@ -186,7 +212,8 @@ def windowed_sinc(
     """The pass band with ``phi = tau`` (from the moments) and the phi it reaches.
 
     The degree is doubled while even the narrowest pass band deviates less than ``tau``
-    (heavy smoothing needs a filter that resolves ``mu << mu_max``). With ``keep``, the
+    (heavy smoothing needs a filter that resolves ``mu << mu_max``), continuing the same
+    recurrence (``2N - 1`` products in all for degree ``2N``). With ``keep``, the
     Chebyshev vectors of the returned filter's degree are left in it (see
     :func:`chebyshev_moments`) while they fit in :data:`KEEP_BYTES`; else it is left empty.
 
@@ -198,26 +225,22 @@ def windowed_sinc(
     history : list of (float, float)
         ``(x_pb, phi)`` for every pass band evaluated.
     """
+    if keep is not None:
+        keep.clear()
+    rec = _Recurrence(apply_op, c, mu_max, keep if 4 * degree * c.size <= KEEP_BYTES else None)
     while True:
-        if keep is not None:
-            keep.clear()
-        store = keep if keep is not None and 4 * degree * c.size <= KEEP_BYTES else None
-        flt, phi, history = _band(apply_op, c, tau, mu_max, degree, tolerance, store)
+        if 4 * degree * c.size > KEEP_BYTES:
+            rec.drop_vectors()
+        moments = rec.extend(max(degree - 1, 1))
+        flt, phi, history = _band(moments, tau, mu_max, degree, tolerance)
         if phi >= tau * (1 - tolerance) or 2 * degree > MAX_DEGREE:
             return flt, phi, history
         degree *= 2
 
 
 def _band(
-    apply_op: Callable[[Array], Array],
-    c: Array,
-    tau: float,
-    mu_max: float,
-    degree: int,
-    tolerance: float,
-    keep: list[NDArray[np.float32]] | None = None,
+    moments: Array, tau: float, mu_max: float, degree: int, tolerance: float
 ) -> tuple[SincFilter, float, list[tuple[float, float]]]:
-    moments, _ = chebyshev_moments(apply_op, c, mu_max, max(degree - 1, 1), keep)
     history: list[tuple[float, float]] = []
 
     def phi_at(theta: float) -> float:
