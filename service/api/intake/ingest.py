@@ -335,8 +335,10 @@ def check_job(req: IngestRequest) -> dict[str, Any]:
     """``POST /v1/jobs``: everything a job needs, checked; the input file to store (an inline
     geometry is written as a JSON file next to the spooled body, once every check passed)."""
     parsed = parse_request(req, req.limits.max_points)
+    from service.api.intake.dryrun import check_time, dry_run  # 422: too slow, or refused
+
+    check_time(parsed.document.geometry, parsed.params, req.options.get("job_timeout"))
     check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
-    from service.api.intake.dryrun import dry_run  # 422 for what the engine would refuse
 
     dry_run(parsed.document.geometry, parsed.params, int(req.options.get("dry_run_points", 0)))
     if "geometry" in parsed.extra:
