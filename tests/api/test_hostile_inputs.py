@@ -227,3 +227,20 @@ def test_the_cli_error_is_one_line_without_warnings(tmp_path: Path, name: str, d
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("geosmooth: error:"), done.stderr
         assert "Warning" not in done.stderr
+
+
+def test_an_r12_dxf_without_header_is_smoothed(client: httpx.Client) -> None:
+    """Found by the hostile corpus: the result of a flat R12 DXF (no HEADER section) was written
+    as LWPOLYLINE, which R12 has not (500 on /v1/smooth, internal-error for a job)."""
+    r = client.post(
+        "/v1/smooth",
+        files={"file": ("r12.dxf", _TEXT_FILES["dxf"])},
+        data={"params": json.dumps({"lam": 1.0})},
+    )
+    assert r.status_code == 200, r.text
+    from service.io import read_geometry as read
+
+    before = read(_TEXT_FILES["dxf"], "dxf").geometry.points
+    after = read(r.content, "dxf").geometry.points
+    assert after.shape == before.shape and np.all(np.isfinite(after))
+    assert not np.allclose(after, before)  # it did smooth

@@ -119,3 +119,18 @@ def test_fifty_points_in_200_dimensions_are_refused_by_the_time_estimate(
     assert problem["estimate_seconds"] > 120 or problem["estimate_bytes"] > problem.get(
         "limit_bytes", float("inf")
     )
+
+
+def test_a_slow_input_is_refused_before_the_costly_checks(client: httpx.Client) -> None:
+    """With an explicit tau the submit checks the exact phi(0), which costs about as much as
+    the job in 200-D: the time estimate must answer first (a 422, not the parse time limit)."""
+    points = np.random.default_rng(3).normal(size=(50, 200))
+    body = json.dumps({"points": points.tolist()}).encode()
+    r = client.post(
+        "/v1/jobs",
+        files={"file": ("cloud.json", body)},
+        data={"params": json.dumps({"tau": 1.0})},
+    )
+    assert r.status_code == 422, r.text
+    assert r.json()["code"] == "job-too-large"
+    assert r.json()["limit_seconds"] == 120

@@ -17,7 +17,7 @@ from typing import Any
 
 from service.api.errors import typed_problem
 
-__all__ = ["DRY_RUN_SECONDS", "dry_run"]
+__all__ = ["DRY_RUN_SECONDS", "check_time", "dry_run"]
 
 #: Estimated seconds (one core) above which a small input is not tried at submit.
 DRY_RUN_SECONDS = 2.0
@@ -44,3 +44,18 @@ def dry_run(geometry: Any, params: Any, max_points: int) -> None:
         typed = typed_problem(exc)
         if typed is not None and 400 <= typed.status < 500:
             raise
+
+
+def check_time(geometry: Any, params: Any, time_limit: float | None) -> None:
+    """Refuse (422 ``job-too-large``) an input whose estimated time is above ``time_limit``
+    *before* the submit's own checks, which cost about as much as the job on such inputs (the
+    exact ``phi(0)`` of 50 points in 200-D held the ingest process until its time limit)."""
+    if not time_limit:
+        return
+    from service.jobs.limits import check_admission
+    from service.jobs.queue import JobSize
+
+    faces = None if geometry.faces is None else len(geometry.faces)
+    n, dim = geometry.points.shape
+    size = JobSize(n=n, dim=dim, kind=geometry.kind, n_faces=faces)
+    check_admission(size, params, None, time_limit=float(time_limit))

@@ -339,8 +339,10 @@ def check_job(req: IngestRequest) -> NewJob:
     ``tau``), typed; the router adds tenant and idempotency key. An inline geometry becomes a
     JSON file next to the spooled body, written once every check passed."""
     parsed = parse_request(req, req.limits.max_points)
+    from service.api.intake.dryrun import check_time, dry_run  # 422: too slow, or refused
+
+    check_time(parsed.document.geometry, parsed.params, req.options.get("job_timeout"))
     check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
-    from service.api.intake.dryrun import dry_run  # 422 for what the engine would refuse
 
     dry_run(parsed.document.geometry, parsed.params, int(req.options.get("dry_run_points", 0)))
     if "geometry" in parsed.extra:

@@ -183,7 +183,11 @@ class Intake:
             params_required=params_required,
             out_format=out_format,
             exact_tau_max_points=self.settings.submit_exact_tau_points,
-            options={"dry_run_points": self.settings.submit_dry_run_points, **(options or {})},
+            options={
+                "dry_run_points": self.settings.submit_dry_run_points,
+                "job_timeout": self.settings.job_timeout,
+                **(options or {}),
+            },
         )
         shown = upload.filename or "the upload"
         redact = {str(upload.path): shown, str(upload.path.parent): "spool"}

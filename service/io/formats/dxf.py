@@ -275,7 +275,7 @@ def _replace(
         attribs = {
             k: first.dxf.get(k) for k in ("layer", "color", "linetype") if first.dxf.hasattr(k)
         }
-    if flat:
+    if flat and doc.dxfversion >= "AC1015":  # LWPOLYLINE needs R2000; an R12 file: POLYLINE
         msp.add_lwpolyline(
             p[:, :2].tolist(), close=closed, dxfattribs={**attribs, "elevation": float(p[0, 2])}
         )
