@@ -272,7 +272,8 @@ def test_every_setting_named_in_the_documents_exists() -> None:
     from service.settings import Settings
 
     known = {f"GEOSMOOTH_{name.upper()}" for name in Settings.model_fields}
-    # read by the CLI (debug, submit's key, the library's threads) and the test suite, not by the service's settings
+    # read by the CLI (debug, submit's key, the library's threads) and the test suite,
+    # not by the service's settings
     known |= {"GEOSMOOTH_DEBUG", "GEOSMOOTH_API_KEY", "GEOSMOOTH_SHARED_DATA",
               "GEOSMOOTH_SCREENSHOTS", "GEOSMOOTH_THREADS"}  # fmt: skip
     pattern = re.compile(r"GEOSMOOTH_[A-Z0-9_]*[A-Z0-9]")
@@ -304,7 +305,8 @@ def test_budgets_quoted_from_info_are_current() -> None:
     assert f'`"rms_range": [0.0, {bunny["rms_range"][1]:.6f}]`' in cli
     assert f'`"sigma_estimate": {bunny["sigma_estimate"]:.2e}`' in cli
     tau = bunny["suggested_tau"]
-    assert (f'`"suggested_tau": {tau:.2e}`' if tau is not None else '`"suggested_tau": null`') in cli
+    quoted = f'`"suggested_tau": {tau:.2e}`' if tau is not None else '`"suggested_tau": null`'
+    assert quoted in cli
     assert f"`(0, {bunny['phi0']:.3f})`" in method
 
 
