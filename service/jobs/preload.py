@@ -30,15 +30,24 @@ __all__ = ["apply_thread_limit", "warm_up"]
 
 
 def warm_up() -> None:
-    """Smooth a 16-point ring once (tau search included) and write and read it back."""
+    """Smooth a 16-point ring once (tau search included) and write and read it back; smooth
+    a tiny mesh and a tiny cloud (the compiled neighbourhood kernels)."""
     n = 16
     t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
     rng = np.random.default_rng(0)
     ring = Geometry(np.c_[np.cos(t), np.sin(t), np.zeros(n)] + rng.normal(0, 0.01, (n, 3)),
                     edges=np.c_[np.arange(n), (np.arange(n) + 1) % n])  # fmt: skip
     result = smooth(ring, SmoothingParams(rms=0.005))
+    # a mesh (1-rings, normal displacement) and a cloud (Delaunay fans): every compiled kernel
+    # of service.core.operator.kernels is loaded here once, not in each job process
+    octahedron = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]])
+    faces = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4],
+                      [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])  # fmt: skip
+    mesh = Geometry(octahedron + rng.normal(0, 0.01, (6, 3)), faces=faces)
+    smooth(mesh, SmoothingParams(rms=0.005))
+    smooth(Geometry(rng.normal(0, 1.0, (40, 3))), SmoothingParams(rms=0.05))
     doc = GeometryDocument.from_geometry(ring)
-    for fmt in ("xyz", "ply"):
+    for fmt in ("json", "ply"):
         read_geometry(write_geometry(doc, fmt, result.points), fmt)
     gcv = ring.points[:, :2] + rng.normal(0, 0.01, (n, 2))  # the free-displacement/GCV path
     smooth(Geometry(gcv, edges=ring.edges), SmoothingParams(tau="gcv"))
