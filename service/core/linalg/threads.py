@@ -36,7 +36,7 @@ def limit_threads(threads: int) -> Any:
     import scipy.sparse.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits
 
-    from service.core import solver  # noqa: F401  (loads CHOLMOD and its BLAS / OpenMP)
+    from service.core.linalg import solver  # noqa: F401  (loads CHOLMOD and its BLAS / OpenMP)
 
     for name in _ENV:
         os.environ[name] = str(threads)
