@@ -98,6 +98,8 @@ class SmoothResult:
         ``volume_change``, ``area_change``, ``moved_far``.
     bound : dict or None
         ``max_deviation`` bound: ``{"max_deviation", "rounds", "clipped"}``.
+    tiles : dict or None
+        Tiled runs: count, halo, rounds and every tile (points, halo, worker, seconds, phi).
     """
 
     points: NDArray[np.float64]
@@ -137,6 +139,7 @@ class SmoothResult:
         )
     )
     bound: dict[str, Any] | None = None
+    tiles: dict[str, Any] | None = None  # tiled runs (service.core.tiles)
 
     @property
     def n_points(self) -> int:
@@ -185,4 +188,6 @@ class SmoothResult:
         )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()
+        if self.tiles is not None:
+            out["tiles"] = self.tiles
         return out

@@ -19,7 +19,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from service.jobs.errors import StorageError, StorageFull, storage_error
+from service.jobs.errors import JobTooLarge, StorageError, StorageFull, storage_error
 from service.jobs.limits import check_admission
 from service.jobs.queue import JobInput, JobSize
 
@@ -88,16 +88,27 @@ def admit_size(
     weld: bool,
     size: JobSize | None,
     limit: int | None,
-) -> None:
+) -> SmoothingParams:
     """Refuse the job if its memory estimate is above ``limit`` (reads the input when the
-    caller did not give its ``size``)."""
+    caller did not give its ``size``). Returns ``params``, with ``tile_points`` set when only a
+    tiled run fits (:func:`service.jobs.tiles.auto_tile_points`, issue 23)."""
     if limit is None:
-        return
+        return params
     if size is None:
         from service.io import read_geometry
 
         size = JobSize.of(read_geometry(data, fmt, weld=weld).geometry)
-    check_admission(size, params, limit)
+    try:
+        check_admission(size, params, limit)
+    except JobTooLarge:
+        from service.jobs.tiles import auto_tile_points, tile_workers
+
+        tile = None if params.tile_points else auto_tile_points(size, params, limit,
+                                                                 tile_workers())  # fmt: skip
+        if tile is None:
+            raise
+        return params.model_copy(update={"tile_points": tile})
+    return params
 
 
 def check_space(directory: Path, needed: int, min_free: int) -> None:
@@ -158,7 +169,8 @@ def new_job(
     if idempotency_key is not None:
         digest = request_hash(data, fmt, stored, filename=filename, weld=weld,
                               webhook_url=webhook_url)  # fmt: skip
-    admit_size(data, fmt, smoothing, weld=weld, size=size, limit=memory_limit)
+    smoothing = admit_size(data, fmt, smoothing, weld=weld, size=size, limit=memory_limit)
+    stored = smoothing.model_dump(mode="json", exclude_none=True)
     return NewJob(
         uuid.uuid4().hex, fmt, filename, stored, input_size(data), max_attempts, weld, tenant,
         webhook_url, idempotency_key, digest,
