@@ -41,6 +41,7 @@ __all__ = [
 ]
 
 T = TypeVar("T")
+RunMap = Callable[[Callable[..., Any], list[tuple[Any, ...]]], list[Any]]
 #: A tile's points (core + halo) per core point assumed at admission.
 HALO_FACTOR = 2.0
 #: Bytes per point the job process itself holds in a tiled run (input, output, tile index
@@ -229,8 +230,23 @@ def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
         ctx.flush_progress()
 
     try:
-        with local_tiles(tile_workers(), on_tile, counter) as run_map:
-            return smooth(geometry, params, progress, memory_limit=ctx.memory_limit,
-                          run_map=run_map)  # fmt: skip
+        with _tiles_of(ctx, on_tile, counter) as run_map:
+            result = smooth(geometry, params, progress, memory_limit=ctx.memory_limit,
+                            run_map=run_map)  # fmt: skip
+        if result.tiles is not None:
+            result.tiles["retried"] = counter.retried
+        return result
     finally:
         ctx.report_progress = report
+
+
+def _tiles_of(
+    ctx: JobContext, on_tile: Callable[[], None], counter: TileCounter
+) -> contextlib.AbstractContextManager[RunMap]:
+    """RQ jobs inside a ``geosmooth worker`` (its work horses have ``GEOSMOOTH_WORKER_PID``),
+    else :func:`local_tiles` on this job's worker share."""
+    if os.environ.get("GEOSMOOTH_WORKER_PID"):
+        from service.jobs.distributed.tiles import rq_tiles
+
+        return rq_tiles(ctx.job_id, on_tile, counter)
+    return local_tiles(tile_workers(), on_tile, counter)
