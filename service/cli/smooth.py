@@ -221,12 +221,18 @@ def _run_streamed(
     ns: argparse.Namespace, params: SmoothingParams, fmt: str, started: float, err: TextIO
 ) -> int:
     """``smooth`` of a LAS/LAZ, binary PLY or XYZ file in tiles, read and written in chunks."""
+    import contextlib
+
     from service.core.errors import TauOutOfRange
     from service.io.stream import smooth_streamed
+    from service.jobs.tiles import local_tiles
 
+    workers = max(1, int(os.environ.get("GEOSMOOTH_TILE_WORKERS", "1") or 1))
     progress = ProgressDisplay(err, enabled=not ns.quiet)
     try:
-        result = smooth_streamed(Path(ns.input), Path(ns.output), fmt, params, progress)
+        with local_tiles(workers) if workers > 1 else contextlib.nullcontext() as run_map:
+            result = smooth_streamed(Path(ns.input), Path(ns.output), fmt, params, progress,
+                                     run_map=run_map)  # fmt: skip
     except TauOutOfRange as exc:
         raise CliError(tau_message(exc, params), exc.exit_code) from exc
     finally:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -281,6 +281,7 @@ def smooth_streamed(
     params: SmoothingParams,
     progress: ProgressCallback | None = None,
     memory_limit: int | None = None,
+    run_map: Any = None,
 ) -> SmoothResult:
     """Read the coordinates of ``src`` in chunks, smooth them (tiled with
     ``params.tile_points``), write ``dst`` by streaming ``src`` again (module docstring)."""
@@ -288,7 +289,8 @@ def smooth_streamed(
     from service.core.tiles.entry import smooth
 
     P, faces = read_coordinates(src, fmt)
-    result = smooth(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit)
+    result = smooth(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit,
+                    run_map=run_map)  # fmt: skip
     del P
     rewrite(src, dst, fmt, result.points)
     return result
