@@ -176,6 +176,12 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
 
     started = time.perf_counter()
     params, out_fmt = _check_options(ns)
+    if params.tile_points and not ns.fixed and "-" not in (ns.input, ns.output):
+        from service.io.stream import streamed_format  # tiles: stream the file (issue 23)
+
+        fmt = streamed_format(Path(ns.input), ns.input_format, out_fmt, ns.weld, ns.xyz_dims)
+        if fmt and not given_writer_options(ns) and not ns.ascii:
+            return _run_streamed(ns, params, fmt, started, err)
     fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
     doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
     geometry = _with_fixed(doc, fixed)
@@ -217,4 +223,34 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
         details=_details(doc),
         notes=output_notes(doc, out_fmt),
     )
+    return EXIT_OK
+
+
+def _run_streamed(
+    ns: argparse.Namespace, params: SmoothingParams, fmt: str, started: float, err: TextIO
+) -> int:
+    """``smooth`` of a LAS/LAZ, binary PLY or XYZ file in tiles, read and written in chunks."""
+    import contextlib
+
+    from service.core.errors import TauOutOfRange
+    from service.io.stream import smooth_streamed
+    from service.jobs.tiles import local_tiles
+
+    workers = max(1, int(os.environ.get("GEOSMOOTH_TILE_WORKERS", "1") or 1))
+    progress = ProgressDisplay(err, enabled=not ns.quiet)
+    try:
+        with local_tiles(workers) if workers > 1 else contextlib.nullcontext() as run_map:
+            result = smooth_streamed(Path(ns.input), Path(ns.output), fmt, params, progress,
+                                     run_map=run_map)  # fmt: skip
+    except TauOutOfRange as exc:
+        raise CliError(tau_message(exc, params), exc.exit_code) from exc
+    finally:
+        progress.finish()
+    report: dict[str, Any] = dict(result.report())
+    if ns.report:
+        report.update(input=ns.input, input_format=fmt, output=ns.output, output_format=fmt,
+                      params=params.model_dump(mode="json"), geosmooth_version=version(),
+                      wall_seconds=time.perf_counter() - started, streamed=True)  # fmt: skip
+        write_json_report(ns.report, report)
+    show_summary(progress, report, ns, params, started, details=["streamed"], notes=[])
     return EXIT_OK

@@ -25,7 +25,7 @@ _EXPORTS = {
     "Spectrum": "result",
     "ProgressCallback": "progress",
     "ProgressEvent": "progress",
-    "smooth": "pipeline",
+    "smooth": "tiles.entry",
     "build_operator": "operator.build",
     "SmoothingOperator": "operator.build",
 }
@@ -66,9 +66,9 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.core.geometry import Geometry
     from service.core.operator.build import SmoothingOperator, build_operator
     from service.core.params import SmoothingParams
-    from service.core.pipeline import smooth
     from service.core.progress import ProgressCallback, ProgressEvent
     from service.core.result import SmoothResult, Spectrum
+    from service.core.tiles.entry import smooth
 
 
 def __getattr__(name: str) -> Any:

@@ -265,6 +265,17 @@ class SmoothingParams(BaseModel):
             "For pipelines that must never pass a damaged file on."
         ),
     )
+    # --- tiles (issue 23) ---------------------------------------------------------------------
+    tile_points: int | None = Field(
+        default=None,
+        ge=1000,
+        description=(
+            "Smooth in spatial tiles of about this many points, each with a halo as wide as the "
+            "solution's influence reaches, under one global tau (service/core/tiles); also "
+            "chosen automatically for jobs whose memory estimate exceeds the limit. Not with "
+            "preserve_volume, max_deviation, spectrum, tau='gcv', windowed-sinc or L(f)."
+        ),
+    )
     preset: Preset | None = Field(
         default=None,
         description=(

@@ -108,6 +108,8 @@ class SmoothResult:
     noise_found : bool or None
         Automatic tau: whether the noise estimate found noise (``False``: the input was
         returned unchanged, ``tau_how`` says why); ``None`` for other rules.
+    tiles : dict or None
+        Tiled runs: count, halo, rounds and every tile (points, halo, worker, seconds, phi).
     """
 
     points: NDArray[np.float64]
@@ -149,6 +151,7 @@ class SmoothResult:
     bound: dict[str, Any] | None = None
     shape_warnings: list[str] = field(default_factory=list)
     noise_found: bool | None = None
+    tiles: dict[str, Any] | None = None  # tiled runs (service.core.tiles)
 
     @property
     def rms_deviation(self) -> float:
@@ -209,4 +212,6 @@ class SmoothResult:
         )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()
+        if self.tiles is not None:
+            out["tiles"] = self.tiles
         return out

@@ -22,11 +22,14 @@ import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from service.jobs.errors import StorageError, StorageFull, storage_error
+from service.jobs.errors import JobTooLarge, StorageError, StorageFull, storage_error
 from service.jobs.limits import check_admission
 from service.jobs.queue import JobInput, JobSize, NewJob
+
+if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
 
 __all__ = [
     "JobRow",
@@ -78,18 +81,31 @@ def request_hash(data: JobInput, fmt: str, params: dict[str, Any], **fields: Any
     return hashlib.sha256(f"{_digest(data)}\n{meta}".encode()).hexdigest()
 
 
-def admit_size(job: NewJob, limit: int | None) -> None:
+def admit_size(job: NewJob, limit: int | None) -> SmoothingParams:
     """Refuse the job if its memory estimate is above ``limit`` or its time estimate above the
     job time limit (reads the input when the job came without its ``size`` and a memory limit
-    is set)."""
+    is set). Returns the job's params, with ``tile_points`` set when only a tiled run fits the
+    memory limit (:func:`service.jobs.tiles.auto_tile_points`)."""
+    params = job.params
     if job.size is None and limit is None:
-        return
+        return params
     size = job.size
     if size is None:
         from service.io import read_geometry
 
         size = JobSize.of(read_geometry(job.input, job.fmt, weld=job.weld).geometry)
-    check_admission(size, job.params, limit)
+    try:
+        check_admission(size, params, limit)
+    except JobTooLarge:
+        from service.jobs.tiles import auto_tile_points, tile_workers
+
+        tile = None
+        if not params.tile_points and limit is not None:
+            tile = auto_tile_points(size, params, limit, tile_workers())
+        if tile is None:
+            raise
+        return params.model_copy(update={"tile_points": tile})
+    return params
 
 
 def check_space(directory: Path, needed: int, min_free: int) -> None:
@@ -131,7 +147,7 @@ def admit(job: NewJob, *, memory_limit: int | None, max_attempts: int) -> JobRow
     if job.idempotency_key is not None:
         digest = request_hash(job.input, job.fmt, stored, filename=job.filename, weld=job.weld,
                               webhook_url=job.webhook_url)  # fmt: skip
-    admit_size(job, memory_limit)
+    stored = admit_size(job, memory_limit).model_dump(mode="json", exclude_none=True)
     return JobRow(
         uuid.uuid4().hex, job.fmt, job.filename, stored, input_size(job.input), max_attempts,
         job.weld, job.tenant, job.webhook_url, job.idempotency_key, digest,

@@ -137,13 +137,12 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     dict
         ``SmoothResult.report()``.
     """
-    from service.core.pipeline import smooth
     from service.io import read_geometry, write_geometry
+    from service.jobs.tiles import run_smooth
 
     ctx.stage("reading")
     doc = read_geometry(ctx.input_path, ctx.fmt, weld=ctx.weld)
-    result = smooth(doc.geometry, ctx.params, progress=ctx.progress,
-                    memory_limit=ctx.memory_limit)  # fmt: skip
+    result = run_smooth(ctx, doc.geometry)  # tiled on local processes with tile_points
     ctx.stage("writing")
     buf = io.BytesIO()
     np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))

@@ -37,6 +37,7 @@ from rq import Worker
 from service.core.linalg.threads import limit_threads, threads_per_worker
 from service.jobs import problems
 from service.jobs.distributed.backend import Backend
+from service.jobs.distributed.tiles import TILE_TASK
 from service.jobs.limits import default_job_memory
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
@@ -54,7 +55,8 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CRASH_SIGNALS = frozenset({signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal.SIGILL,
                             signal.SIGABRT, signal.SIGSYS, signal.SIGTRAP})  # fmt: skip
-_PRELOAD = ("service.jobs.distributed.tasks", "service.jobs.preload")
+_PRELOAD = ("service.jobs.distributed.tasks", "service.jobs.distributed.tiles",
+            "service.jobs.preload")
 
 
 class GeosmoothWorker(Worker):  # type: ignore[misc]
@@ -81,6 +83,11 @@ class GeosmoothWorker(Worker):  # type: ignore[misc]
         """RQ's heartbeat, then the run's lease; a run that lost its job is stopped."""
         super().maintain_heartbeats(job, execution)
         store, job_id = self.backend.store, self._job_id(job)
+        if job.func_name == TILE_TASK:  # a tile of a job run elsewhere: stop if the job ended
+            rec = store.get(job_id)
+            if rec is None or rec.status is not JobStatus.RUNNING:
+                self.kill_horse()
+            return
         renewed = store.update(
             job_id, expect=(JobStatus.RUNNING,), when={"owner": self.name, "rq_job": job.id},
             lease_until=time.time() + self.backend.settings.worker_lease,
@@ -94,6 +101,8 @@ class GeosmoothWorker(Worker):  # type: ignore[misc]
     def execute_job(self, job: Job, queue: Queue) -> None:
         """RQ's run of a job, then its webhook (in the background)."""
         super().execute_job(job, queue)
+        if job.func_name == TILE_TASK:
+            return
         rec = self.backend.store.get(self._job_id(job))
         if rec is not None and rec.finished and rec.webhook_url:
             self.notifier.enqueue(rec.id)
@@ -101,6 +110,8 @@ class GeosmoothWorker(Worker):  # type: ignore[misc]
     def _horse_killed(self, job: Job, retpid: int, status: int, rusage: Any) -> None:
         """Record the end of a horse that died without recording it (see the module docstring)."""
         backend, job_id = self.backend, self._job_id(job)
+        if job.func_name == TILE_TASK:  # its claim expires: the coordinator re-runs the tile
+            return
         raw = backend.store.raw(job_id) or {}
         ours = (raw.get("status"), raw.get("owner"), raw.get("rq_job"))
         if ours != ("running", self.name, job.id):

@@ -1,0 +1,58 @@
+"""``smooth`` with ``params.tile_points``: the untiled pipeline, or tiles when asked.
+
+The library, the CLI, the HTTP API and the jobs call this one function (exported as
+``service.core.smooth``): with ``tile_points`` unset, or an input of at most that many points, it
+is :func:`service.core.pipeline.smooth` unchanged; otherwise :func:`.driver.smooth_tiled`, whose
+tiles are listed in the result's ``tiles`` member.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from service.core.geometry import Geometry
+from service.core.operator.build import SmoothingOperator
+from service.core.params import SmoothingParams
+from service.core.pipeline import smooth as smooth_untiled
+from service.core.progress import ProgressCallback
+from service.core.result import SmoothResult
+from service.core.tiles.driver import RunMap, TiledResult, smooth_tiled
+
+__all__ = ["smooth", "tiles_report"]
+
+
+def tiles_report(tiled: TiledResult, tile_points: int) -> dict[str, Any]:
+    """The ``tiles`` member of a report: count, halo, rounds and one entry per tile."""
+    return {
+        "count": len(tiled.tiles),
+        "tile_points": tile_points,
+        "halo_hops": tiled.hops,
+        "hop_length": tiled.hop_length,
+        "rounds": tiled.rounds,
+        "tiles": [dataclasses.asdict(t) for t in tiled.tiles],
+    }
+
+
+def smooth(
+    geometry: Geometry,
+    params: SmoothingParams,
+    progress: ProgressCallback | None = None,
+    *,
+    operator: SmoothingOperator | None = None,
+    memory_limit: int | None = None,
+    run_map: RunMap[Any] | None = None,
+) -> SmoothResult:
+    """:func:`service.core.pipeline.smooth`, tiled when ``params.tile_points`` is below the
+    input's size (``run_map`` runs the tiles; default: one after the other in this process).
+
+    Raises
+    ------
+    ParameterError, TauOutOfRange, SolverError
+    """
+    n_tile = params.tile_points
+    if n_tile is None or geometry.n <= n_tile:
+        return smooth_untiled(geometry, params, progress, operator=operator,
+                              memory_limit=memory_limit)  # fmt: skip
+    tiled = smooth_tiled(geometry, params, n_tile, progress, run_map, memory_limit)
+    return dataclasses.replace(tiled.result, tiles=tiles_report(tiled, n_tile))

@@ -1,0 +1,296 @@
+"""Streamed point files for tiled runs (issue 23): coordinates in, coordinates out, in chunks.
+
+A tiled run needs only the coordinates of the input (24 bytes a point) and gives back new
+coordinates; every other attribute can stay in the file. :func:`read_coordinates` reads
+``x, y, z`` chunk by chunk (LAS/LAZ with laspy's chunk iterator, binary PLY through a memory
+map of its vertex block, XYZ text in blocks of lines) and, for binary PLY meshes, the
+triangles; :func:`rewrite` streams the input again and writes it with the new coordinates, every
+other dimension, property, column and byte left as it was (LAS/LAZ: scaled to the file's own
+scale and offset; PLY: cast to the vertex properties' types; XYZ: printed with the input's
+decimals). So the process holds the coordinates twice and one chunk of records, never the
+input's attribute table.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.io.errors import FormatError
+from service.io.formats.ply.header import PlyHeader, parse_header
+
+if TYPE_CHECKING:
+    from service.core.params import SmoothingParams
+    from service.core.progress import ProgressCallback
+    from service.core.result import SmoothResult
+
+__all__ = [
+    "CHUNK", "STREAMED", "read_coordinates", "rewrite", "smooth_streamed", "streamable",
+    "streamed_format",
+]
+
+CHUNK = 1 << 20
+#: Formats read and written in chunks here.
+STREAMED = ("las", "laz", "ply", "xyz")
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+Array = NDArray[np.float64]
+
+
+def _code(ply_type: str) -> str:
+    """numpy code of a PLY scalar type (the header parser may have normalised it already)."""
+    return _PLY_TYPES.get(ply_type, ply_type)
+
+
+def _ply_header(path: Path) -> PlyHeader:
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    return parse_header(head)
+
+
+def _vertex_dtype(header: PlyHeader) -> np.dtype | None:
+    """The structured dtype of a binary PLY's leading vertex element (scalars only)."""
+    if header.encoding == "ascii" or not header.elements:
+        return None
+    vertex = header.elements[0]
+    if vertex.name != "vertex" or any(p.is_list for p in vertex.properties):
+        return None
+    if not {"x", "y", "z"} <= {p.name for p in vertex.properties}:
+        return None
+    end = "<" if header.encoding == "binary_little_endian" else ">"
+    return np.dtype([(p.name, end + _code(p.type)) for p in vertex.properties])
+
+
+def streamable(path: Path, fmt: str) -> bool:
+    """Whether :func:`read_coordinates` / :func:`rewrite` handle this file."""
+    if fmt in ("las", "laz", "xyz"):
+        return True
+    if fmt != "ply":
+        return False
+    try:
+        header = _ply_header(path)
+    except FormatError:
+        return False
+    if _vertex_dtype(header) is None:
+        return False
+    rest = header.elements[1:]
+    faces_ok = _faces_dtype(header) is not None
+    return all(e.name == "face" for e in rest) and len(rest) <= 1 and faces_ok
+
+
+def _faces_dtype(header: PlyHeader) -> np.dtype | None:
+    """Triangles stored as one ``list uchar int`` property with count 3 (checked on read)."""
+    if len(header.elements) == 1:
+        return np.dtype([])
+    face = header.elements[1]
+    if len(face.properties) != 1 or not face.properties[0].is_list:
+        return None
+    prop = face.properties[0]
+    end = "<" if header.encoding == "binary_little_endian" else ">"
+    if prop.count_type is None:
+        return None
+    return np.dtype([("n", end + _code(prop.count_type)),
+                     ("v", end + _code(prop.type), (3,))])  # fmt: skip
+
+
+def read_coordinates(path: Path, fmt: str) -> tuple[Array, NDArray[np.int64] | None]:
+    """``(points (n, 3) float64, triangles (m, 3) or None)`` of a streamable file.
+
+    Raises
+    ------
+    FormatError
+        A PLY face that is not a triangle; a file laspy cannot read.
+    """
+    path = Path(path)
+    if fmt in ("las", "laz"):
+        return _las_points(path), None
+    if fmt == "xyz":
+        return _xyz_points(path), None
+    header = _ply_header(path)
+    vdt = _vertex_dtype(header)
+    assert vdt is not None
+    n = header.elements[0].count
+    vertices = np.memmap(path, dtype=vdt, mode="r", offset=header.body_offset, shape=(n,))
+    P = np.empty((n, 3))
+    for at in range(0, n, CHUNK):
+        block = vertices[at : at + CHUNK]
+        for j, name in enumerate("xyz"):
+            P[at : at + CHUNK, j] = block[name]
+    faces = None
+    fdt = _faces_dtype(header)
+    if fdt is not None and len(header.elements) > 1:
+        m = header.elements[1].count
+        rec = np.memmap(path, dtype=fdt, mode="r", offset=header.body_offset + n * vdt.itemsize,
+                        shape=(m,))  # fmt: skip
+        if m and np.any(rec["n"] != 3):
+            raise FormatError("a PLY face is not a triangle: streamed tiles need triangles",
+                              fmt="ply")  # fmt: skip
+        faces = np.asarray(rec["v"], dtype=np.int64)
+    return P, faces
+
+
+def _las_points(path: Path) -> Array:
+    import laspy
+
+    with laspy.open(path) as reader:
+        n = int(reader.header.point_count)
+        P = np.empty((n, 3))
+        at = 0
+        for chunk in reader.chunk_iterator(CHUNK):
+            k = len(chunk)
+            P[at : at + k] = np.c_[chunk.x, chunk.y, chunk.z]
+            at += k
+    return P[:at]
+
+
+def _data_lines(path: Path) -> Iterator[list[bytes]]:
+    """Blocks of up to :data:`CHUNK` data lines (comments and a header line skipped)."""
+    with open(path, "rb") as fh:
+        block: list[bytes] = []
+        for line in fh:
+            s = line.strip()
+            if not s or s.startswith(b"#") or not _numeric(s.split(None, 1)[0]):
+                continue
+            block.append(s)
+            if len(block) == CHUNK:
+                yield block
+                block = []
+        if block:
+            yield block
+
+
+def _numeric(token: bytes) -> bool:
+    try:
+        float(token.replace(b",", b""))
+    except ValueError:
+        return False
+    return True
+
+
+def _xyz_points(path: Path) -> Array:
+    parts = []
+    for block in _data_lines(path):
+        parts.append(np.array([line.replace(b",", b" ").split()[:3] for line in block],
+                              dtype=np.float64))  # fmt: skip
+    return np.concatenate(parts) if parts else np.zeros((0, 3))
+
+
+def rewrite(src: Path, dst: Path, fmt: str, points: Array) -> None:
+    """Write ``src`` to ``dst`` with ``points`` as its coordinates, chunk by chunk (module
+    docstring).
+
+    Raises
+    ------
+    FormatError
+        A coordinate that the LAS file's scale and offset cannot hold.
+    """
+    src, dst = Path(src), Path(dst)
+    if fmt in ("las", "laz"):
+        _las_rewrite(src, dst, points, fmt == "laz")
+    elif fmt == "xyz":
+        _xyz_rewrite(src, dst, points)
+    else:
+        _ply_rewrite(src, dst, points)
+
+
+def _las_rewrite(src: Path, dst: Path, points: Array, compress: bool) -> None:
+    import laspy
+
+    from service.io.formats.las import _scaled
+
+    with laspy.open(src) as reader, laspy.open(dst, mode="w", header=reader.header,
+                                               do_compress=compress) as writer:  # fmt: skip
+        header = reader.header
+        at = 0
+        for chunk in reader.chunk_iterator(CHUNK):
+            k = len(chunk)
+            for j, name in enumerate(("X", "Y", "Z")):
+                scale, offset = float(header.scales[j]), float(header.offsets[j])
+                chunk[name] = _scaled(points[at : at + k, j], scale, offset, "xyz"[j])
+            writer.write_points(chunk)
+            at += k
+        if header.evlrs:
+            writer.write_evlrs(header.evlrs)
+
+
+def _ply_rewrite(src: Path, dst: Path, points: Array) -> None:
+    header = _ply_header(src)
+    vdt = _vertex_dtype(header)
+    assert vdt is not None
+    n = header.elements[0].count
+    vertices = np.memmap(src, dtype=vdt, mode="r", offset=header.body_offset, shape=(n,))
+    with open(src, "rb") as fin, open(dst, "wb") as out:
+        out.write(fin.read(header.body_offset))
+        for at in range(0, n, CHUNK):
+            block = np.array(vertices[at : at + CHUNK])
+            for j, name in enumerate("xyz"):
+                block[name] = points[at : at + CHUNK, j].astype(vdt[name])
+            out.write(block.tobytes())
+        fin.seek(header.body_offset + n * vdt.itemsize)
+        shutil.copyfileobj(fin, out, 1 << 22)
+
+
+def _decimals(token: bytes) -> int:
+    text = token.decode()
+    return len(text.split(".", 1)[1]) if "." in text and "e" not in text.lower() else 6
+
+
+def _xyz_rewrite(src: Path, dst: Path, points: Array) -> None:
+    at = 0
+    with open(src, "rb") as fin, open(dst, "wb") as out:
+        digits: list[int] | None = None
+        for raw in fin:
+            s = raw.strip()
+            if not s or s.startswith(b"#") or not _numeric(s.split(None, 1)[0]):
+                out.write(raw)
+                continue
+            tokens = s.split()
+            if digits is None:
+                digits = [_decimals(t) for t in tokens[:3]]
+            new = [f"{points[at, j]:.{digits[j]}f}".encode() for j in range(3)]
+            out.write(b" ".join(new + tokens[3:]) + b"\n")
+            at += 1
+
+
+
+def streamed_format(
+    src: Path, given: str | None, out_fmt: str | None, weld: bool | None, xyz_dims: int | None
+) -> str | None:
+    """The format to stream ``src`` in, or ``None`` when the file is not for this path: the
+    output in the same format, no welding, three coordinates, a :func:`streamable` file."""
+    from service.io import detect_format
+
+    fmt = given or (detect_format(src.name) if src.suffix else None)
+    if fmt not in STREAMED or (out_fmt not in (None, fmt)) or weld or xyz_dims not in (None, 3):
+        return None
+    return fmt if src.is_file() and streamable(src, fmt) else None
+
+
+def smooth_streamed(
+    src: Path,
+    dst: Path,
+    fmt: str,
+    params: SmoothingParams,
+    progress: ProgressCallback | None = None,
+    memory_limit: int | None = None,
+    run_map: Any = None,
+) -> SmoothResult:
+    """Read the coordinates of ``src`` in chunks, smooth them (tiled with
+    ``params.tile_points``), write ``dst`` by streaming ``src`` again (module docstring)."""
+    from service.core.geometry import Geometry
+    from service.core.tiles.entry import smooth
+
+    P, faces = read_coordinates(src, fmt)
+    result = smooth(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit,
+                    run_map=run_map)  # fmt: skip
+    del P
+    rewrite(src, dst, fmt, result.points)
+    return result
