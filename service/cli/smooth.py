@@ -234,7 +234,7 @@ def _run_streamed(
 
     from service.core.errors import TauOutOfRange
     from service.io.stream import smooth_streamed
-    from service.jobs.tiles import local_tiles
+    from service.jobs.tiles.local import local_tiles
 
     workers = max(1, int(os.environ.get("GEOSMOOTH_TILE_WORKERS", "1") or 1))
     progress = ProgressDisplay(err, enabled=not ns.quiet)

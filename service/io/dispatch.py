@@ -18,7 +18,6 @@ from typing import Any, BinaryIO
 
 from numpy.typing import ArrayLike
 
-from service.exit_codes import EXIT_OUTPUT
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
@@ -240,7 +239,7 @@ class OutputRefused(FormatError):
     field = "format"
     title = "Output format cannot hold this input"
     status = 422
-    exit_code = EXIT_OUTPUT
+    exit_code = 6  # the CLI's table (service/exit_codes.py): cannot write the output
 
 
 _KIND_WORDS = {"mesh": "faces", "polyline": "lines", "cloud": "a point cloud"}

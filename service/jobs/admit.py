@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from service.jobs.errors import JobTooLarge, StorageError, StorageFull, storage_error
-from service.jobs.limits import check_admission
+from service.jobs.limits import auto_tile_points, check_admission, tile_workers
 from service.jobs.queue import JobInput, JobSize, NewJob
 
 if TYPE_CHECKING:
@@ -97,8 +97,6 @@ def admit_size(job: NewJob, limit: int | None) -> SmoothingParams:
     try:
         check_admission(size, params, limit)
     except JobTooLarge:
-        from service.jobs.tiles import auto_tile_points, tile_workers
-
         tile = None
         if not params.tile_points and limit is not None:
             tile = auto_tile_points(size, params, limit, tile_workers())

@@ -22,14 +22,12 @@ If it dies without recording (segfault, ``os._exit``, SIGKILL), the server recor
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import importlib
 import json
 import multiprocessing
 import multiprocessing.connection
 import os
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -40,7 +38,7 @@ from typing import Any
 from service.jobs import problems
 from service.jobs.embedded.store import JobStore
 from service.jobs.files import JobFiles
-from service.jobs.limits import limit_memory
+from service.jobs.limits import limit_memory, set_parent_death_signal
 from service.jobs.progress import final_progress
 from service.jobs.runner import JobContext, RunLost
 
@@ -50,7 +48,6 @@ STORAGE_RETRY_SECONDS = float(os.environ.get("GEOSMOOTH_STORAGE_RETRY_SECONDS") 
 
 __all__ = ["RunSpec", "load_runner", "main", "set_parent_death_signal"]
 
-_PR_SET_PDEATHSIG = 1
 
 
 @dataclass(frozen=True)
@@ -67,17 +64,6 @@ class RunSpec:
     server_pid: int
     progress_interval: float = 0.2
     memory_limit: int | None = None
-
-
-def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
-    """Ask Linux to send ``sig`` to this process when its parent dies; ``False`` elsewhere."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
-    except (OSError, AttributeError):  # pragma: no cover - non-glibc oddities
-        return False
 
 
 def load_runner(path: str) -> Callable[[JobContext], dict[str, Any]]:

@@ -16,9 +16,12 @@
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import os
 import resource
+import signal
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,13 +32,27 @@ if TYPE_CHECKING:
     from service.jobs.queue import JobSize
 
 __all__ = [
+    "HALO_FACTOR",
+    "MIN_TILE_POINTS",
+    "PARENT_BYTES_PER_POINT",
+    "auto_tile_points",
     "check_admission",
     "default_job_memory",
     "limit_memory",
     "memory_cap_hit",
+    "set_parent_death_signal",
+    "tile_workers",
 ]
 
 _GIB = 1024**3
+_PR_SET_PDEATHSIG = 1
+#: A tile's points (core + halo) per core point assumed at admission.
+HALO_FACTOR = 2.0
+#: Bytes per point the job process itself holds in a tiled run (input, output, tile index
+#: arrays, a tile being cut): float64 coordinates twice, the mask and index arrays.
+PARENT_BYTES_PER_POINT = 160
+#: Smallest tile admission chooses (the halo would dominate below).
+MIN_TILE_POINTS = 20_000
 
 
 def physical_memory() -> int:
@@ -160,3 +177,51 @@ def limit_memory(limit: int | None) -> int | None:
         cap = min(cap, hard)
     resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
     return cap
+
+
+# --- tiled jobs (issue 23): the tile size admission chooses -----------------------------
+
+
+def tile_workers() -> int:
+    """Tile processes of this job: its thread share (``OMP_NUM_THREADS``, set by the worker
+    from ``threads_per_worker``), at least 1."""
+    try:
+        return max(1, int(os.environ.get("OMP_NUM_THREADS", "1")))
+    except ValueError:
+        return 1
+
+
+def auto_tile_points(
+    size: JobSize, params: SmoothingParams, limit: int, workers: int = 1
+) -> int | None:
+    """The largest ``n / 2^m`` whose tiled run fits ``limit`` bytes (``None``: none does, or
+    the parameters have no tiled form)."""
+    from service.core.errors import ParameterError
+    from service.core.linalg.resources import estimate_resources
+    from service.core.tiles import check_tileable
+
+    try:
+        check_tileable(params)
+    except ParameterError:
+        return None
+    tile = size.n
+    while tile >= 2 * MIN_TILE_POINTS:
+        tile = (tile + 1) // 2
+        members = min(int(HALO_FACTOR * tile), size.n)
+        faces = None if size.n_faces is None else int(size.n_faces * members / size.n)
+        est = estimate_resources(members, size.dim, size.kind, params, n_faces=faces,
+                                 memory_limit=limit // max(workers, 1))  # fmt: skip
+        if PARENT_BYTES_PER_POINT * size.n + workers * est.memory_bytes <= limit:
+            return tile
+    return None
+
+
+def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
+    """Ask Linux to send ``sig`` to this process when its parent dies; ``False`` elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):  # pragma: no cover - non-glibc oddities
+        return False

@@ -143,3 +143,17 @@ def _finite(value: float | None) -> float | None:
         return None
     value = float(value)
     return value if math.isfinite(value) else None
+
+
+class TileCounter:
+    """Tiles finished in the current round, for the progress dict's ``tiles`` member."""
+
+    def __init__(self) -> None:
+        self.done = 0
+        self.total = 0
+        self.rounds = 0
+        self.retried = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"done": self.done, "total": self.total, "round": self.rounds,
+                "retried": self.retried}  # fmt: skip

@@ -7,8 +7,10 @@ A *job function* takes a :class:`JobContext` and returns the report dict; the wo
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -19,10 +21,13 @@ import numpy as np
 
 from service.core.progress import ProgressEvent
 from service.jobs.files import write_durable
-from service.jobs.progress import ProgressTracker
+from service.jobs.progress import ProgressTracker, TileCounter
 
 if TYPE_CHECKING:
+    from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
+    from service.core.result import SmoothResult
+    from service.jobs.tiles.local import RunMap
 
 __all__ = ["DEFAULT_RUNNER", "JobContext", "RunLost", "smooth_job"]
 
@@ -138,7 +143,6 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
         ``SmoothResult.report()``.
     """
     from service.io import read_geometry, write_geometry
-    from service.jobs.tiles import run_smooth
 
     ctx.stage("reading")
     doc = read_geometry(ctx.input_path, ctx.fmt, weld=ctx.weld)
@@ -149,3 +153,54 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     ctx.write("result.npy", buf.getvalue())
     ctx.write(f"result.{ctx.fmt}", write_geometry(doc, ctx.fmt, result.points))
     return result.report()
+
+
+def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
+    """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on
+    :func:`local_tiles` with the tile counts in every progress dict (``tiles`` member)."""
+    from service.core.tiles.entry import smooth
+
+    params = ctx.params
+    if params.tile_points is None or geometry.n <= params.tile_points:
+        return smooth(geometry, params, ctx.progress, memory_limit=ctx.memory_limit)
+    counter = TileCounter()
+    report = ctx.report_progress
+
+    def with_tiles(data: dict[str, Any]) -> bool:
+        return report({**data, "tiles": counter.as_dict()})
+
+    ctx.report_progress = with_tiles
+    last: dict[str, str] = {"stage": "neighborhoods"}
+
+    def progress(event: ProgressEvent) -> None:
+        last["stage"] = event.stage
+        ctx.progress(event)
+
+    def on_tile() -> None:
+        ctx.progress(ProgressEvent(last["stage"]))
+        ctx.flush_progress()
+
+    try:
+        with _tiles_of(ctx, on_tile, counter) as run_map:
+            result = smooth(geometry, params, progress, memory_limit=ctx.memory_limit,
+                            run_map=run_map)  # fmt: skip
+        if result.tiles is not None:
+            result.tiles["retried"] = counter.retried
+        return result
+    finally:
+        ctx.report_progress = report
+
+
+def _tiles_of(
+    ctx: JobContext, on_tile: Callable[[], None], counter: TileCounter
+) -> contextlib.AbstractContextManager[RunMap]:
+    """RQ jobs inside a ``geosmooth worker`` (its work horses have ``GEOSMOOTH_WORKER_PID``),
+    else :func:`local_tiles` on this job's worker share."""
+    from service.jobs.limits import tile_workers
+    from service.jobs.tiles.local import local_tiles
+
+    if os.environ.get("GEOSMOOTH_WORKER_PID"):
+        from service.jobs.tiles.rq import rq_tiles
+
+        return rq_tiles(ctx.job_id, on_tile, counter)
+    return local_tiles(tile_workers(), on_tile, counter)

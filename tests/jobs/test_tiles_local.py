@@ -17,9 +17,11 @@ from service.core.linalg.resources import estimate_resources
 from service.core.params import SmoothingParams
 from service.io import GeometryDocument, write_geometry
 from service.jobs import JobStatus, LocalQueue
+from service.jobs.limits import PARENT_BYTES_PER_POINT, auto_tile_points
+from service.jobs.progress import TileCounter
 from service.jobs.queue import JobSize, NewJob
 from service.jobs.runner import DEFAULT_RUNNER
-from service.jobs.tiles import PARENT_BYTES_PER_POINT, TileCounter, auto_tile_points, local_tiles
+from service.jobs.tiles.local import local_tiles
 from tests.core.tiles.terrain import terrain_cloud
 from tests.jobs.jobs_helpers import pid_gone, wait_finished, wait_for
 

@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 
     from service.settings import Settings
 
-__all__ = ["RUN_TASK", "Backend", "backoff"]
+__all__ = ["RUN_TASK", "Backend", "WorkerConfig", "backoff"]
 
 log = logging.getLogger("geosmooth.jobs")
 
@@ -196,3 +196,12 @@ class Backend:
         for job_id, stamp in self.blobs.job_ids().items():
             if job_id not in known and now - stamp >= _ORPHAN_AGE:
                 self.blobs.remove(job_id)
+
+
+class WorkerConfig:
+    """What the work horses of this worker use, set by ``tasks.configure`` in the worker before
+    it forks (read by the job task and the tile task)."""
+
+    backend: Backend | None = None
+    runner: str | None = None  # None: the default runner
+    memory_limit: int | None = None

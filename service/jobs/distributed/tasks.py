@@ -22,10 +22,11 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from service.jobs import problems
-from service.jobs.child import load_runner, set_parent_death_signal
+from service.jobs.child import load_runner
 from service.jobs.distributed.backend import HOST
+from service.jobs.distributed.backend import WorkerConfig as _Config
 from service.jobs.errors import StorageUnavailable
-from service.jobs.limits import limit_memory
+from service.jobs.limits import limit_memory, set_parent_death_signal
 from service.jobs.progress import final_progress
 from service.jobs.queue import JobStatus
 from service.jobs.runner import DEFAULT_RUNNER, JobContext, RunLost
@@ -34,12 +35,6 @@ if TYPE_CHECKING:
     from service.jobs.distributed.backend import Backend
 
 __all__ = ["configure", "run_job"]
-
-
-class _Config:
-    backend: Backend | None = None
-    runner: str = DEFAULT_RUNNER
-    memory_limit: int | None = None
 
 
 def configure(backend: Backend, runner: str, memory_limit: int | None) -> None:
@@ -107,7 +102,7 @@ def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
                 weld=rec.weld,
                 memory_limit=_Config.memory_limit,
             )
-            report = load_runner(_Config.runner)(ctx)
+            report = load_runner(_Config.runner or DEFAULT_RUNNER)(ctx)
             ctx.flush_progress()
             ctx.write("report.json", json.dumps(report, indent=1, allow_nan=False).encode())
             blobs.commit(job_id, workdir, ctx.written)

@@ -37,11 +37,11 @@ from rq import Worker
 from service.core.linalg.threads import limit_threads, threads_per_worker
 from service.jobs import problems
 from service.jobs.distributed.backend import Backend
-from service.jobs.distributed.tiles import TILE_TASK
 from service.jobs.limits import default_job_memory
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
 from service.jobs.runner import DEFAULT_RUNNER
+from service.jobs.tiles.rq import TILE_TASK
 
 if TYPE_CHECKING:
     from rq.job import Job
@@ -55,7 +55,7 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CRASH_SIGNALS = frozenset({signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal.SIGILL,
                             signal.SIGABRT, signal.SIGSYS, signal.SIGTRAP})  # fmt: skip
-_PRELOAD = ("service.jobs.distributed.tasks", "service.jobs.distributed.tiles",
+_PRELOAD = ("service.jobs.distributed.tasks", "service.jobs.tiles.rq",
             "service.jobs.preload")
 
 

@@ -33,24 +33,24 @@ import uuid
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from service.jobs.child import set_parent_death_signal
 from service.jobs.files import write_durable
+from service.jobs.limits import set_parent_death_signal
 from service.jobs.queue import JobStatus
 
 if TYPE_CHECKING:
     from service.jobs.distributed.backend import Backend
-    from service.jobs.tiles import TileCounter
+    from service.jobs.progress import TileCounter
 
 __all__ = ["TILE_TASK", "rq_tiles", "run_tile"]
 
 T = TypeVar("T")
-TILE_TASK = "service.jobs.distributed.tiles.run_tile"
+TILE_TASK = "service.jobs.tiles.rq.run_tile"
 #: Seconds between two checks for tiles nobody holds (claims expired, or never taken).
 SCAN_INTERVAL = 0.5
 
 
 def _backend() -> Backend:
-    from service.jobs.distributed.tasks import _Config
+    from service.jobs.distributed.backend import WorkerConfig as _Config
 
     assert _Config.backend is not None, "tiles run in a geosmooth worker"
     return _Config.backend
@@ -116,7 +116,7 @@ def _run_one(backend: Backend, job_id: str, name: str, owner: str,
 def run_tile(job_id: str, name: str) -> None:
     """The RQ task of one tile (in a work horse): nothing if the job no longer runs or the
     tile is held or done elsewhere."""
-    from service.jobs.distributed.tasks import _Config
+    from service.jobs.distributed.backend import WorkerConfig as _Config
 
     set_parent_death_signal()
     backend = _backend()

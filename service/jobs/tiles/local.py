@@ -14,91 +14,24 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
-import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from service.core.progress import ProgressEvent
-from service.jobs.queue import JobSize
+from service.jobs.progress import TileCounter
 
 if TYPE_CHECKING:
-    from service.core.geometry import Geometry
-    from service.core.params import SmoothingParams
-    from service.core.result import SmoothResult
-    from service.jobs.runner import JobContext
+    pass
 
 __all__ = [
-    "HALO_FACTOR",
-    "MIN_TILE_POINTS",
-    "PARENT_BYTES_PER_POINT",
-    "TileCounter",
-    "auto_tile_points",
     "local_tiles",
-    "run_smooth",
-    "tile_workers",
 ]
 
 T = TypeVar("T")
 RunMap = Callable[[Callable[..., Any], list[tuple[Any, ...]]], list[Any]]
-#: A tile's points (core + halo) per core point assumed at admission.
-HALO_FACTOR = 2.0
-#: Bytes per point the job process itself holds in a tiled run (input, output, tile index
-#: arrays, a tile being cut): float64 coordinates twice, the mask and index arrays.
-PARENT_BYTES_PER_POINT = 160
-#: Smallest tile admission chooses (the halo would dominate below).
-MIN_TILE_POINTS = 20_000
 #: Tile re-runs after a worker died, per tile.
 MAX_RETRIES = 2
-
-
-def tile_workers() -> int:
-    """Tile processes of this job: its thread share (``OMP_NUM_THREADS``, set by the worker
-    from ``threads_per_worker``), at least 1."""
-    try:
-        return max(1, int(os.environ.get("OMP_NUM_THREADS", "1")))
-    except ValueError:
-        return 1
-
-
-def auto_tile_points(
-    size: JobSize, params: SmoothingParams, limit: int, workers: int = 1
-) -> int | None:
-    """The largest ``n / 2^m`` whose tiled run fits ``limit`` bytes (``None``: none does, or
-    the parameters have no tiled form)."""
-    from service.core.errors import ParameterError
-    from service.core.linalg.resources import estimate_resources
-    from service.core.tiles import check_tileable
-
-    try:
-        check_tileable(params)
-    except ParameterError:
-        return None
-    tile = size.n
-    while tile >= 2 * MIN_TILE_POINTS:
-        tile = (tile + 1) // 2
-        members = min(int(HALO_FACTOR * tile), size.n)
-        faces = None if size.n_faces is None else int(size.n_faces * members / size.n)
-        est = estimate_resources(members, size.dim, size.kind, params, n_faces=faces,
-                                 memory_limit=limit // max(workers, 1))  # fmt: skip
-        if PARENT_BYTES_PER_POINT * size.n + workers * est.memory_bytes <= limit:
-            return tile
-    return None
-
-
-class TileCounter:
-    """Tiles finished in the current round, for the progress dict's ``tiles`` member."""
-
-    def __init__(self) -> None:
-        self.done = 0
-        self.total = 0
-        self.rounds = 0
-        self.retried = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return {"done": self.done, "total": self.total, "round": self.rounds,
-                "retried": self.retried}  # fmt: skip
 
 
 def _init_worker() -> None:
@@ -202,51 +135,3 @@ def _kill(pool: ProcessPoolExecutor | None) -> None:
     for proc in procs:
         with contextlib.suppress(Exception):
             proc.kill()
-
-
-def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
-    """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on
-    :func:`local_tiles` with the tile counts in every progress dict (``tiles`` member)."""
-    from service.core.tiles.entry import smooth
-
-    params = ctx.params
-    if params.tile_points is None or geometry.n <= params.tile_points:
-        return smooth(geometry, params, ctx.progress, memory_limit=ctx.memory_limit)
-    counter = TileCounter()
-    report = ctx.report_progress
-
-    def with_tiles(data: dict[str, Any]) -> bool:
-        return report({**data, "tiles": counter.as_dict()})
-
-    ctx.report_progress = with_tiles
-    last: dict[str, str] = {"stage": "neighborhoods"}
-
-    def progress(event: ProgressEvent) -> None:
-        last["stage"] = event.stage
-        ctx.progress(event)
-
-    def on_tile() -> None:
-        ctx.progress(ProgressEvent(last["stage"]))
-        ctx.flush_progress()
-
-    try:
-        with _tiles_of(ctx, on_tile, counter) as run_map:
-            result = smooth(geometry, params, progress, memory_limit=ctx.memory_limit,
-                            run_map=run_map)  # fmt: skip
-        if result.tiles is not None:
-            result.tiles["retried"] = counter.retried
-        return result
-    finally:
-        ctx.report_progress = report
-
-
-def _tiles_of(
-    ctx: JobContext, on_tile: Callable[[], None], counter: TileCounter
-) -> contextlib.AbstractContextManager[RunMap]:
-    """RQ jobs inside a ``geosmooth worker`` (its work horses have ``GEOSMOOTH_WORKER_PID``),
-    else :func:`local_tiles` on this job's worker share."""
-    if os.environ.get("GEOSMOOTH_WORKER_PID"):
-        from service.jobs.distributed.tiles import rq_tiles
-
-        return rq_tiles(ctx.job_id, on_tile, counter)
-    return local_tiles(tile_workers(), on_tile, counter)
