@@ -275,7 +275,8 @@ def test_every_setting_named_in_the_documents_exists() -> None:
     # read by the CLI (debug, submit's key, the library's threads) and the test suite,
     # not by the service's settings
     known |= {"GEOSMOOTH_DEBUG", "GEOSMOOTH_API_KEY", "GEOSMOOTH_SHARED_DATA",
-              "GEOSMOOTH_SCREENSHOTS", "GEOSMOOTH_THREADS"}  # fmt: skip
+              "GEOSMOOTH_SCREENSHOTS", "GEOSMOOTH_THREADS",
+              "GEOSMOOTH_TILE_WORKERS"}  # fmt: skip
     pattern = re.compile(r"GEOSMOOTH_[A-Z0-9_]*[A-Z0-9]")
     named = {name for doc in DOCUMENTS for name in pattern.findall(doc.read_text())}
     assert named <= known, sorted(named - known)
