@@ -117,10 +117,12 @@ def test_json_body_and_format_conversion(client: httpx.Client) -> None:
     job = r.json()
     assert job["format"] == "json" and job["filename"] is None
     assert wait_done(client, job["id"])["status"] == "succeeded"
-    for fmt in ("json", "ply", "obj", "xyz"):
-        result = client.get(f"/v1/jobs/{job['id']}/result", params={"format": fmt})
+    for fmt in ("json", "ply", "obj"):
+        result = client.get(f"/v1/jobs/{job['id']}/result", params={"output_format": fmt})
         assert result.status_code == 200, result.text
         _check_deviation(pts, parse_points(result.content, fmt), 0.05, tol=1e-4)
+    refused = client.get(f"/v1/jobs/{job['id']}/result", params={"output_format": "xyz"})
+    assert refused.status_code == 422 and refused.json()["field"] == "format"  # no faces in XYZ
     obj = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "obj"}).text
     assert sum(line.startswith("f ") for line in obj.splitlines()) == len(faces)
 

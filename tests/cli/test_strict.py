@@ -44,7 +44,7 @@ def test_noise_free_input_says_so_and_is_written_unchanged(cli: Run, tmp_path: P
     assert res.returncode == EXIT_OK, res.stderr
     assert "no noise found" in res.stderr
     rep = json.loads(report.read_text())
-    assert rep["noise_found"] is False and rep["rms_deviation"] == 0.0 and rep["tau"] is None
+    assert rep["noise_found"] is False and rep["rms_displacement"] == 0.0 and rep["tau"] is None
     written = [ln for ln in out.read_text().splitlines() if ln.startswith("v ")]
     original = [ln for ln in src.read_text().splitlines() if ln.startswith("v ")]
     assert np.array_equal(np.array([ln.split()[1:] for ln in written], dtype=float),
