@@ -65,6 +65,8 @@ def _inputs() -> list[tuple[bytes, str, SmoothingParams]]:
     for i in range(20):
         fmt = ("obj", "xyz", "ply", "json")[i % 4]
         geometry = _ring(i, 80 + 10 * (i % 5))
+        if fmt == "xyz":  # XYZ holds points only: the ring's points as a cloud
+            geometry = Geometry(geometry.points)
         params = SmoothingParams(tau=0.02 + 0.005 * (i % 3)) if i % 2 else SmoothingParams(
             rms=0.01)  # fmt: skip
         data = write_geometry(GeometryDocument.from_geometry(geometry), fmt)
