@@ -20,7 +20,9 @@ __all__ = [
     "LaplacianVariant",
     "MethodName",
     "NeighborhoodKind",
+    "NoiseWeights",
     "Preset",
+    "RobustRule",
     "SearchName",
     "SmoothingParams",
     "SolverName",
@@ -37,6 +39,8 @@ SearchName = Literal["auto", "newton", "rational"]
 MethodName = Literal["tikhonov", "windowed-sinc"]
 # --- end core-engine block --------------------------------------------------------------------
 TauRule = Literal["auto", "gcv"]
+RobustRule = Literal["auto", "none", "huber", "tukey"]
+NoiseWeights = Literal["auto", "none", "local"]
 Displacement = Literal["auto", "free", "normal"]
 Preset = Literal["report"]
 Junctions = Literal["corner", "smooth"]
@@ -58,6 +62,8 @@ REPORT_PRESET: dict[str, Any] = {
     "weights": "auto",
     "neighborhood": "delaunay",
     "k": 12,
+    "robust": "none",
+    "noise_weights": "none",
     "displacement": "free",
     "presmooth": 0,
     "junctions": "smooth",
@@ -155,6 +161,25 @@ class SmoothingParams(BaseModel):
         gt=0,
         allow_inf_nan=False,
         description="Width of the Gaussian psi of eq. (10), on curvatures rescaled to [0, 1].",
+    )
+    robust: RobustRule = Field(
+        default="auto",
+        description=(
+            "Robust data weights against outliers: each point's residual against the local fit "
+            "of its neighbours, scaled by the noise, reduces its weight omega_i (Huber or "
+            "Tukey), so tau is spent on the bulk noise and outliers are pulled in; the report "
+            "lists them ('outliers'). 'auto': with the automatic tau and no given weights, only "
+            "when more points lie beyond the Gaussian extreme than the noise explains; 'none': "
+            "the report's plain weights."
+        ),
+    )
+    noise_weights: NoiseWeights = Field(
+        default="auto",
+        description=(
+            "Weights omega_i = 1/sigma_i from a per-point noise estimate (the report's D, "
+            "FITPACK's w = 1/sigma). 'auto': with the automatic tau and no given weights, when "
+            "the noise level varies across the input; 'local': always; 'none': never."
+        ),
     )
     tolerance: float = Field(
         default=TOLERANCE,

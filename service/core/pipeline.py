@@ -34,6 +34,7 @@ from service.core.result import SmoothResult
 from service.core.run import Run
 from service.core.search.maxnorm import bound_deviation, clip_points
 from service.core.search.polyfilter import filter_system
+from service.core.search.robust import DataWeights, data_weights
 from service.core.search.roots import LambdaSearch
 from service.core.search.target import check_range, find_lambda, gcv_search, knee, resolve_tau
 from service.core.system.deviation import Deviation, SmoothingSystem
@@ -89,7 +90,8 @@ def smooth(
     params, op, fixed, n_fixed = problem.params, problem.op, problem.fixed, problem.n_fixed
     run.frame = frame = problem.frame
     system, to_points = problem.system, problem.to_points
-    run.tau = resolve_tau(params, geometry, fixed, run, op)
+    geometry, run.data_weights = problem.geometry, problem.weights  # omega_i of the data term
+    run.tau = resolve_tau(params, geometry, fixed, run, op, problem.weights)
     run.emit("analysis")
     automatic = params.tau_rule == "auto"
     if system.empty and automatic and run.tau:
@@ -158,6 +160,7 @@ class Problem:
     frame: Frame
     system: SmoothingSystem
     to_points: Callable[[Array], Array]
+    weights: DataWeights | None = None
 
 
 def prepare(
@@ -177,11 +180,14 @@ def prepare(
     params = resolve_displacement(params, geometry)
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes)
+    geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
+    if weights is not None and notes is not None:
+        notes.extend(weights.notes)
     frame = op.frame.weighted(geometry.omega()[~fixed])
     params, system, to_points = auto_system(
         params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
     )
-    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points)
+    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points, weights)
 
 
 def _deviation(

@@ -54,13 +54,16 @@ def auto_tau(
     params: SmoothingParams,
     fixed: NDArray[np.bool_],
     adjacency: sp.csr_matrix | None = None,
+    tau_scale: Array | None = None,
 ) -> AutoTau:
     """``tau`` from the estimated noise (discrepancy principle, calibrated factor).
 
     ``tau = 0`` (the run returns its input unchanged, ``rule`` says why) when there is nothing
     to remove: no noise found (:func:`~service.core.search.noise.estimate_noise`: exactly
     smooth, or residuals that grow with the neighbourhood like the shape's own detail), no
-    estimate possible (too few or degenerate points), or no point free to move.
+    estimate possible (too few or degenerate points), or no point free to move. ``tau_scale``:
+    ``sigma_i / sigma`` per point when the data weights follow the noise
+    (:mod:`~service.core.search.robust`): the budget sums ``(omega_i sigma_i / sigma)^2``.
     """
     est = estimate_noise(geometry)
     if est is None:
@@ -68,7 +71,8 @@ def auto_tau(
                        "(too few or degenerate points): returned unchanged; give tau, rms or lam "
                        "to smooth it")
     r = codimension(geometry)
-    w2 = float(np.sum(geometry.omega()[~fixed] ** 2))
+    omega = geometry.omega() if tau_scale is None else geometry.omega() * tau_scale
+    w2 = float(np.sum(omega[~fixed] ** 2))  # sigma_i-scaled with noise weights (issue 21)
     if not est.noise_found:
         rough = discrepancy_tau(est.roughness, w2, r, params.displacement)
         return AutoTau(0.0, 0.0, f"automatic: {est.describe()}: returned unchanged; give tau, "

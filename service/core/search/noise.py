@@ -31,6 +31,7 @@ files (``service/core/README.md``, "Noise or shape").
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -48,10 +49,13 @@ __all__ = [
     "TAU_FACTOR",
     "NoiseEstimate",
     "codimension",
+    "curve_neighbours",
     "discrepancy_tau",
     "estimate_noise",
     "hutchinson_trace",
     "log_mode",
+    "manifold_dim",
+    "noise_of",
     "patch_variances",
 ]
 
@@ -210,7 +214,7 @@ def _sample(n: int) -> NDArray[np.int64]:
     return np.sort(np.random.default_rng(0).choice(n, SAMPLE, replace=False))
 
 
-def _manifold_dim(geometry: Geometry) -> int:
+def manifold_dim(geometry: Geometry) -> int:
     if geometry.faces is not None:
         return 2
     if geometry.edges is not None:
@@ -218,7 +222,23 @@ def _manifold_dim(geometry: Geometry) -> int:
     return min(2, geometry.dim - 1)
 
 
+_MEMO: list[tuple[weakref.ref[Array], tuple[int | None, float], NoiseEstimate | None]] = []
+
+
 def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
+    """:func:`noise_of`, remembered for the last points array (the data weights and the
+    automatic tau of one run ask for the same estimate; geometries differing in weights only
+    share their points array)."""
+    key = (k, float(np.sum(geometry.points)))  # an array changed in place is not the same
+    for ref, kk, est in _MEMO:
+        if ref() is geometry.points and kk == key:
+            return est
+    est = noise_of(geometry, k)
+    _MEMO[:] = [(weakref.ref(geometry.points), key, est)]
+    return est
+
+
+def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
     """Robust estimate of the noise standard deviation across the shape.
 
     Parameters
@@ -234,7 +254,7 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
         ``None`` when the input is too small or too degenerate for any fit (e.g. 1-D data,
         fewer points than a quadratic needs).
     """
-    d = _manifold_dim(geometry)
+    d = manifold_dim(geometry)
     s = geometry.dim
     c = s - d
     if d < 1 or c < 1:
@@ -247,7 +267,7 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
         return None
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None:
-        along = _curve_neighbours(geometry, 2 * k)
+        _, along = curve_neighbours(geometry, 2 * k)
         if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
             return _estimate(P, along, k, d)
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
@@ -265,17 +285,21 @@ def estimate_noise(geometry: Geometry, k: int | None = None) -> NoiseEstimate | 
     return _estimate(P, np.asarray(nbr, dtype=np.int64).reshape(at.size, k2), k, d)
 
 
-def _curve_neighbours(geometry: Geometry, K: int) -> NDArray[np.int64]:
+def curve_neighbours(
+    geometry: Geometry, K: int, at: NDArray[np.int64] | None = None
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The ``K`` nearest points along the curves (hops over the edges, then distance) of
-    sampled points whose curve has that many; nearest in space would take points of the next
-    turn of a helix or of a neighbouring strand for the curve's own (a helix with 100 points a
-    turn and pitch 0.63: 20 nearest in space span two turns)."""
+    sampled points (or of the points ``at``) whose curve has that many; nearest in space would
+    take points of the next turn of a helix or of a neighbouring strand for the curve's own (a
+    helix with 100 points a turn and pitch 0.63: 20 nearest in space span two turns).
+
+    Returns the points kept (those with ``K`` such neighbours) and their neighbours."""
     n = geometry.n
     E = np.asarray(geometry.edges)
     A = sp.csr_matrix((np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
                       shape=(n, n))
     A = (A + sp.identity(n, format="csr")).astype(bool).astype(np.float64)
-    at = _sample(n)
+    at = _sample(n) if at is None else at
     R = sp.csr_matrix((np.ones(at.size), (np.arange(at.size), at)), shape=(at.size, n))
     score = R.copy()
     for _ in range(K):  # each hop adds 1 to every point reached so far: nearer, higher
@@ -283,7 +307,7 @@ def _curve_neighbours(geometry: Geometry, K: int) -> NDArray[np.int64]:
         score = score + R
     score = score.tocsr()
     P = geometry.points
-    rows = []
+    rows, kept = [], []
     for i in range(at.size):
         lo, hi = score.indptr[i], score.indptr[i + 1]
         if hi - lo < K:
@@ -291,7 +315,8 @@ def _curve_neighbours(geometry: Geometry, K: int) -> NDArray[np.int64]:
         cols = score.indices[lo:hi]
         dist = np.linalg.norm(P[cols] - P[at[i]], axis=1)
         rows.append(cols[np.lexsort((dist, -score.data[lo:hi]))[:K]])
-    return np.array(rows, dtype=np.int64).reshape(-1, K)
+        kept.append(at[i])
+    return np.array(kept, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, K)
 
 
 def _estimate(P: Array, nbr: NDArray[np.int64], k: int, d: int) -> NoiseEstimate | None:
@@ -339,7 +364,7 @@ TANGENTIAL_SHARE = 1.0
 
 def codimension(geometry: Geometry) -> int:
     """Normal directions per point: ``s - 2`` for meshes, ``s - 1`` for curves and clouds."""
-    return max(geometry.dim - _manifold_dim(geometry), 0)
+    return max(geometry.dim - manifold_dim(geometry), 0)
 
 
 def discrepancy_tau(

@@ -20,6 +20,7 @@ from service.core.params import SmoothingParams
 from service.core.run import Run
 from service.core.search.autotau import auto_tau, gcv_lambda, knee_tau
 from service.core.search.budget import free_weight, rms_to_tau
+from service.core.search.robust import DataWeights
 from service.core.search.roots import (
     LambdaSearch,
     estimate_lambda,
@@ -39,6 +40,7 @@ def resolve_tau(
     fixed: NDArray[np.bool_],
     run: Run,
     op: SmoothingOperator | None = None,
+    weights: DataWeights | None = None,
 ) -> float | None:
     """The target ``tau`` in the input's frame: given, ``rms^2 sum omega_i^2`` (free points),
     or from the estimated noise (:func:`~service.core.search.autotau.auto_tau`); ``None`` for a
@@ -50,7 +52,8 @@ def resolve_tau(
         return None
     if rule == "auto":
         adjacency = op.neighborhoods.adjacency if op is not None else None
-        auto = auto_tau(geometry, params, fixed, adjacency)
+        scale = None if weights is None else weights.tau_scale
+        auto = auto_tau(geometry, params, fixed, adjacency, scale)
         run.sigma, run.tau_how = auto.sigma, auto.rule
         return auto.tau
     if rule == "tau":

@@ -1,0 +1,136 @@
+"""Per-point local fits: every point against the quadratic fit of its neighbours without it.
+
+For point ``i`` with neighbours ``N_i`` (``k`` nearest, ``i`` excluded) the local frame comes
+from principal component analysis of ``N_i`` alone and a quadratic height function ``z(u)`` is
+fitted to them by least squares (as in :func:`service.core.search.noise.patch_variances`). Two
+numbers per point follow, both free of point ``i`` itself:
+
+* ``v_i = RSS_i / (c (m - p))``: the residual variance of the neighbours' fit, unbiased for
+  ``sigma^2`` where the shape is locally quadratic and the neighbours are clean (``m`` the
+  neighbours used, ``c`` normal directions, ``p`` coefficients);
+* ``r_i = ||z_i - z(u_i)||^2 / (1 + h_i)``: the squared normal residual of ``i`` against that
+  fit, with ``h_i = b_i^T (B^T B)^-1 b_i`` the prediction variance of the fit at ``u_i``; for
+  Gaussian noise ``r_i / sigma^2`` is ``chi^2_c`` (the leave-one-out residual, so an outlier
+  cannot pull the fit it is measured against).
+
+A point far from its neighbours' fit while that fit is consistent with the noise is an outlier;
+far from a fit that is itself poor (a crease, a corner, another outlier among the neighbours) it
+is undecided (:mod:`service.core.search.robust`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from service.core.geometry import Geometry
+
+__all__ = ["leave_one_out", "point_neighbours"]
+
+Array = NDArray[np.float64]
+_CHUNK = 20000
+
+
+def _design(u: Array) -> Array:
+    """``[1, u, quadratic monomials of u]`` for ``u`` of shape (..., d)."""
+    d = u.shape[-1]
+    cols = [np.ones(u.shape[:-1]), *(u[..., a] for a in range(d))]
+    cols += [u[..., a] * u[..., b] for a in range(d) for b in range(a, d)]
+    return np.stack(cols, axis=-1)
+
+
+def point_neighbours(geometry: Geometry, k: int, manifold_dim: int) -> NDArray[np.int64]:
+    """Each point (column 0) and its ``k`` nearest neighbours: along the curves for polylines
+    (:func:`service.core.search.noise.curve_neighbours`), in space otherwise."""
+    n = geometry.n
+    P = geometry.points
+    if geometry.faces is None and geometry.edges is not None and manifold_dim == 1:
+        from service.core.search.noise import curve_neighbours
+
+        rows, nbr = curve_neighbours(geometry, k + 1, np.arange(n))
+        if rows.size == n:
+            return _self_first(nbr, np.arange(n))
+    _, nbr = cKDTree(P).query(P, k=min(k + 1, n))
+    nbr = np.asarray(nbr, dtype=np.int64).reshape(n, -1)
+    return _self_first(nbr, np.arange(n))
+
+
+def _self_first(nbr: NDArray[np.int64], rows: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Put each row's own point in column 0 (coincident points may come first)."""
+    nbr = nbr.copy()
+    bad = np.flatnonzero(nbr[:, 0] != rows)
+    for i in bad:
+        where = np.flatnonzero(nbr[i] == rows[i])
+        if where.size:
+            nbr[i, where[0]] = nbr[i, 0]
+        nbr[i, 0] = rows[i]
+    return nbr
+
+
+def leave_one_out(
+    points: Array,
+    nbr: NDArray[np.int64],
+    manifold_dim: int,
+    use: NDArray[np.bool_] | None = None,
+) -> tuple[Array, Array]:
+    """``(r, v)`` of the module docstring for every row of ``nbr`` (centre in column 0).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, s)
+    nbr : ndarray, shape (m, k + 1)
+        Row ``i``: the point, then its neighbours.
+    manifold_dim : int
+        ``d``: tangent dimensions (2 surfaces, 1 curves).
+    use : ndarray of bool, shape (m, k), optional
+        Which neighbours enter the fit (default all): excluded ones are e.g. known outliers.
+
+    Returns
+    -------
+    r, v : ndarray, shape (m,)
+        ``nan`` where the fit is rank deficient or has no degree of freedom left.
+    """
+    m_rows = nbr.shape[0]
+    r = np.full(m_rows, np.nan)
+    v = np.full(m_rows, np.nan)
+    for start in range(0, m_rows, _CHUNK):
+        sl = slice(start, start + _CHUNK)
+        W = None if use is None else use[sl].astype(np.float64)
+        r[sl], v[sl] = _fit(points, nbr[sl], manifold_dim, W)
+    return r, v
+
+
+def _fit(P: Array, nbr: NDArray[np.int64], d: int, W: Array | None) -> tuple[Array, Array]:
+    X0 = P[nbr[:, 0]]
+    Q = P[nbr[:, 1:]]
+    if W is None:
+        W = np.ones(Q.shape[:2])
+    cnt = W.sum(axis=1)
+    mean = np.einsum("nk,nki->ni", W, Q) / np.maximum(cnt, 1.0)[:, None]
+    Qc = Q - mean[:, None, :]
+    _, vecs = np.linalg.eigh(np.einsum("nk,nki,nkj->nij", W, Qc, Qc))
+    V = vecs[:, :, ::-1]  # tangents first, then normals
+    local = np.einsum("nki,nij->nkj", Qc, V)
+    local0 = np.einsum("ni,nij->nj", X0 - mean, V)
+    u, z = local[..., :d], local[..., d:]
+    scale = np.sqrt(np.einsum("nk,nka->n", W, u**2) / np.maximum(cnt * d, 1.0))
+    scale = np.where(scale > 0, scale, 1.0)
+    B = _design(u / scale[:, None, None])
+    b0 = _design(local0[:, :d] / scale[:, None])
+    p, c = B.shape[2], z.shape[2]
+    G = np.einsum("nk,nkp,nkq->npq", W, B, B)
+    ok = (cnt - p >= 1) & (np.linalg.cond(G) < 1e10)
+    r = np.full(len(nbr), np.nan)
+    v = np.full(len(nbr), np.nan)
+    if not ok.any():
+        return r, v
+    Gi = np.linalg.inv(G[ok])
+    BtWz = np.einsum("nk,nkq,nkc->nqc", W[ok], B[ok], z[ok])
+    coef = np.einsum("npq,nqc->npc", Gi, BtWz)
+    res = z[ok] - np.einsum("nkp,npc->nkc", B[ok], coef)
+    v[ok] = np.einsum("nk,nkc->n", W[ok], res**2) / (c * (cnt[ok] - p))
+    e0 = local0[ok, d:] - np.einsum("np,npc->nc", b0[ok], coef)
+    h0 = np.einsum("np,npq,nq->n", b0[ok], Gi, b0[ok])
+    r[ok] = np.sum(e0**2, axis=1) / (1.0 + h0)
+    return r, v

@@ -1,0 +1,207 @@
+"""Data weights ``omega_i`` (the diagonal ``D`` of eq. 3) from the noise (issue 21).
+
+Two factors multiply the user's weights ``u_i``:
+
+* **robust** ``rho_i``: each point's leave-one-out residual ``r_i`` against the quadratic fit
+  of its neighbours (:mod:`.pointfits`), scaled by the noise, ``z_i = sqrt(r_i) / sigma_i``,
+  is ``|N(0, 1)|``-like (``chi_c`` for ``c`` normal directions) for Gaussian noise. Points with
+  ``z_i`` above the Gaussian extreme ``z0`` (:data:`ALPHA` per point) while the fit of their
+  neighbours is consistent with the noise (``v_i <= V_MAX sigma_i^2``; a crease or a second
+  outlier nearby leaves the point undecided, weight 1) are outliers. Their neighbours' fits are
+  made again without them (one pass), so that an outlier does not hide a second one.
+  Weights: ``"huber"`` ``rho^2 = min(1, 1.345 / z)``; ``"tukey"`` ``rho = max(1 - (z/4.685)^2,
+  0)``; ``"auto"`` only when more points exceed ``z0`` than Gaussian noise explains (a Poisson
+  test), then ``rho = 1`` up to ``z0`` and Tukey's taper to 0 at ``2 z0`` (the bulk keeps its
+  weight). Weights never go below :data:`OMEGA_MIN` (the system stays definite).
+* **uneven noise** ``s_i = (sigma / sigma_i)^(1/2)`` (:data:`UNEVEN_POWER`): ``sigma_i^2``
+  the lower quartile of the ``v_j`` over the point's neighbourhood (bias-corrected by the
+  ``chi^2_nu / nu`` quartile; a crease or an outlier raises the fits across it, not the
+  quartile), its logarithm averaged over the neighbourhood twice. ``"auto"`` applies it when the
+  spread ``q90 - q10`` of ``log sigma_i`` exceeds :data:`SPREAD`, which a constant noise level
+  does not reach, and the residuals are noise rather than shape (:data:`SHAPE_FREE`); see
+  ``service/core/README.md``, "Issue 21: noise and data weights".
+
+The automatic tau sums ``(omega_i sigma_i / sigma)^2`` (eq. 3's expectation under noise
+``sigma_i``): outliers leave the budget, the bulk noise fills it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2, poisson
+
+from service.core.geometry import Geometry
+from service.core.params import SmoothingParams
+from service.core.search.noise import estimate_noise, manifold_dim
+from service.core.search.pointfits import leave_one_out, point_neighbours
+
+__all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
+           "local_sigma", "robust_weights"]
+
+Array = NDArray[np.float64]
+#: Per-point probability of a Gaussian residual beyond the outlier threshold ``z0``.
+ALPHA = 1e-4
+#: Upper quantile of ``chi^2_nu / nu`` up to which a neighbours' fit is "consistent with the
+#: noise" (``v_i <= V_MAX sigma_i^2``).
+V_QUANTILE = 1e-3
+#: Smallest robust weight.
+OMEGA_MIN = 1e-3
+#: ``q90 - q10`` of ``log sigma_i`` above which the noise varies (constant noise stays below).
+SPREAD = 0.7
+#: ``"auto"`` noise weights only where the residuals are clearly noise: the estimate's scale
+#: ratio ``v(2k) / v(k)`` (:mod:`.noise`) at most this (calibration: smooth shapes with
+#: constant or varying noise <= 1.05; a CAD part with creases at low noise 1.62, where the
+#: residuals vary with the shape: spread 1.21, and the weights would smooth its creases away).
+SHAPE_FREE = 1.15
+HUBER, TUKEY = 1.345, 4.685
+#: Quantile of the neighbourhood's ``v_j`` that estimates ``sigma_i^2``.
+QUANTILE = 0.25
+#: ``s_i = (sigma / sigma_i)^UNEVEN_POWER``: 1 is eq. (3)'s ``D = 1/sigma``; 0.5 measured better
+#: (calibration: sphere, circle, cloud sphere with noise 1 -> 5x; ``service/core/README.md``).
+UNEVEN_POWER = 0.5
+
+
+@dataclass(frozen=True)
+class DataWeights:
+    """The weights a run uses and why.
+
+    Attributes
+    ----------
+    omega : ndarray, shape (n,)
+        ``u_i rho_i s_i`` (finite; fixed points keep theirs).
+    tau_scale : ndarray, shape (n,)
+        ``sigma_i / sigma``: the automatic tau sums ``(omega_i tau_scale_i)^2``.
+    outliers : ndarray of int
+        Points treated as outliers (``z_i > z0``, weight reduced).
+    robust : str
+        The robust rule applied: ``"none"``, ``"huber"``, ``"tukey"`` or ``"auto"``.
+    uneven : bool
+        Whether ``s_i`` was applied.
+    spread : float or None
+        ``q90 - q10`` of ``log sigma_i``.
+    notes : tuple of str
+    """
+
+    omega: Array
+    tau_scale: Array
+    outliers: NDArray[np.int64]
+    robust: str = "none"
+    uneven: bool = False
+    spread: float | None = None
+    notes: tuple[str, ...] = ()
+
+
+def data_weights(
+    geometry: Geometry, params: SmoothingParams
+) -> tuple[Geometry, DataWeights | None]:
+    """The geometry with its weights replaced by ``omega`` of :class:`DataWeights`, and them.
+
+    ``"auto"`` rules act with the automatic tau only (a given tau, rms or lambda is a budget in
+    the user's weights) and never over user-given weights; ``"huber"``, ``"tukey"`` and
+    ``"local"`` always (tau then counts the new weights). ``None``: nothing applies.
+    """
+    automatic = params.tau_rule == "auto" and geometry.weights is None
+    robust = params.robust if params.robust != "auto" or automatic else "none"
+    uneven = params.noise_weights if params.noise_weights != "auto" or automatic else "none"
+    if robust == "none" and uneven == "none":
+        notes: tuple[str, ...] = ()
+        if geometry.weights is not None and "auto" in (params.robust, params.noise_weights):
+            notes = ("weights given: no automatic robust or noise weights (robust='huber' or "
+                     "'tukey', noise_weights='local' apply them on top)",)
+        return geometry, (DataWeights(geometry.omega(), np.ones(geometry.n),
+                                      np.zeros(0, np.int64), notes=notes) if notes else None)
+    est = estimate_noise(geometry)
+    d = manifold_dim(geometry)
+    if est is None or not est.noise_found or geometry.dim - d < 1:
+        return geometry, None
+    nbr = point_neighbours(geometry, est.k, d)
+    r, v = leave_one_out(geometry.points, nbr, d)
+    c = geometry.dim - d
+    nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
+    s2 = np.full(geometry.n, est.sigma**2)
+    _, r, v = flag_outliers(geometry.points, nbr, d, r, v, s2, nu)  # fits without outliers
+    sig = local_sigma(v, nbr, nu)
+    finite = np.isfinite(sig) & (sig > 0)
+    spread = float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() \
+        else 0.0
+    clean = est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE
+    use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
+    ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
+    ratio = np.clip(ratio, 0.05, 20.0)
+    rho, outliers, applied = robust_weights(
+        geometry.points, d, r, v, (est.sigma * ratio) ** 2, nu, robust
+    )
+    omega = geometry.omega() * rho / ratio**UNEVEN_POWER
+    weights = omega if geometry.weights is None else np.where(
+        np.isfinite(geometry.weights), omega, geometry.weights)
+    said: list[str] = []
+    if use_uneven:
+        said.append(f"noise varies across the input (spread of log sigma_i {spread:.2f}): "
+                     "weights 1/sigma_i")
+    if outliers.size:
+        said.append(f"{outliers.size} points treated as outliers ({applied} weights)")
+    dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said))
+    return replace(geometry, weights=weights), dw
+
+
+def local_sigma(v: Array, nbr: NDArray[np.int64], nu: int) -> Array:
+    """``sigma_i``: the lower quartile of ``v`` over each row of ``nbr`` over that of
+    ``chi^2_nu / nu`` (a crease or an outlier raises the fits that straddle it, not the
+    quartile), then the mean of its logarithm over the row, twice (robust, then smooth)."""
+    with np.errstate(all="ignore"):
+        s2 = np.nanquantile(v[nbr], QUANTILE, axis=1) / (chi2.ppf(QUANTILE, nu) / nu)
+        logs = np.log(np.where(s2 > 0, s2, np.nan))
+        for _ in range(2):
+            logs = np.nanmean(logs[nbr], axis=1)
+    return np.sqrt(np.exp(logs))
+
+
+def flag_outliers(
+    P: Array, nbr: NDArray[np.int64], d: int, r: Array, v: Array, s2: Array, nu: int
+) -> tuple[NDArray[np.bool_], Array, Array]:
+    """Points beyond the Gaussian extreme of a fit consistent with the noise (``s2`` per point),
+    and ``r, v`` with the fits that had outliers among their neighbours made again without."""
+    c = max(P.shape[1] - d, 1)
+    t0 = float(chi2.isf(ALPHA, c))
+    vmax = float(chi2.isf(V_QUANTILE, nu) / nu)
+    with np.errstate(invalid="ignore"):
+        flagged = (r > t0 * s2) & (v <= vmax * s2)
+        again = np.flatnonzero(flagged[nbr[:, 1:]].any(axis=1))
+        if again.size:
+            r2, v2 = leave_one_out(P, nbr[again], d, ~flagged[nbr[again, 1:]])
+            r, v = r.copy(), v.copy()
+            r[again], v[again] = r2, v2
+            flagged = (r > t0 * s2) & (v <= vmax * s2)
+    return flagged, r, v
+
+
+def robust_weights(
+    P: Array, d: int, r: Array, v: Array, s2: Array, nu: int, rule: str
+) -> tuple[Array, NDArray[np.int64], str]:
+    """``rho_i``, the outliers and the rule applied (module docstring), from the residuals
+    ``r, v`` of :func:`flag_outliers` and the noise variance ``s2`` per point."""
+    n = P.shape[0]
+    ones = np.ones(n)
+    if rule == "none":
+        return ones, np.zeros(0, np.int64), "none"
+    c = max(P.shape[1] - d, 1)
+    t0 = float(chi2.isf(ALPHA, c))
+    vmax = float(chi2.isf(V_QUANTILE, nu) / nu)
+    with np.errstate(invalid="ignore"):
+        decided = np.isfinite(r) & (v <= vmax * s2)
+        z = np.where(decided, np.sqrt(np.maximum(r, 0.0) / s2), 0.0)
+    z0 = float(np.sqrt(t0))
+    outliers = np.flatnonzero(z > z0)
+    if rule == "auto":
+        if outliers.size <= poisson.ppf(0.999, n * ALPHA):
+            return ones, np.zeros(0, np.int64), "none"
+        t = np.clip((z - z0) / z0, 0.0, 1.0)
+        rho = 1.0 - t**2
+    elif rule == "huber":
+        rho = np.sqrt(np.minimum(1.0, HUBER / np.maximum(z, 1e-300)))
+    else:
+        rho = 1.0 - (z / TUKEY) ** 2
+    return np.maximum(rho, OMEGA_MIN), outliers, rule
