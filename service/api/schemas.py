@@ -215,6 +215,17 @@ class Report(BaseModel):
         description="Automatic tau: whether noise was found (false: the input was returned "
         "unchanged, tau_how says why).",
     )
+    outlier_count: int = Field(
+        default=0, description="Points the robust data weights treated as outliers (robust)."
+    )
+    outliers: list[int] = Field(
+        default_factory=list, description="Indices of the points treated as outliers."
+    )
+    data_weights: str | None = Field(
+        default=None,
+        description="Data weights applied beyond the user's: 'robust (<rule>)', 'noise' "
+        "(1/sigma_i, uneven noise) or both; null for none.",
+    )
     shape_warnings: list[str] = Field(
         default_factory=list,
         description="The shape checks' warnings (also in warnings); strict fails on any.",

@@ -149,6 +149,9 @@ def _noise_lines(report: Mapping[str, Any]) -> list[str]:
     how = report.get("tau_how")
     if how:
         out.append(f"  tau: {how}.")
+    if report.get("outlier_count"):
+        out.append(f"  outliers: {report['outlier_count']} points treated as outliers "
+                   f"({report.get('data_weights')} weights; indices in the report).")
     return out
 
 

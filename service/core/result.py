@@ -110,6 +110,11 @@ class SmoothResult:
         returned unchanged, ``tau_how`` says why); ``None`` for other rules.
     tiles : dict or None
         Tiled runs: count, halo, rounds and every tile (points, halo, worker, seconds, phi).
+    outliers : ndarray of int
+        Points the robust data weights treated as outliers (``params.robust``; issue 21).
+    data_weights : str or None
+        Which data weights beyond the user's were applied: ``"robust (<rule>)"``, ``"noise"``
+        (``1/sigma_i``, uneven noise), both joined by ``" + "``, or ``None``.
     """
 
     points: NDArray[np.float64]
@@ -152,6 +157,9 @@ class SmoothResult:
     shape_warnings: list[str] = field(default_factory=list)
     noise_found: bool | None = None
     tiles: dict[str, Any] | None = None  # tiled runs (service.core.tiles)
+    # --- issue 21: robust and noise data weights ---
+    outliers: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    data_weights: str | None = None
 
     @property
     def rms_deviation(self) -> float:
@@ -209,6 +217,11 @@ class SmoothResult:
             shape_warnings=list(self.shape_warnings),
             bound=self.bound,
             **self.checks,
+        )
+        out.update(
+            outlier_count=int(self.outliers.size),
+            outliers=[int(i) for i in self.outliers],
+            data_weights=self.data_weights,
         )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()

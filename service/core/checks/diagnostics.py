@@ -5,6 +5,7 @@ checks and warnings of :mod:`.guards`, timings, work counters and the optional s
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,7 +112,18 @@ def diagnostics(
         bound=run.bound,
         shape_warnings=shape_warnings,
         noise_found=None if params.tau_rule != "auto" else bool(run.sigma),
+        **_data_weights(run),
     )
+
+
+def _data_weights(run: Run) -> dict[str, Any]:
+    """The outliers and data weights of the run (issue 21), as :class:`SmoothResult` fields."""
+    dw = run.data_weights
+    if dw is None:
+        return {}
+    kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
+        ["noise"] if dw.uneven else [])
+    return {"outliers": dw.outliers, "data_weights": " + ".join(kinds) or None}
 
 
 def _noise_for_checks(

@@ -4,15 +4,17 @@ Two factors multiply the user's weights ``u_i``:
 
 * **robust** ``rho_i``: each point's leave-one-out residual ``r_i`` against the quadratic fit
   of its neighbours (:mod:`.pointfits`), scaled by the noise, ``z_i = sqrt(r_i) / sigma_i``,
-  is ``|N(0, 1)|``-like (``chi_c`` for ``c`` normal directions) for Gaussian noise. Points with
+  is ``|N(0, 1)|``-like (``chi_c`` for ``c`` normal directions) for Gaussian noise (the scale
+  is calibrated so that the median of ``z_i^2`` is that of ``chi^2_c``). Points with
   ``z_i`` above the Gaussian extreme ``z0`` (:data:`ALPHA` per point) while the fit of their
   neighbours is consistent with the noise (``v_i <= V_MAX sigma_i^2``; a crease or a second
   outlier nearby leaves the point undecided, weight 1) are outliers. Their neighbours' fits are
   made again without them (one pass), so that an outlier does not hide a second one.
   Weights: ``"huber"`` ``rho^2 = min(1, 1.345 / z)``; ``"tukey"`` ``rho = max(1 - (z/4.685)^2,
   0)``; ``"auto"`` only when more points exceed ``z0`` than Gaussian noise explains (a Poisson
-  test), then ``rho = 1`` up to ``z0`` and Tukey's taper to 0 at ``2 z0`` (the bulk keeps its
-  weight). Weights never go below :data:`OMEGA_MIN` (the system stays definite).
+  test on their count, or one point so far out that ``n P(chi^2_c > z^2) < 10^-3``), then
+  ``rho = 1`` up to ``z0`` and Tukey's taper to 0 at ``2 z0`` (the bulk keeps its weight).
+  Weights never go below :data:`OMEGA_MIN` (the system stays definite).
 * **uneven noise** ``s_i = (sigma / sigma_i)^(1/2)`` (:data:`UNEVEN_POWER`): ``sigma_i^2``
   the lower quartile of the ``v_j`` over the point's neighbourhood (bias-corrected by the
   ``chi^2_nu / nu`` quartile; a crease or an outlier raises the fits across it, not the
@@ -121,7 +123,7 @@ def data_weights(
     r, v = leave_one_out(geometry.points, nbr, d)
     c = geometry.dim - d
     nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
-    s2 = np.full(geometry.n, est.sigma**2)
+    s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
     _, r, v = flag_outliers(geometry.points, nbr, d, r, v, s2, nu)  # fits without outliers
     sig = local_sigma(v, nbr, nu)
     finite = np.isfinite(sig) & (sig > 0)
@@ -131,8 +133,9 @@ def data_weights(
     use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
     ratio = np.clip(ratio, 0.05, 20.0)
+    s2 = (est.sigma * ratio) ** 2
     rho, outliers, applied = robust_weights(
-        geometry.points, d, r, v, (est.sigma * ratio) ** 2, nu, robust
+        geometry.points, d, r, v, s2 * _calibration(r, s2, c), nu, robust
     )
     omega = geometry.omega() * rho / ratio**UNEVEN_POWER
     weights = omega if geometry.weights is None else np.where(
@@ -145,6 +148,14 @@ def data_weights(
         said.append(f"{outliers.size} points treated as outliers ({applied} weights)")
     dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said))
     return replace(geometry, weights=weights), dw
+
+
+def _calibration(r: Array, s2: Array | float, c: int) -> float:
+    """``median(r / s2)`` over that of ``chi^2_c``: the scale that makes the leave-one-out
+    residuals' bulk ``chi^2_c`` (the global estimate is the mode of differently made fits)."""
+    with np.errstate(all="ignore"):
+        q = np.nanmedian(r / s2)
+    return float(np.clip(q / chi2.median(c), 0.25, 4.0)) if np.isfinite(q) and q > 0 else 1.0
 
 
 def local_sigma(v: Array, nbr: NDArray[np.int64], nu: int) -> Array:
@@ -196,7 +207,8 @@ def robust_weights(
     z0 = float(np.sqrt(t0))
     outliers = np.flatnonzero(z > z0)
     if rule == "auto":
-        if outliers.size <= poisson.ppf(0.999, n * ALPHA):
+        extreme = n * chi2.sf(float(np.max(z, initial=0.0)) ** 2, c)  # Bonferroni
+        if outliers.size <= poisson.ppf(0.999, n * ALPHA) and extreme > 1e-3:
             return ones, np.zeros(0, np.int64), "none"
         t = np.clip((z - z0) / z0, 0.0, 1.0)
         rho = 1.0 - t**2
