@@ -86,12 +86,15 @@ def check_tileable(params: SmoothingParams) -> None:
         "params.tau": params.tau_rule == "gcv",
         "params.method": params.method == "windowed-sinc",
         "params.laplacian": params.laplacian == "feature",
+        "params.robust": params.robust not in ("auto", "none"),
+        "params.noise_weights": params.noise_weights not in ("auto", "none"),
     }
     for name, on in bad.items():
         if on:
             raise ParameterError(
                 f"{name.split('.')[1]}={getattr(params, name.split('.')[1])!r} has no tiled form "
-                "(a global rescaling, bound, spectrum, pass band or curvature scale): "
+                "(a global rescaling, bound, spectrum, pass band, curvature scale or data "
+                "weights from the noise): "
                 "drop tile_points or this option",
                 field=name,
             )
@@ -158,7 +161,9 @@ def smooth_tiled(
     check_tileable(params)
     t0 = time.perf_counter()
     mapper: RunMap[Any] = run_map or _serial
-    params = resolve_displacement(params, geometry).model_copy(update={"tile_points": None})
+    # data weights from the noise (issue 21) are one global choice; tiles keep the user's
+    params = resolve_displacement(params, geometry).model_copy(
+        update={"tile_points": None, "robust": "none", "noise_weights": "none"})
     cores = kd_split(geometry.points, tile_points)
     hop = hop_length(geometry, params.k)
     tiles = _tiles(geometry, cores, PROBE_HOPS, hop)
@@ -261,7 +266,12 @@ def _stitch(
 
 
 def _pooled_sigma(probes: Sequence[TileProbe]) -> float | None:
-    est = [(p.n_core, p.sigma) for p in probes if p.sigma is not None]
+    """The noise the tiled tau was pooled from: over the tiles whose estimate found noise, as
+    in :func:`_global_tau` (a tile whose residuals read as shape, ``sigma = 0``, takes no part
+    in the budget and must not pull the reported level down: on a terrain cloud with noise
+    0.1 whose scale ratio is near the limit, two of four tiles read as shape and the average
+    over all four was 0.06 against the untiled 0.12)."""
+    est = [(p.n_core, p.sigma) for p in probes if p.sigma and p.tau]
     if not est:
-        return None
+        return next((0.0 for p in probes if p.sigma is not None), None)
     return math.sqrt(sum(n * s**2 for n, s in est) / sum(n for n, _ in est))

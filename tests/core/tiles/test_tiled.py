@@ -102,11 +102,6 @@ def test_one_global_tau(kind: str) -> None:
     assert _relative(tiled.result.points, ref.points, g.points) <= 1e-2
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known bug since the merge with the safe default's noise estimate: the tiles' pooled "
-    "sigma is 0.06 where the untiled estimate is 0.12 (true 0.1); issue 23 stays open",
-)
 def test_automatic_tau_pools_the_noise() -> None:
     g = CASES["cloud"]()
     untiled = smooth(g, SmoothingParams())
@@ -127,6 +122,8 @@ def test_automatic_tau_pools_the_noise() -> None:
         ({"tau": "gcv"}, "params.tau"),
         ({"method": "windowed-sinc"}, "params.method"),
         ({"laplacian": "feature"}, "params.laplacian"),
+        ({"robust": "tukey"}, "params.robust"),
+        ({"noise_weights": "local"}, "params.noise_weights"),
     ],
 )
 def test_options_without_a_tiled_form_are_refused(update: dict, field: str) -> None:
