@@ -34,7 +34,7 @@ from service.core.result import SmoothResult
 from service.core.run import Run
 from service.core.search.maxnorm import bound_deviation, clip_points
 from service.core.search.polyfilter import filter_system
-from service.core.search.robust import DataWeights, data_weights
+from service.core.search.robust import DataWeights, data_weights, pull_in
 from service.core.search.roots import LambdaSearch
 from service.core.search.target import check_range, find_lambda, gcv_search, knee, resolve_tau
 from service.core.system.deviation import Deviation, SmoothingSystem
@@ -121,6 +121,8 @@ def smooth(
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
     X[~fixed] = frame.back(to_points(U))
+    if problem.weights is not None:  # outliers with no data weight: eq. (4) places them
+        X = pull_in(X, op.L, problem.weights.pulled)
     volume_scale = None
     if params.preserve_volume:
         X, volume_scale = preserve_measure(geometry, X)

@@ -9,7 +9,9 @@ Two factors multiply the user's weights ``u_i``:
   ``z_i`` above the Gaussian extreme ``z0`` (:data:`ALPHA` per point) while the fit of their
   neighbours is consistent with the noise (``v_i <= V_MAX sigma_i^2``; a crease or a second
   outlier nearby leaves the point undecided, weight 1) are outliers. Their neighbours' fits are
-  made again without them (one pass), so that an outlier does not hide a second one.
+  made again without them (one pass), so that an outlier does not hide a second one. Points
+  far from their neighbours' centroid (:func:`isolated`: thrown inside a sphere or far along
+  the surface, where no fit is consistent) are outliers too.
   Weights: ``"huber"`` ``rho^2 = min(1, 1.345 / z)``; ``"tukey"`` ``rho = max(1 - (z/4.685)^2,
   0)``; ``"auto"`` only when more points exceed ``z0`` than Gaussian noise explains (a Poisson
   test on their count, or one point so far out that ``n P(chi^2_c > z^2) < 10^-3``), then
@@ -29,10 +31,12 @@ The automatic tau sums ``(omega_i sigma_i / sigma)^2`` (eq. 3's expectation unde
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.sparse.linalg import spsolve
 from scipy.stats import chi2, poisson
 
 from service.core.geometry import Geometry
@@ -41,7 +45,7 @@ from service.core.search.noise import estimate_noise, manifold_dim
 from service.core.search.pointfits import leave_one_out, point_neighbours
 
 __all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
-           "local_sigma", "robust_weights"]
+           "isolated", "local_sigma", "pull_in", "robust_weights"]
 
 Array = NDArray[np.float64]
 #: Per-point probability of a Gaussian residual beyond the outlier threshold ``z0``.
@@ -53,6 +57,10 @@ V_QUANTILE = 1e-3
 OMEGA_MIN = 1e-3
 #: ``q90 - q10`` of ``log sigma_i`` above which the noise varies (constant noise stays below).
 SPREAD = 0.7
+#: Outliers with a robust weight up to this are placed by :func:`pull_in`.
+PULLED = 0.1
+#: A point further than this many local spacings from its neighbours' centroid is isolated.
+ISOLATION = 4.0
 #: ``"auto"`` noise weights only where the residuals are clearly noise: the estimate's scale
 #: ratio ``v(2k) / v(k)`` (:mod:`.noise`) at most this (calibration: smooth shapes with
 #: constant or varying noise <= 1.05; a CAD part with creases at low noise 1.62, where the
@@ -85,6 +93,8 @@ class DataWeights:
     spread : float or None
         ``q90 - q10`` of ``log sigma_i``.
     notes : tuple of str
+    pulled : ndarray of int
+        Outliers whose weight is (next to) zero: :func:`pull_in` places them.
     """
 
     omega: Array
@@ -94,6 +104,7 @@ class DataWeights:
     uneven: bool = False
     spread: float | None = None
     notes: tuple[str, ...] = ()
+    pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def data_weights(
@@ -134,8 +145,9 @@ def data_weights(
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
     ratio = np.clip(ratio, 0.05, 20.0)
     s2 = (est.sigma * ratio) ** 2
+    far = isolated(geometry, nbr, np.sqrt(s2))
     rho, outliers, applied = robust_weights(
-        geometry.points, d, r, v, s2 * _calibration(r, s2, c), nu, robust
+        geometry.points, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
     omega = geometry.omega() * rho / ratio**UNEVEN_POWER
     weights = omega if geometry.weights is None else np.where(
@@ -146,7 +158,8 @@ def data_weights(
                      "weights 1/sigma_i")
     if outliers.size:
         said.append(f"{outliers.size} points treated as outliers ({applied} weights)")
-    dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said))
+    pulled = outliers[(rho[outliers] <= PULLED) & ~geometry.fixed_mask()[outliers]]
+    dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said), pulled)
     return replace(geometry, weights=weights), dw
 
 
@@ -189,11 +202,49 @@ def flag_outliers(
     return flagged, r, v
 
 
+def isolated(geometry: Geometry, nbr: NDArray[np.int64], sigma: Array) -> NDArray[np.bool_]:
+    """Points far from their neighbours' median (graph neighbours for meshes and curves, the
+    ``k`` nearest for clouds; coordinate-wise, so that a neighbour thrown off does not move
+    it): beyond :data:`ISOLATION` times the local spacing (median over the ``k`` nearest of
+    their mean distance to their own) and beyond twice the Gaussian extreme of the noise. A
+    point thrown far off (inside a sphere, far along the surface) has neighbours that fit
+    nothing, so its residual test is undecided; this catches it."""
+    P = geometry.points
+    d = np.mean(np.linalg.norm(P[nbr[:, 1:]] - P[:, None, :], axis=2), axis=1)
+    spacing = np.median(d[nbr[:, 1:]], axis=1)
+    centre = np.median(P[nbr[:, 1:]], axis=1)
+    E = geometry.faces if geometry.faces is not None else geometry.edges
+    if E is not None:
+        idx = _graph_neighbours(E, geometry.n)
+        has = idx[:, 0] >= 0
+        Q = np.where((idx >= 0)[..., None], P[np.maximum(idx, 0)], np.nan)
+        with np.errstate(all="ignore"):
+            centre[has] = np.nanmedian(Q[has], axis=1)
+    delta = np.linalg.norm(P - centre, axis=1)
+    z0 = float(np.sqrt(chi2.isf(ALPHA, 1)))
+    return (delta > ISOLATION * spacing) & (delta > 2 * z0 * sigma)
+
+
+def _graph_neighbours(E: NDArray[np.int64], n: int, most: int = 32) -> NDArray[np.int64]:
+    """Each vertex's neighbours over the elements ``E`` (up to ``most``), ``-1`` padded."""
+    pairs = np.concatenate([E[:, [a, b]] for a in range(E.shape[1])
+                            for b in range(E.shape[1]) if a != b])
+    A = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    A.sum_duplicates()
+    deg = np.diff(A.indptr)
+    m = int(min(max(int(deg.max(initial=0)), 1), most))
+    pos = A.indptr[:-1, None] + np.arange(m)
+    ok = np.arange(m) < deg[:, None]
+    return np.where(ok, A.indices[np.minimum(pos, max(A.nnz - 1, 0))] if A.nnz else -1, -1)
+
+
 def robust_weights(
-    P: Array, d: int, r: Array, v: Array, s2: Array, nu: int, rule: str
+    P: Array, d: int, r: Array, v: Array, s2: Array, nu: int, rule: str,
+    far: NDArray[np.bool_] | None = None,
 ) -> tuple[Array, NDArray[np.int64], str]:
     """``rho_i``, the outliers and the rule applied (module docstring), from the residuals
-    ``r, v`` of :func:`flag_outliers` and the noise variance ``s2`` per point."""
+    ``r, v`` of :func:`flag_outliers`, the noise variance ``s2`` per point and the points
+    ``far`` from everything (:func:`isolated`, treated as infinitely far out)."""
     n = P.shape[0]
     ones = np.ones(n)
     if rule == "none":
@@ -204,10 +255,13 @@ def robust_weights(
     with np.errstate(invalid="ignore"):
         decided = np.isfinite(r) & (v <= vmax * s2)
         z = np.where(decided, np.sqrt(np.maximum(r, 0.0) / s2), 0.0)
+    if far is not None:
+        z[far] = np.inf
     z0 = float(np.sqrt(t0))
     outliers = np.flatnonzero(z > z0)
     if rule == "auto":
-        extreme = n * chi2.sf(float(np.max(z, initial=0.0)) ** 2, c)  # Bonferroni
+        top = float(np.max(z, initial=0.0))
+        extreme = 0.0 if np.isinf(top) else n * chi2.sf(top**2, c)  # Bonferroni
         if outliers.size <= poisson.ppf(0.999, n * ALPHA) and extreme > 1e-3:
             return ones, np.zeros(0, np.int64), "none"
         t = np.clip((z - z0) / z0, 0.0, 1.0)
@@ -217,3 +271,26 @@ def robust_weights(
     else:
         rho = 1.0 - (z / TUKEY) ** 2
     return np.maximum(rho, OMEGA_MIN), outliers, rule
+
+
+def pull_in(X: Array, L: sp.spmatrix, idx: NDArray[np.int64]) -> Array:
+    """``X`` with the points ``idx`` moved to ``argmin ||L X||_F^2`` over them, the others held.
+
+    Eq. (4) with ``omega_i -> 0`` at these points: their data term vanishes, so whatever the
+    displacement mode of the rest, the minimiser places them where the smoothness term alone
+    wants them (``L_O^T L_O X_O = -L_O^T L_R X_R``; a point moving along its normal only
+    could not come back from far along the surface or from inside a closed shape).
+    """
+    if idx.size == 0:
+        return X
+    L = sp.csc_matrix(L)
+    rest = np.setdiff1d(np.arange(X.shape[0]), idx)
+    Lo, Lr = L[:, idx], L[:, rest]
+    A = sp.csc_matrix(Lo.T @ Lo)
+    b = -(Lo.T @ (Lr @ X[rest]))
+    ridge = 1e-10 * max(float(A.diagonal().max()), 1e-300)
+    A = A + ridge * sp.identity(idx.size, format="csc")
+    b = b + ridge * X[idx]
+    out = X.copy()
+    out[idx] = np.asarray(spsolve(A, b)).reshape(idx.size, -1)
+    return out
