@@ -107,30 +107,39 @@ def _fit(P: Array, nbr: NDArray[np.int64], d: int, W: Array | None) -> tuple[Arr
     if W is None:
         W = np.ones(Q.shape[:2])
     cnt = W.sum(axis=1)
-    mean = np.einsum("nk,nki->ni", W, Q) / np.maximum(cnt, 1.0)[:, None]
+    Wc = W[..., None]
+    mean = np.sum(Wc * Q, axis=1) / np.maximum(cnt, 1.0)[:, None]
     Qc = Q - mean[:, None, :]
-    _, vecs = np.linalg.eigh(np.einsum("nk,nki,nkj->nij", W, Qc, Qc))
+    lam, vecs = np.linalg.eigh(np.matmul((Wc * Qc).transpose(0, 2, 1), Qc))
     V = vecs[:, :, ::-1]  # tangents first, then normals
-    local = np.einsum("nki,nij->nkj", Qc, V)
-    local0 = np.einsum("ni,nij->nj", X0 - mean, V)
+    local = np.matmul(Qc, V)
+    local0 = np.matmul((X0 - mean)[:, None, :], V)[:, 0]
     u, z = local[..., :d], local[..., d:]
-    scale = np.sqrt(np.einsum("nk,nka->n", W, u**2) / np.maximum(cnt * d, 1.0))
+    scale = np.sqrt(np.sum(W * np.sum(u**2, axis=2), axis=1) / np.maximum(cnt * d, 1.0))
     scale = np.where(scale > 0, scale, 1.0)
     B = _design(u / scale[:, None, None])
     b0 = _design(local0[:, :d] / scale[:, None])
     p, c = B.shape[2], z.shape[2]
-    G = np.einsum("nk,nkp,nkq->npq", W, B, B)
-    ok = (cnt - p >= 1) & (np.linalg.cond(G) < 1e10)
+    BW = (Wc * B).transpose(0, 2, 1)
+    G = np.matmul(BW, B)
+    spread = lam[:, ::-1][:, :d]  # tangent variances: a neighbourhood flat in one is degenerate
+    ok = (cnt - p >= 1) & (spread[:, -1] > 1e-8 * np.maximum(spread[:, 0], 1e-300))
     r = np.full(len(nbr), np.nan)
     v = np.full(len(nbr), np.nan)
+    try:
+        Gi = np.linalg.inv(G[ok])
+    except np.linalg.LinAlgError:  # a singular one among them: the pseudo-inverse, checked
+        Gi = np.linalg.pinv(G[ok])
+    good = np.all(np.isfinite(Gi), axis=(1, 2)) & (
+        np.abs(np.matmul(Gi, G[ok]) - np.eye(p)).max(axis=(1, 2)) < 1e-6)
+    ok[ok] = good
+    Gi = Gi[good]
     if not ok.any():
         return r, v
-    Gi = np.linalg.inv(G[ok])
-    BtWz = np.einsum("nk,nkq,nkc->nqc", W[ok], B[ok], z[ok])
-    coef = np.einsum("npq,nqc->npc", Gi, BtWz)
-    res = z[ok] - np.einsum("nkp,npc->nkc", B[ok], coef)
-    v[ok] = np.einsum("nk,nkc->n", W[ok], res**2) / (c * (cnt[ok] - p))
-    e0 = local0[ok, d:] - np.einsum("np,npc->nc", b0[ok], coef)
-    h0 = np.einsum("np,npq,nq->n", b0[ok], Gi, b0[ok])
+    coef = np.matmul(Gi, np.matmul(BW[ok], z[ok]))
+    res = z[ok] - np.matmul(B[ok], coef)
+    v[ok] = np.sum(W[ok] * np.sum(res**2, axis=2), axis=1) / (c * (cnt[ok] - p))
+    e0 = local0[ok, d:] - np.matmul(b0[ok][:, None, :], coef)[:, 0]
+    h0 = np.einsum("np,np->n", b0[ok], np.matmul(Gi, b0[ok][..., None])[..., 0])
     r[ok] = np.sum(e0**2, axis=1) / (1.0 + h0)
     return r, v

@@ -242,3 +242,16 @@ def test_a_vertex_thrown_inside_a_sphere_mesh_is_found_and_pulled_back() -> None
     assert 77 in res.outliers.tolist()
     assert abs(np.linalg.norm(res.points[77]) - 1.0) < 0.1
     assert res.outliers.size <= 3
+
+
+def test_row_quantile_is_nanquantile() -> None:
+    from service.core.search.robust import row_quantile
+
+    rng = np.random.default_rng(12)
+    A = rng.normal(size=(200, 13))
+    A[rng.random(A.shape) < 0.3] = np.nan
+    A[5] = np.nan
+    for q in (0.25, 0.5, 0.9):
+        with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+            want = np.nanquantile(A, q, axis=1)
+        assert np.allclose(row_quantile(A, q), want, equal_nan=True)
