@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -94,6 +94,9 @@ class NoiseEstimate:
     scale_ratio : float or None
         Median of ``v_i(2k) / v_i(k)`` over the points near the mode (``None`` when the input
         has fewer than ``2k`` points): about 1 for noise, growing with the shape's detail.
+    neighbours : ndarray of int or None
+        Every point's ``2k`` nearest (itself first; along the curves for polylines) when the
+        fits covered every point in order (reused by :mod:`.robust`), else ``None``.
     """
 
     sigma: float
@@ -103,6 +106,7 @@ class NoiseEstimate:
     residuals: NDArray[np.float64]
     roughness: float = 0.0
     scale_ratio: float | None = None
+    neighbours: NDArray[np.int64] | None = None
 
     @property
     def noise_found(self) -> bool:
@@ -267,9 +271,10 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
         return None
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None:
-        _, along = curve_neighbours(geometry, 2 * k)
+        rows, along = curve_neighbours(geometry, 2 * k)
         if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
-            return _estimate(P, along, k, d)
+            full = rows.size == n  # every point, in order: kept for the data weights
+            return _kept(_estimate(P, along, k, d), along if full else None)
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
     tree = cKDTree(P)
     at = _sample(P.shape[0])
@@ -282,7 +287,13 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
         at = _sample(P.shape[0])
     k2 = min(2 * k, P.shape[0])
     _, nbr = tree.query(P[at], k=k2)
-    return _estimate(P, np.asarray(nbr, dtype=np.int64).reshape(at.size, k2), k, d)
+    nbr = np.asarray(nbr, dtype=np.int64).reshape(at.size, k2)
+    full = P is geometry.points and at.size == n
+    return _kept(_estimate(P, nbr, k, d), nbr if full else None)
+
+
+def _kept(est: NoiseEstimate | None, nbr: NDArray[np.int64] | None) -> NoiseEstimate | None:
+    return est if est is None or nbr is None else replace(est, neighbours=nbr)
 
 
 def curve_neighbours(

@@ -40,10 +40,15 @@ def _design(u: Array) -> Array:
     return np.stack(cols, axis=-1)
 
 
-def point_neighbours(geometry: Geometry, k: int, manifold_dim: int) -> NDArray[np.int64]:
+def point_neighbours(
+    geometry: Geometry, k: int, manifold_dim: int, known: NDArray[np.int64] | None = None
+) -> NDArray[np.int64]:
     """Each point (column 0) and its ``k`` nearest neighbours: along the curves for polylines
-    (:func:`service.core.search.noise.curve_neighbours`), in space otherwise."""
+    (:func:`service.core.search.noise.curve_neighbours`), in space otherwise; the first
+    ``k + 1`` columns of ``known`` (the noise estimate's, same rule) when given."""
     n = geometry.n
+    if known is not None and known.shape == (n, known.shape[1]) and known.shape[1] > k:
+        return _self_first(known[:, : k + 1], np.arange(n))
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None and manifold_dim == 1:
         from service.core.search.noise import curve_neighbours

@@ -130,7 +130,7 @@ def data_weights(
     d = manifold_dim(geometry)
     if est is None or not est.noise_found or geometry.dim - d < 1:
         return geometry, None
-    nbr = point_neighbours(geometry, est.k, d)
+    nbr = point_neighbours(geometry, est.k, d, est.neighbours)
     r, v = leave_one_out(geometry.points, nbr, d)
     c = geometry.dim - d
     nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
@@ -203,24 +203,24 @@ def flag_outliers(
 
 
 def isolated(geometry: Geometry, nbr: NDArray[np.int64], sigma: Array) -> NDArray[np.bool_]:
-    """Points far from their neighbours' median (graph neighbours for meshes and curves, the
-    ``k`` nearest for clouds; coordinate-wise, so that a neighbour thrown off does not move
-    it): beyond :data:`ISOLATION` times the local spacing (median over the ``k`` nearest of
-    their mean distance to their own) and beyond twice the Gaussian extreme of the noise. A
+    """Points far from their neighbours: from the median of their graph neighbours for meshes
+    and curves (coordinate-wise, so that a neighbour thrown off does not move it), their mean
+    distance to the ``k`` nearest for clouds; beyond :data:`ISOLATION` times the local spacing
+    (median over the ``k`` nearest of their mean distance to their own) and beyond twice the
+    Gaussian extreme of the noise. A
     point thrown far off (inside a sphere, far along the surface) has neighbours that fit
     nothing, so its residual test is undecided; this catches it."""
     P = geometry.points
     d = np.mean(np.linalg.norm(P[nbr[:, 1:]] - P[:, None, :], axis=2), axis=1)
     spacing = np.median(d[nbr[:, 1:]], axis=1)
     E = geometry.faces if geometry.faces is not None else geometry.edges
-    if E is None:
-        centre = np.median(P[nbr[:, 1:]], axis=1)
-    else:
-        centre = P.copy()  # a vertex without neighbours is its own centre
-        idx = _graph_neighbours(E, geometry.n)
-        has = idx[:, 0] >= 0
-        Q = np.where((idx >= 0)[..., None], P[np.maximum(idx, 0)], np.nan)[has]
-        centre[has] = np.stack([row_quantile(Q[..., a], 0.5) for a in range(P.shape[1])], 1)
+    if E is None:  # a cloud: its own mean distance to the k nearest
+        return (d > ISOLATION * spacing) & (d > 2 * float(np.sqrt(chi2.isf(ALPHA, 1))) * sigma)
+    centre = P.copy()  # a vertex without neighbours is its own centre
+    idx = _graph_neighbours(E, geometry.n)
+    has = idx[:, 0] >= 0
+    Q = np.where((idx >= 0)[..., None], P[np.maximum(idx, 0)], np.nan)[has]
+    centre[has] = np.stack([row_quantile(Q[..., a], 0.5) for a in range(P.shape[1])], 1)
     delta = np.linalg.norm(P - centre, axis=1)
     z0 = float(np.sqrt(chi2.isf(ALPHA, 1)))
     return (delta > ISOLATION * spacing) & (delta > 2 * z0 * sigma)
