@@ -176,9 +176,11 @@ class SmoothingParams(BaseModel):
     noise_weights: NoiseWeights = Field(
         default="auto",
         description=(
-            "Weights omega_i = 1/sigma_i from a per-point noise estimate (the report's D, "
-            "FITPACK's w = 1/sigma). 'auto': with the automatic tau and no given weights, when "
-            "the noise level varies across the input; 'local': always; 'none': never."
+            "Weights from a per-point noise estimate sigma_i: omega_i = (sigma/sigma_i)^(1/2) "
+            "(the report's D = 1/sigma, FITPACK's w = 1/sigma, softened: measured better), "
+            "the automatic tau counting the noise each point carries. 'auto': with the "
+            "automatic tau and no given weights, when the noise level varies across the input; "
+            "'local': always; 'none': never."
         ),
     )
     tolerance: float = Field(
