@@ -126,29 +126,10 @@ def data_weights(
                      "'tukey', noise_weights='local' apply them on top)",)
         return geometry, (DataWeights(geometry.omega(), np.ones(geometry.n),
                                       np.zeros(0, np.int64), notes=notes) if notes else None)
-    est = estimate_noise(geometry)
-    d = manifold_dim(geometry)
-    if est is None or not est.noise_found or geometry.dim - d < 1:
+    got = _factors(geometry, robust, uneven)
+    if got is None:
         return geometry, None
-    nbr = point_neighbours(geometry, est.k, d, est.neighbours)
-    r, v = leave_one_out(geometry.points, nbr, d)
-    c = geometry.dim - d
-    nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
-    s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
-    _, r, v = flag_outliers(geometry.points, nbr, d, r, v, s2, nu)  # fits without outliers
-    sig = local_sigma(v, nbr, nu)
-    finite = np.isfinite(sig) & (sig > 0)
-    spread = float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() \
-        else 0.0
-    clean = est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE
-    use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
-    ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
-    ratio = np.clip(ratio, 0.05, 20.0)
-    s2 = (est.sigma * ratio) ** 2
-    far = isolated(geometry, nbr, np.sqrt(s2))
-    rho, outliers, applied = robust_weights(
-        geometry.points, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
-    )
+    rho, ratio, outliers, applied, use_uneven, spread = got
     omega = geometry.omega() * rho / ratio**UNEVEN_POWER
     weights = omega if geometry.weights is None else np.where(
         np.isfinite(geometry.weights), omega, geometry.weights)
@@ -161,6 +142,50 @@ def data_weights(
     pulled = outliers[(rho[outliers] <= PULLED) & ~geometry.fixed_mask()[outliers]]
     dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said), pulled)
     return replace(geometry, weights=weights), dw
+
+
+def _factors(
+    geometry: Geometry, robust: str, uneven: str
+) -> tuple[Array, Array, NDArray[np.int64], str, bool, float] | None:
+    """``rho``, ``sigma_i / sigma``, the outliers, the robust rule applied, whether the noise
+    weights apply and the spread; coincident points (split normals, repeated scans) are
+    measured once (a copy among the neighbours fits the point exactly), as a cloud."""
+    P = geometry.points
+    uniq, inv = np.unique(P, axis=0, return_inverse=True)
+    if uniq.shape[0] < geometry.n:
+        if uniq.shape[0] < 10:
+            return None
+        got = _factors(Geometry(uniq), robust, uneven)
+        if got is None:
+            return None
+        inv = inv.reshape(-1)
+        rho, ratio, out, applied, use_uneven, spread = got
+        return (rho[inv], ratio[inv], np.flatnonzero(np.isin(inv, out)), applied, use_uneven,
+                spread)
+    est = estimate_noise(geometry)
+    d = manifold_dim(geometry)
+    if est is None or not est.noise_found or geometry.dim - d < 1:
+        return None
+    nbr = point_neighbours(geometry, est.k, d, est.neighbours)
+    r, v = leave_one_out(P, nbr, d)
+    c = geometry.dim - d
+    nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
+    s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
+    _, r, v = flag_outliers(P, nbr, d, r, v, s2, nu)  # fits without outliers
+    sig = local_sigma(v, nbr, nu)
+    finite = np.isfinite(sig) & (sig > 0)
+    spread = float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() \
+        else 0.0
+    clean = est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE
+    use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
+    ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
+    ratio = np.clip(ratio, 0.05, 20.0)
+    s2 = (est.sigma * ratio) ** 2
+    far = isolated(geometry, nbr, np.sqrt(s2))
+    rho, outliers, applied = robust_weights(
+        P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
+    )
+    return rho, ratio, outliers, applied, use_uneven, spread
 
 
 def _calibration(r: Array, s2: Array | float, c: int) -> float:
