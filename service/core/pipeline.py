@@ -39,6 +39,7 @@ from service.core.search.target import check_range, find_lambda, gcv_search, kne
 from service.core.system.deviation import Deviation, SmoothingSystem
 from service.core.system.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.system.elimination import laplacian_system
+from service.core.system.tangential import relax_tangential
 
 __all__ = [
     "Problem",
@@ -119,12 +120,13 @@ def smooth(
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
     X[~fixed] = frame.back(to_points(U))
+    X, along = relax_tangential(geometry, params, op, fixed, frame, X, search.phi, dev)
     volume_scale = None
     if params.preserve_volume:
         X, volume_scale = preserve_measure(geometry, X)
     if params.max_deviation is not None:
         X, _ = clip_points(geometry.points, X, params.max_deviation)
-    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
+    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale, along)
 
 
 @dataclass(frozen=True)

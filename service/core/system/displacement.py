@@ -306,6 +306,8 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
             field="params.displacement",
         )
     if params.displacement != "auto":
+        if params.displacement == "normal" and "tangential" not in params.model_fields_set:
+            return params.model_copy(update={"tangential": "off"})
         return params
     mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
     if mode == "normal" and not 1 <= r <= AUTO_NORMAL_MAX_CODIM:  # e.g. a mesh given in 2-D
