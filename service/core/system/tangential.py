@@ -95,7 +95,8 @@ class TangentialStep:
     budget : float
         ``tau_t`` (internal frame), 0 when the share is below :data:`SHARE_FLOOR`.
     psi : float
-        The tangential deviation reached (before :func:`unfold`).
+        The tangential deviation ``sum_i omega_i^2 ||x_i - x_i^n||^2`` of the result (after
+        :func:`unfold`); the total deviation is the normal solve's ``phi`` plus ``psi``.
     lam : float
         lambda of the tangential solve (internal frame), 0 when none.
     reverted : int
@@ -252,9 +253,11 @@ def unfold(X: Array, base: Array, faces: NDArray[np.int64], rounds: int = 12) ->
 def applies(geometry: Geometry, params: SmoothingParams) -> bool:
     """The step runs for triangle meshes in 3-D smoothed by normal displacement with
     ``tangential="auto"`` (the default; an explicit ``displacement="normal"`` sets it to
-    ``"off"``, :func:`~service.core.system.displacement.resolve_displacement`)."""
+    ``"off"``, :func:`~service.core.system.displacement.resolve_displacement`) and the
+    automatic tau: a given ``tau``, ``rms`` or ``lam`` keeps its contract ``phi = tau``."""
     return (
         params.tangential == "auto"
+        and params.tau_rule == "auto"
         and params.displacement == "normal"
         and geometry.faces is not None
         and geometry.dim == 3
@@ -309,6 +312,7 @@ def relax_tangential(
     out = base.copy()
     out[~fixed] += E_t
     out, reverted = unfold(out, base, geometry.faces)  # type: ignore[arg-type]
+    psi = float(np.sum(system.d2[:, None] * (out - base)[~fixed] ** 2))
     X = X.copy()
     X[~fixed] = frame.back(out[~fixed])
     return X, TangentialStep(share, budget, psi, lam, reverted)
