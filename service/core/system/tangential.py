@@ -70,6 +70,10 @@ Array = NDArray[np.float64]
 #: Isotropic noise: 0.81 - 1.04. The benchmark's anisotropic noise (0.2 sigma along the surface,
 #: rho 0.21 - 0.53) is left to the normal solve.
 SHARE_FLOOR = 0.55
+#: Shares above this count as this: noise larger along the surface than across it is not what a
+#: sensor makes; the excess is the sampling's irregularity (an irregular triangulation) or
+#: quantization along flat axis-aligned faces. Calibration half, isotropic noise: 0.81 - 1.04.
+SHARE_CAP = 1.0
 #: Fraction of the discrepancy budget spent along the surface. Past the full budget the solve
 #: relaxes the sampling towards the uniform Laplacian's equilibrium and the vertex error rises
 #: steeply (calibration half, isotropic noise, geometric mean of the vertex error: 0.8 x 0.409,
@@ -156,6 +160,7 @@ def tangential_budget(share: float, phi_normal: float, dims: int = 2) -> float:
     """
     if not share > SHARE_FLOOR or not phi_normal > 0:
         return 0.0
+    share = min(share, SHARE_CAP)
     excess = (share**2 - SHARE_FLOOR**2) / (1.0 - SHARE_FLOOR**2)
     return float(BUDGET_FACTOR * dims * phi_normal * excess)
 
