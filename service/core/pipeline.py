@@ -120,7 +120,7 @@ def smooth(
     U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
     X = geometry.points.copy()
     X[~fixed] = frame.back(to_points(U))
-    X, along = relax_tangential(geometry, params, op, fixed, frame, X, search.phi, dev)
+    X, along = relax_tangential(geometry, params, op, fixed, frame, X, search)
     volume_scale = None
     if params.preserve_volume:
         X, volume_scale = preserve_measure(geometry, X)

@@ -46,10 +46,8 @@ from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.search.roots import estimate_lambda
-from service.core.system.deviation import Deviation
+from service.core.search.roots import LambdaSearch
 from service.core.system.displacement import normal_frames
-from service.core.system.elimination import laplacian_system
 
 __all__ = [
     "BUDGET_FACTOR",
@@ -58,8 +56,8 @@ __all__ = [
     "applies",
     "relax_tangential",
     "tangential_budget",
+    "tangential_flow",
     "tangential_share",
-    "tangential_solve",
     "unfold",
 ]
 
@@ -76,14 +74,14 @@ SHARE_FLOOR = 0.55
 SHARE_CAP = 1.0
 #: Fraction of the discrepancy budget spent along the surface. Past the full budget the solve
 #: relaxes the sampling towards the uniform Laplacian's equilibrium and the vertex error rises
-#: steeply (calibration half, isotropic noise, geometric mean of the vertex error: 0.8 x 0.409,
-#: 1.0 x 0.372, 1.25 x 0.459, 1.5 x 0.559); below it falls off slowly, hence a little under 1.
+#: steeply (calibration half, isotropic noise, geometric mean of the vertex error with the
+#: explicit steps: 0.7 x 0.432, 0.9 x 0.392, 1.1 x 0.413, 1.3 x 0.502; with the Tikhonov solve
+#: 0.8 x 0.409, 1.0 x 0.372, 1.25 x 0.459, 1.5 x 0.559).
 BUDGET_FACTOR = 0.9
-#: Relative tolerance on ``psi = tau_t`` (the budget is an estimate).
-PSI_TOLERANCE = 0.1
-MAX_EVALUATIONS = 6
-#: Iterated Tikhonov order of the tangential solve (1 measured better than 2 and costs half).
-ORDER = 1
+#: Step of the explicit tangential Laplacian steps (the umbrella operator's stable 1/2).
+STEP = 0.5
+#: At most this many steps (calibration half: 2 - 9 reach the budget).
+MAX_STEPS = 200
 MEDIAN_CHI2_1 = 0.4549  # median of chi^2 with 1 degree of freedom
 MEDIAN_CHI2_2 = 1.3863  # ... with 2 (2 ln 2)
 
@@ -101,8 +99,8 @@ class TangentialStep:
     psi : float
         The tangential deviation ``sum_i omega_i^2 ||x_i - x_i^n||^2`` of the result (after
         :func:`unfold`); the total deviation is the normal solve's ``phi`` plus ``psi``.
-    lam : float
-        lambda of the tangential solve (internal frame), 0 when none.
+    steps : int
+        Explicit steps taken (:func:`tangential_flow`), 0 when none.
     reverted : int
         Points sent back to the normal solve's position by :func:`unfold`.
     """
@@ -110,7 +108,7 @@ class TangentialStep:
     share: float
     budget: float
     psi: float = 0.0
-    lam: float = 0.0
+    steps: int = 0
     reverted: int = 0
 
     def to_dict(self, phi_factor: float = 1.0) -> dict[str, float | int]:
@@ -119,6 +117,7 @@ class TangentialStep:
             "share": self.share,
             "budget": self.budget * phi_factor,
             "psi": self.psi * phi_factor,
+            "steps": self.steps,
             "reverted": self.reverted,
         }
 
@@ -169,64 +168,56 @@ def _tangential(E: Array, normals: Array) -> Array:
     return E - np.einsum("ij,ij->i", E, normals)[:, None] * normals
 
 
-def tangential_solve(
-    dev: Deviation, normals: Array, budget: float
-) -> tuple[Array, float, float]:
-    """The tangential part of eq. (4)'s deviation at the lambda where ``psi(lambda) = budget``.
+def tangential_flow(
+    L: sp.csr_matrix,
+    P: Array,
+    omega: Array,
+    fixed: NDArray[np.bool_],
+    normals: Array,
+    budget: float,
+) -> tuple[Array, int, float]:
+    """Explicit tangential Laplacian steps from ``P`` until ``psi = budget``.
 
-    ``psi`` decreases with lambda like ``phi`` does; the search is a secant method on
-    ``log psi`` against ``log lambda`` from the Lanczos estimate of ``phi(lambda) = budget``
-    (no factorization), to :data:`PSI_TOLERANCE`, at most :data:`MAX_EVALUATIONS` solves.
-
-    Parameters
-    ----------
-    dev : Deviation
-        Of the free system (:func:`~service.core.system.elimination.laplacian_system`).
-    normals : ndarray, shape (m, s)
-        Unit normals of the free points.
-    budget : float
-        ``tau_t`` (internal frame).
+    ``E <- E - STEP T T^T (L (P + E))`` on the free points (``T T^T`` the projection onto the
+    tangent planes of the input, normals ``normals``), the step that would pass the budget
+    shortened to land on ``psi = sum_i omega_i^2 ||e_i||^2 = budget`` (a quadratic in its
+    length). The iteration count is the regularization (Landweber); it measured as good as
+    the tangential part of eq. (4)'s solution at the same budget (calibration half, isotropic
+    noise, geometric mean of the vertex error 0.392 against 0.393) at a tenth of the cost.
 
     Returns
     -------
-    E_t : ndarray, shape (m, s)
+    E : ndarray, shape (m, s)
         Tangential deviation of the free points.
-    lam, psi : float
+    steps : int
+    psi : float
     """
-    d2 = dev.system.d2[:, None]
-    lo, hi = dev.floor, max(dev.system.lambda_ceiling(budget), dev.floor)
-    inv_d = 1.0 / np.sqrt(dev.system.d2)[:, None]
-    lam, _, _, _ = estimate_lambda(  # phi >= psi: a lambda at or below the root of psi
-        lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * dev.system.r, budget, lo, hi,
-        order=dev.order,
-    )
-    history: list[tuple[float, float]] = []
-    best: tuple[float, float, Array] | None = None
-    for _ in range(MAX_EVALUATIONS):
-        E_t = _tangential(dev.deviation(lam), normals)
-        psi = float(np.sum(d2 * E_t**2))
-        if best is None or abs(np.log(max(psi, 1e-300) / budget)) < abs(
-            np.log(max(best[1], 1e-300) / budget)
-        ):
-            best = (lam, psi, E_t)
-        if abs(psi - budget) <= PSI_TOLERANCE * budget or psi <= 0:
-            break
-        history.append((np.log(lam), np.log(psi)))
-        slope = -1.0
-        if len(history) >= 2:
-            (a0, b0), (a1, b1) = history[-2:]
-            slope = min((b1 - b0) / (a1 - a0), -0.05) if a1 != a0 else -1.0
-        lam = float(min(max(np.exp(np.log(lam) + np.log(budget / psi) / slope), lo), hi))
-    assert best is not None
-    return best[2], best[0], best[1]
+    free = ~fixed
+    d2 = (omega[free] ** 2)[:, None]
+    X = P.copy()
+    E = np.zeros((int(free.sum()), P.shape[1]))
+    psi = 0.0
+    for steps in range(1, MAX_STEPS + 1):
+        G = -STEP * _tangential(np.asarray(L @ X)[free], normals)
+        after = float(np.sum(d2 * (E + G) ** 2))
+        if after >= budget:  # psi(t) = psi + 2t <E, G> + t^2 |G|^2 = budget, t in (0, 1]
+            a, b = float(np.sum(d2 * G**2)), 2.0 * float(np.sum(d2 * E * G))
+            t = (-b + np.sqrt(max(b * b + 4.0 * a * (budget - psi), 0.0))) / (2.0 * a)
+            E += min(max(t, 0.0), 1.0) * G
+            return E, steps, float(np.sum(d2 * E**2))
+        E += G
+        X[free] += G
+        psi = after
+    return E, MAX_STEPS, psi
 
 
-def unfold(X: Array, base: Array, faces: NDArray[np.int64], rounds: int = 12) -> tuple[Array, int]:
+def unfold(X: Array, base: Array, faces: NDArray[np.int64], halvings: int = 6) -> tuple[Array, int]:
     """``X`` with the moves from ``base`` shrunk where they fold a face that ``base`` does not.
 
-    Each round halves the move ``X - base`` of the corners of the newly folded faces (from the
-    fourth round on also of their neighbours across the faces); the last round sets them to
-    zero, and if any new fold is left (it cannot: ``base`` has none) ``base`` is returned.
+    The corners of every newly folded face have their move ``X - base`` halved (from the
+    fourth round on also their neighbours across the faces), for ``halvings`` rounds; then
+    set to zero, a ring wider each round, until no new fold is left. It ends: a face whose
+    corners are all back at ``base`` is folded only if it is folded in ``base``.
 
     Returns
     -------
@@ -239,7 +230,7 @@ def unfold(X: Array, base: Array, faces: NDArray[np.int64], rounds: int = 12) ->
     before = fold_mask(base, faces, n)
     move = X - base
     scale = np.ones(n)
-    for k in range(rounds):
+    for k in range(n + halvings + 1):
         Y = base + scale[:, None] * move
         new = fold_mask(Y, faces, n) & ~before
         if not new.any():
@@ -248,11 +239,8 @@ def unfold(X: Array, base: Array, faces: NDArray[np.int64], rounds: int = 12) ->
         mark[faces[new].ravel()] = True
         if k >= 3:
             mark[faces[mark[faces].any(axis=1)].ravel()] = True
-        scale[mark] = 0.0 if k == rounds - 2 else 0.5 * scale[mark]
-    Y = base + scale[:, None] * move
-    if (fold_mask(Y, faces, n) & ~before).any():
-        return base.copy(), n
-    return Y, int(np.sum(scale < 1))
+        scale[mark] = 0.5 * scale[mark] if k < halvings else 0.0
+    return base.copy(), n  # not reached
 
 
 def applies(geometry: Geometry, params: SmoothingParams) -> bool:
@@ -277,8 +265,7 @@ def relax_tangential(
     fixed: NDArray[np.bool_],
     frame: Frame,
     X: Array,
-    phi_normal: float,
-    dev: Deviation,
+    normal: LambdaSearch,
 ) -> tuple[Array, TangentialStep | None]:
     """The points ``X`` of the normal solve (input frame) with the tangential step applied.
 
@@ -288,10 +275,8 @@ def relax_tangential(
         Of the run (:class:`~service.core.pipeline.Problem`).
     X : ndarray, shape (n, 3)
         The normal solve's points.
-    phi_normal : float
+    normal : LambdaSearch
         Its deviation ``phi_n`` (internal frame).
-    dev : Deviation
-        The normal solve's (its solver's name and work counters are shared).
 
     Returns
     -------
@@ -304,20 +289,16 @@ def relax_tangential(
     P = frame.points(geometry.points)
     normals = normal_frames(P, op.neighborhoods.adjacency, 1)[:, :, 0]
     share = tangential_share(P, op.neighborhoods.adjacency, normals)
-    budget = tangential_budget(share, phi_normal)
+    budget = tangential_budget(share, normal.phi)
     if budget <= 0:
         return X, TangentialStep(share, budget)
     omega = geometry.omega() / frame.weight_scale
-    system = laplacian_system(op.L, P, omega, fixed)
-    free_dev = Deviation(system, solver="cg", order=int(ORDER))
-    E_t, lam, psi = tangential_solve(free_dev, normals[~fixed], budget)
-    for key in ("factorizations", "solves", "matvecs", "factorization", "solve", "analysis"):
-        setattr(dev.stats, key, getattr(dev.stats, key) + getattr(free_dev.stats, key))
+    E_t, steps, _ = tangential_flow(op.L, P, omega, fixed, normals[~fixed], budget)
     base = frame.points(X)
     out = base.copy()
     out[~fixed] += E_t
     out, reverted = unfold(out, base, geometry.faces)  # type: ignore[arg-type]
-    psi = float(np.sum(system.d2[:, None] * (out - base)[~fixed] ** 2))
+    psi = float(np.sum((omega[~fixed] ** 2)[:, None] * (out - base)[~fixed] ** 2))
     X = X.copy()
     X[~fixed] = frame.back(out[~fixed])
-    return X, TangentialStep(share, budget, psi, lam, reverted)
+    return X, TangentialStep(share, budget, psi, steps, reverted)
