@@ -200,7 +200,7 @@ def tangential_flow(
     for steps in range(1, MAX_STEPS + 1):
         G = -STEP * _tangential(np.asarray(L @ X)[free], normals)
         after = float(np.sum(d2 * (E + G) ** 2))
-        if after >= budget:  # psi(t) = psi + 2t <E, G> + t^2 |G|^2 = budget, t in (0, 1]
+        if after >= budget * (1.0 - 1e-12):  # psi(t) = psi + 2t <E, G> + t^2 |G|^2 = budget
             a, b = float(np.sum(d2 * G**2)), 2.0 * float(np.sum(d2 * E * G))
             t = (-b + np.sqrt(max(b * b + 4.0 * a * (budget - psi), 0.0))) / (2.0 * a)
             E += min(max(t, 0.0), 1.0) * G
