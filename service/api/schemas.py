@@ -215,6 +215,11 @@ class Report(BaseModel):
         description="Automatic tau: whether noise was found (false: the input was returned "
         "unchanged, tau_how says why).",
     )
+    tangential: dict[str, Any] | None = Field(
+        default=None,
+        description="Meshes, normal displacement with the automatic tau: the step along the "
+        "surface (share, budget, psi, steps, reverted); the total deviation is phi + psi.",
+    )
     shape_warnings: list[str] = Field(
         default_factory=list,
         description="The shape checks' warnings (also in warnings); strict fails on any.",
