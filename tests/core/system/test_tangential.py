@@ -184,3 +184,33 @@ def test_an_explicit_normal_with_an_explicit_auto_runs_it() -> None:
     res = smooth(g, SmoothingParams(displacement="normal", tangential="auto"))
     assert res.tangential is not None and res.tangential["budget"] > 0
     assert res.report()["tangential"] == res.tangential
+
+
+def _random_hull_sphere(seed: int = 21) -> tuple[np.ndarray, np.ndarray]:
+    pts = np.random.default_rng(seed).normal(size=(1500, 3))
+    hull = trimesh.convex.convex_hull(pts / np.linalg.norm(pts, axis=1, keepdims=True))
+    return np.asarray(hull.vertices), np.asarray(hull.faces)
+
+
+def test_valence_irregularity_of_regular_and_random_triangulations() -> None:
+    _, F = grid_mesh(10, 10)
+    assert tg.valence_irregularity(F, 100) == 0.0  # interior valence 6 everywhere
+    m = trimesh.creation.icosphere(3)
+    assert tg.valence_irregularity(np.asarray(m.faces), len(m.vertices)) == 0.0  # 6 and 5
+    Q, F = _random_hull_sphere()
+    valence = np.bincount(np.asarray(trimesh.Trimesh(Q, F).edges_unique).ravel())
+    top2 = np.sort(np.bincount(valence))[-2:].sum()  # closed: every vertex is interior
+    assert tg.valence_irregularity(F, len(Q)) == pytest.approx(1 - top2 / len(Q))
+    assert tg.valence_irregularity(F, len(Q)) > tg.IRREGULAR_VALENCE
+
+
+def test_an_irregular_triangulation_keeps_normal_displacement() -> None:
+    Q, F = _random_hull_sphere()
+    h = float(np.mean(trimesh.Trimesh(Q, F).edges_unique_length))
+    P = Q + Q * np.random.default_rng(2).normal(0.0, 0.1 * h, (len(Q), 1))
+    g = Geometry(P, faces=F)
+    auto = smooth(g, SmoothingParams())
+    off = smooth(g, SmoothingParams(tangential="off"))
+    assert auto.tangential is not None and auto.tangential["budget"] == 0.0
+    assert auto.tangential["irregular"] > tg.IRREGULAR_VALENCE
+    np.testing.assert_array_equal(auto.points, off.points)
