@@ -52,6 +52,7 @@ from service.core.system.displacement import normal_frames
 __all__ = [
     "BUDGET_FACTOR",
     "SHARE_FLOOR",
+    "SHARE_FLOOR_REGULAR",
     "TangentialStep",
     "applies",
     "relax_tangential",
@@ -69,6 +70,10 @@ Array = NDArray[np.float64]
 #: Isotropic noise: 0.81 - 1.04. The benchmark's anisotropic noise (0.2 sigma along the surface,
 #: rho 0.21 - 0.53) is left to the normal solve.
 SHARE_FLOOR = 0.55
+#: The floor on regular connectivity (``valence_irregularity <= REGULAR_VALENCE``: sphere, torus,
+#: box), whose own sampling adds little: noise along the normals reads 0.03 - 0.11 there.
+SHARE_FLOOR_REGULAR = 0.15
+REGULAR_VALENCE = 0.01
 #: Shares above this count as this: noise larger along the surface than across it is not what a
 #: sensor makes; the excess is the sampling's irregularity (an irregular triangulation) or
 #: quantization along flat axis-aligned faces. Calibration half, isotropic noise: 0.81 - 1.04.
@@ -185,17 +190,20 @@ def valence_irregularity(faces: NDArray[np.int64], n: int) -> float:
     return float(1.0 - top / v.size)
 
 
-def tangential_budget(share: float, phi_normal: float, dims: int = 2) -> float:
+def tangential_budget(
+    share: float, phi_normal: float, dims: int = 2, floor: float = SHARE_FLOOR
+) -> float:
     """``tau_t = BUDGET_FACTOR dims phi_n (rho^2 - rho_0^2) / (1 - rho_0^2)``, 0 below the floor.
 
     ``phi_n`` is what the normal solve spent on one normal direction; white noise of
     ``sigma_t = rho sigma_n`` holds ``rho^2`` times that per tangent direction (discrepancy
-    principle). Shares up to :data:`SHARE_FLOOR` are not counted.
+    principle). Shares up to ``floor`` (:data:`SHARE_FLOOR`, or :data:`SHARE_FLOOR_REGULAR`
+    on regular connectivity) are not counted.
     """
-    if not share > SHARE_FLOOR or not phi_normal > 0:
+    if not share > floor or not phi_normal > 0:
         return 0.0
     share = min(share, SHARE_CAP)
-    excess = (share**2 - SHARE_FLOOR**2) / (1.0 - SHARE_FLOOR**2)
+    excess = (share**2 - floor**2) / (1.0 - floor**2)
     return float(BUDGET_FACTOR * dims * phi_normal * excess)
 
 
@@ -328,7 +336,8 @@ def relax_tangential(
     P = frame.points(geometry.points)
     normals = normal_frames(P, op.neighborhoods.adjacency, 1)[:, :, 0]
     share = tangential_share(P, op.neighborhoods.adjacency, normals)
-    budget = tangential_budget(share, normal.phi)
+    floor = SHARE_FLOOR_REGULAR if irregular <= REGULAR_VALENCE else SHARE_FLOOR
+    budget = tangential_budget(share, normal.phi, floor=floor)
     if budget <= 0:
         return X, TangentialStep(share, budget, irregular=irregular)
     omega = geometry.omega() / frame.weight_scale
