@@ -16,21 +16,23 @@ part is added at the normal solve's lambda). So the step is sized by the data:
    irregularity and the normals' error leak into the tangent planes).
 2. **The budget** (:func:`tangential_budget`): the discrepancy principle on the tangent
    planes, ``d`` tangent directions against one normal direction, scaled down by
-   :data:`BUDGET_FACTOR` and with the share above the floor :data:`SHARE_FLOOR` only
+   :data:`BUDGET_FACTOR` and with the share above a floor only
    (``tau_t = BUDGET_FACTOR d phi_n (rho^2 - rho_0^2) / (1 - rho_0^2)``, ``phi_n`` the normal
-   solve's deviation). Below the floor nothing moves.
-3. **The solve** (:func:`tangential_solve`): eq. (4) for the free points (the report's system,
-   one factorization of ``L^T L + lambda D^2`` for all coordinates), lambda found so that the
-   tangential part of its deviation, ``psi(lambda) = sum_i omega_i^2 ||T_i T_i^T e_i||^2``,
-   equals ``tau_t``; the tangential part is added to the normal solve's points. The normal
-   solve moved each point along its normal ``n_i`` only, so the total deviation is
-   ``phi_n + psi`` exactly (free displacement with ``tau = phi_n + tau_t``, split by direction).
+   solve's deviation; ``rho_0`` :data:`SHARE_FLOOR`, or :data:`SHARE_FLOOR_REGULAR` on regular
+   connectivity). Below the floor nothing moves.
+3. **The steps** (:func:`tangential_flow`): explicit umbrella steps projected onto the tangent
+   planes, from the input, until their deviation ``psi = sum_i omega_i^2 ||e_i||^2`` reaches
+   ``tau_t``; the result is added to the normal solve's points. The normal solve moved each
+   point along its normal ``n_i`` only, so the total deviation is ``phi_n + psi``.
 4. **No new folds** (:func:`unfold`): a face folded after the step that was not folded in the
-   normal solve's result sends its corners (and, if that is not enough, their neighbours) back
-   to the normal solve's positions.
+   normal solve's result shrinks the moves of its corners (and, if that is not enough, of
+   their neighbours) back towards the normal solve's positions.
+5. **Irregular connectivity** (:func:`valence_irregularity` above :data:`IRREGULAR_VALENCE`):
+   no step; there the sampling reads as tangential noise.
 
-Constants chosen on the calibration shapes of the quality benchmark (sphere, torus, box, spot,
-fandisk; ``service/core/README.md``, "Issue 21: tangential noise").
+Constants chosen on the in-repo shapes of the quality benchmark (sphere, torus, box, spot,
+fandisk, bunny) and triangulated random points; ``service/core/README.md``, "Issue 21:
+tangential noise".
 """
 
 from __future__ import annotations
