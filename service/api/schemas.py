@@ -226,6 +226,11 @@ class Report(BaseModel):
         description="Data weights applied beyond the user's: 'robust (<rule>)', 'noise' "
         "(1/sigma_i, uneven noise) or both; null for none.",
     )
+    tangential: dict[str, Any] | None = Field(
+        default=None,
+        description="Meshes, normal displacement with the automatic tau: the step along the "
+        "surface (share, budget, psi, steps, reverted); the total deviation is phi + psi.",
+    )
     shape_warnings: list[str] = Field(
         default_factory=list,
         description="The shape checks' warnings (also in warnings); strict fails on any.",

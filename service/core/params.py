@@ -26,6 +26,7 @@ __all__ = [
     "SearchName",
     "SmoothingParams",
     "SolverName",
+    "Tangential",
     "TauRule",
     "WeightScheme",
 ]
@@ -42,6 +43,7 @@ TauRule = Literal["auto", "gcv"]
 RobustRule = Literal["auto", "none", "huber", "tukey"]
 NoiseWeights = Literal["auto", "none", "local"]
 Displacement = Literal["auto", "free", "normal"]
+Tangential = Literal["auto", "off"]
 Preset = Literal["report"]
 Junctions = Literal["corner", "smooth"]
 
@@ -65,6 +67,7 @@ REPORT_PRESET: dict[str, Any] = {
     "robust": "none",
     "noise_weights": "none",
     "displacement": "free",
+    "tangential": "off",
     "presmooth": 0,
     "junctions": "smooth",
     "order": 1,
@@ -253,6 +256,16 @@ class SmoothingParams(BaseModel):
             "the smoothness measured across the shape. 'auto': the one the quality benchmark "
             "found best for the kind of input (normal for meshes and point clouds, free for "
             "curves)."
+        ),
+    )
+    tangential: Tangential = Field(
+        default="auto",
+        description=(
+            "Meshes smoothed by normal displacement: 'auto' also removes the noise along the "
+            "surface, by as much as the data show (the tangential share of the input's "
+            "Laplacian; nothing moves when the noise is along the normals), without folding "
+            "faces; 'off': normal displacement only. An explicit displacement 'normal' "
+            "implies 'off'."
         ),
     )
     presmooth: int = Field(

@@ -40,6 +40,7 @@ from service.core.search.target import check_range, find_lambda, gcv_search, kne
 from service.core.system.deviation import Deviation, SmoothingSystem
 from service.core.system.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.system.elimination import laplacian_system
+from service.core.system.tangential import relax_tangential
 
 __all__ = [
     "Problem",
@@ -123,12 +124,13 @@ def smooth(
     X[~fixed] = frame.back(to_points(U))
     if problem.weights is not None:  # outliers with no data weight: eq. (4) places them
         X = pull_in(X, op.L, problem.weights.pulled)
+    X, along = relax_tangential(geometry, params, op, fixed, frame, X, search)
     volume_scale = None
     if params.preserve_volume:
         X, volume_scale = preserve_measure(geometry, X)
     if params.max_deviation is not None:
         X, _ = clip_points(geometry.points, X, params.max_deviation)
-    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale)
+    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale, along)
 
 
 @dataclass(frozen=True)

@@ -108,6 +108,12 @@ class SmoothResult:
     noise_found : bool or None
         Automatic tau: whether the noise estimate found noise (``False``: the input was
         returned unchanged, ``tau_how`` says why); ``None`` for other rules.
+    tangential : dict or None
+        The tangential step of normal displacement on meshes
+        (:mod:`service.core.system.tangential`): ``share`` (estimated along-surface over normal
+        noise), ``budget`` and ``psi`` (its target and the tangential deviation reached, input
+        frame), ``reverted`` (points kept at the normal solve's position to avoid folds);
+        ``None`` when the step does not apply.
     tiles : dict or None
         Tiled runs: count, halo, rounds and every tile (points, halo, worker, seconds, phi).
     outliers : ndarray of int
@@ -160,6 +166,7 @@ class SmoothResult:
     # --- issue 21: robust and noise data weights ---
     outliers: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     data_weights: str | None = None
+    tangential: dict[str, Any] | None = None  # issue 21: the tangential step
 
     @property
     def rms_deviation(self) -> float:
@@ -216,6 +223,7 @@ class SmoothResult:
             noise_found=self.noise_found,
             shape_warnings=list(self.shape_warnings),
             bound=self.bound,
+            tangential=self.tangential,
             **self.checks,
         )
         out.update(

@@ -59,7 +59,8 @@ def test_options_map_to_fields():
         "max_iterations": 20, "fix_boundary": True,
         "preserve_volume": True, "solver": "superlu", "spectrum": True,
         "search": "auto", "method": "tikhonov", "order": 2,
-        "displacement": "auto", "presmooth": 2, "junctions": "corner", "max_deviation": None,
+        "displacement": "auto", "tangential": "auto", "presmooth": 2, "junctions": "corner",
+        "max_deviation": None,
         "strict": False, "tile_points": None, "preset": None,
     }  # fmt: skip
 

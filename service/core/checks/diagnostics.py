@@ -22,6 +22,7 @@ from service.core.run import Run
 from service.core.search.noise import codimension, estimate_noise
 from service.core.search.roots import LambdaSearch
 from service.core.system.deviation import Deviation
+from service.core.system.tangential import TangentialStep
 
 __all__ = ["diagnostics"]
 
@@ -38,6 +39,7 @@ def diagnostics(
     search: LambdaSearch,
     n_fixed: int,
     volume_scale: float | None = None,
+    tangential: TangentialStep | None = None,
 ) -> SmoothResult:
     """The :class:`SmoothResult` of a run: input-frame numbers, timings and work counters."""
     frame = run.frame if run.frame is not None else op.frame
@@ -113,6 +115,7 @@ def diagnostics(
         shape_warnings=shape_warnings,
         noise_found=None if params.tau_rule != "auto" else bool(run.sigma),
         **_data_weights(run),
+        tangential=None if tangential is None else tangential.to_dict(frame.phi_factor),
     )
 
 

@@ -42,6 +42,7 @@ __all__ = [
     "NOISE_AREA",
     "NOISE_MOVES",
     "ShapeChecks",
+    "fold_mask",
     "fold_note",
     "folded_faces",
     "guard_warnings",
@@ -124,6 +125,11 @@ def folded_faces(
         np.add.at(vertex, F[:, i], normals)
     around = vertex[F[:, 0]] + vertex[F[:, 1]] + vertex[F[:, 2]] - 3.0 * normals
     return np.einsum("ij,ij->i", normals, around) < 0
+
+
+def fold_mask(points: NDArray[np.float64], F: NDArray[np.int64], n: int) -> NDArray[np.bool_]:
+    """:func:`folded_faces` of the mesh ``(points, F)``."""
+    return folded_faces(_face_normals(points, F), F, n)
 
 
 def _new_folds(

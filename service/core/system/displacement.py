@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
+from service.core.linalg.cache import digest
 from service.core.operator.laplacian import presmooth
 from service.core.operator.neighborhoods import Neighborhoods
 from service.core.params import SmoothingParams
@@ -74,6 +75,9 @@ NORMAL_MAX_ENTRIES = 50_000_000
 FRAME_STEPS = 5
 
 
+_FRAMES: dict[str, NDArray[np.float64]] = {}
+
+
 def normal_frames(
     points: NDArray[np.float64],
     adjacency: sp.csr_matrix,
@@ -102,8 +106,26 @@ def normal_frames(
     Returns
     -------
     ndarray, shape (n or len(at), s, codim)
-        The ``codim`` directions of least variance of each neighbourhood.
+        The ``codim`` directions of least variance of each neighbourhood. The last result is
+        kept (the tangential step asks again for the frames the normal system used).
     """
+    key = digest(points, adjacency.indptr, adjacency.indices, codim, k, steps, at)
+    hit = _FRAMES.get(key)
+    if hit is None:  # (threads: a race only recomputes)
+        hit = _frames(points, adjacency, codim, k, steps, at)
+        _FRAMES.clear()
+        _FRAMES[key] = hit
+    return hit.copy()
+
+
+def _frames(
+    points: NDArray[np.float64],
+    adjacency: sp.csr_matrix,
+    codim: int,
+    k: int,
+    steps: int,
+    at: NDArray[np.int64] | None,
+) -> NDArray[np.float64]:
     X = presmooth(points, adjacency, steps)
     n = X.shape[0]
     k = min(k, n)
@@ -306,6 +328,8 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
             field="params.displacement",
         )
     if params.displacement != "auto":
+        if params.displacement == "normal" and "tangential" not in params.model_fields_set:
+            return params.model_copy(update={"tangential": "off"})
         return params
     mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
     if mode == "normal" and not 1 <= r <= AUTO_NORMAL_MAX_CODIM:  # e.g. a mesh given in 2-D
