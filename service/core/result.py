@@ -118,6 +118,13 @@ class SmoothResult:
         Tiled runs: count, halo, rounds and every tile (points, halo, worker, seconds, phi).
     outliers : ndarray of int
         Points the robust data weights treated as outliers (``params.robust``; issue 21).
+    omega : ndarray or None, shape (n,)
+        The weights ``omega_i`` of the data term the run used when data weights were applied
+        (the user's times the robust and noise weights): ``phi`` is ``sum omega_i^2
+        ||x_i - p_i||^2`` with these over the points not in ``pulled``. ``None``: the user's.
+    pulled : ndarray of int
+        Outliers with (next to) no weight, placed after the solve by ``argmin ||L X||^2`` over
+        them (eq. 4 as ``omega_i -> 0``); their displacement is not part of ``phi``.
     data_weights : str or None
         Which data weights beyond the user's were applied: ``"robust (<rule>)"``, ``"noise"``
         (``1/sigma_i``, uneven noise), both joined by ``" + "``, or ``None``.
@@ -166,6 +173,8 @@ class SmoothResult:
     # --- issue 21: robust and noise data weights ---
     outliers: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     data_weights: str | None = None
+    omega: NDArray[np.float64] | None = None
+    pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     tangential: dict[str, Any] | None = None  # issue 21: the tangential step
 
     @property

@@ -126,7 +126,12 @@ def _data_weights(run: Run) -> dict[str, Any]:
         return {}
     kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
         ["noise"] if dw.uneven else [])
-    return {"outliers": dw.outliers, "data_weights": " + ".join(kinds) or None}
+    return {
+        "outliers": dw.outliers,
+        "data_weights": " + ".join(kinds) or None,
+        "omega": dw.omega if kinds else None,
+        "pulled": dw.pulled,
+    }
 
 
 def _noise_for_checks(
