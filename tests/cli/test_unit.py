@@ -58,7 +58,8 @@ def test_options_map_to_fields():
         "sigma_f": 0.3, "tolerance": 1e-4, "max_iterations": 20, "fix_boundary": True,
         "preserve_volume": True, "solver": "superlu", "spectrum": True,
         "search": "auto", "method": "tikhonov", "order": 2,
-        "displacement": "auto", "presmooth": 2, "junctions": "corner", "max_deviation": None,
+        "displacement": "auto", "presmooth": 2, "junctions": "corner", "ends": "auto",
+        "boundary": "auto", "max_deviation": None,
         "strict": False, "tile_points": None, "preset": None,
     }  # fmt: skip
 
