@@ -15,7 +15,9 @@ __all__ = [
     "REPORT_PRESET",
     "SPECTRUM_MAX_POINTS",
     "TOLERANCE",
+    "Boundary",
     "Displacement",
+    "Ends",
     "Junctions",
     "LaplacianVariant",
     "MethodName",
@@ -46,6 +48,8 @@ Displacement = Literal["auto", "free", "normal"]
 Tangential = Literal["auto", "off"]
 Preset = Literal["report"]
 Junctions = Literal["corner", "smooth"]
+Ends = Literal["auto", "pulled", "fixed"]
+Boundary = Literal["auto", "ring", "curve"]
 
 # Bounds and defaults written once: the fields below, the API's per-key bounds (their defaults
 # in service.settings) and the defaults of the search functions read them.
@@ -70,6 +74,8 @@ REPORT_PRESET: dict[str, Any] = {
     "tangential": "off",
     "presmooth": 0,
     "junctions": "smooth",
+    "ends": "pulled",
+    "boundary": "ring",
     "order": 1,
     "method": "tikhonov",
     "search": "rational",
@@ -285,6 +291,24 @@ class SmoothingParams(BaseModel):
             "Curve networks: a vertex where three or more curves meet is a 'corner' (no "
             "smoothness term of its own: each curve is smoothed up to it) or is smoothed like "
             "any other vertex, towards the centroid of its neighbours ('smooth', the report)."
+        ),
+    )
+    ends: Ends = Field(
+        default="auto",
+        description=(
+            "Open polylines: an endpoint keeps the report's row, which pulls it towards its one "
+            "neighbour so that the curve contracts along itself ('pulled'), or stays in place "
+            "while the curve up to it is smoothed ('fixed', as VTK's windowed-sinc does; "
+            "'auto')."
+        ),
+    )
+    boundary: Boundary = Field(
+        default="auto",
+        description=(
+            "Open meshes: a boundary vertex's row of L averages its one-sided 1-ring ('ring', "
+            "the report; it pulls the border inwards) or its neighbours along the boundary "
+            "only ('curve', VTK's boundary smoothing). 'auto': 'curve' with free "
+            "displacement, 'ring' with normal displacement."
         ),
     )
     max_deviation: float | None = Field(

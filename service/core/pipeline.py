@@ -246,7 +246,8 @@ def free_set(
         check_preservable(geometry, fixed)
     L = op.L
     coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
-    return fixed | ~coupled, int(fixed.sum())
+    pinned = op.pinned if op.pinned is not None else False  # open-curve ends (issue 21)
+    return fixed | ~coupled | pinned, int(fixed.sum())
 
 
 def smoothing_system(

@@ -60,7 +60,7 @@ def test_options_map_to_fields():
         "preserve_volume": True, "solver": "superlu", "spectrum": True,
         "search": "auto", "method": "tikhonov", "order": 2,
         "displacement": "auto", "tangential": "auto", "presmooth": 2, "junctions": "corner",
-        "max_deviation": None,
+        "ends": "auto", "boundary": "auto", "max_deviation": None,
         "strict": False, "tile_points": None, "preset": None,
     }  # fmt: skip
 

@@ -30,7 +30,7 @@ def test_two_parts_phi0_per_component_and_spacing() -> None:
     b = a + np.array([0.0, 5.0])
     P = np.vstack([a, b])
     E = np.vstack([polyline_edges(11), polyline_edges(11, offset=11)])
-    d = describe(Geometry(P, edges=E))
+    d = describe(Geometry(P, edges=E), SmoothingParams(ends="pulled"))  # fixed ends: phi0 = 0
     phi0 = 2 * float(np.sum((a - a.mean(axis=0)) ** 2))  # each part onto its own centroid
     assert np.isclose(d["phi0"], phi0)
     assert np.isclose(d["mean_spacing"], 0.1)

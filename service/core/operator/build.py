@@ -12,11 +12,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import NDArray
 
 from service.core.errors import ParameterError
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.linalg import cache
+from service.core.operator.boundary import (
+    boundary_edges,
+    boundary_rule,
+    ends_rule,
+    pinned_ends,
+    with_boundary_curve_rows,
+)
 from service.core.operator.curvature import curvature
 from service.core.operator.delaunay import cloud_delaunay_neighborhoods
 from service.core.operator.laplacian import laplacian, presmooth, without_junction_rows
@@ -25,6 +33,7 @@ from service.core.operator.neighborhoods import (
     cloud_knn_neighborhoods,
     curve_neighborhoods,
     mesh_neighborhoods,
+    unique_faces,
 )
 from service.core.operator.weights import ResolvedScheme, neighbor_weights
 from service.core.params import SmoothingParams
@@ -48,6 +57,8 @@ BUILD_FIELDS = (
     "sigma_f",
     "presmooth",
     "junctions",
+    "ends",
+    "boundary",
 )
 
 
@@ -67,6 +78,9 @@ class SmoothingOperator:
         Digest of the geometry and the build parameters it was built for.
     timings : dict
         Seconds for ``neighborhoods`` and ``laplacian``.
+    pinned : ndarray of bool, shape (n,), optional
+        Points the end rule keeps in place (open-polyline endpoints with ``ends="fixed"``,
+        :mod:`.boundary`); eliminated like fixed points.
     """
 
     L: sp.csr_matrix
@@ -75,6 +89,7 @@ class SmoothingOperator:
     frame: Frame
     key: str
     timings: dict[str, float] = field(default_factory=dict)
+    pinned: NDArray[np.bool_] | None = None
 
 
 def resolve_weights(params: SmoothingParams, geometry: Geometry) -> ResolvedScheme:
@@ -120,6 +135,7 @@ def operator_key(geometry: Geometry, params: SmoothingParams) -> str:
         geometry.faces if geometry.faces is not None else 0,
         geometry.edges if geometry.edges is not None else 0,
         *(getattr(params, name) for name in BUILD_FIELDS),
+        boundary_rule(params, geometry),
     )
 
 
@@ -158,6 +174,10 @@ def _build(
         curv_nb = cloud_delaunay_neighborhoods(P, params.k)  # curvature from Delaunay fans
     t1 = time.perf_counter()
     W = neighbor_weights(P, nb, scheme)
+    if nb.source == "mesh" and nb.boundary.any() and boundary_rule(params, geometry) == "curve":
+        assert geometry.faces is not None
+        edges = boundary_edges(unique_faces(geometry.faces), geometry.n)
+        W = with_boundary_curve_rows(W, P, edges, uniform=scheme == "uniform")
     ref = P  # curvature and row scales of L(kappa)/L(f) from the pre-smoothed input (quality)
     if params.laplacian != "normalized" and params.presmooth:
         ref = presmooth(P, nb.adjacency, params.presmooth)
@@ -167,7 +187,8 @@ def _build(
         L = without_junction_rows(L, nb.adjacency)
     t2 = time.perf_counter()
     timings = {"neighborhoods": t1 - t0, "laplacian": t2 - t1}
-    return SmoothingOperator(L, nb, scheme, frame, key, timings)
+    pinned = pinned_ends(nb, ends_rule(params))
+    return SmoothingOperator(L, nb, scheme, frame, key, timings, pinned)
 
 
 def build_laplacian(

@@ -40,10 +40,12 @@ from service.core.system.deviation import Deviation
 
 __all__ = [
     "DEGREE",
+    "RESOLUTION",
     "SincFilter",
     "chebyshev_moments",
     "combine",
     "filter_system",
+    "sinc_degree",
     "sinc_deviation",
     "windowed_sinc",
 ]
@@ -53,6 +55,12 @@ Array = NDArray[np.float64]
 #: doubled (up to :data:`MAX_DEGREE`) while no pass band is narrow enough for tau.
 DEGREE = 24
 MAX_DEGREE = 768
+#: The degree resolves the pass band: at least ``RESOLUTION * sqrt(mu_max / mu_pb)`` (Chebyshev
+#: polynomials of degree N resolve about 1/N^2 of [-1, 1] next to its end, and the pass band of a
+#: filter in M = L^T L sits at mu_pb = k_pb^2 for a band k_pb of L). With the fixed starting
+#: degree a narrow band was a blunt filter: at the best pass band, 1.4 - 1.8x the vertex error of
+#: VTK's windowed-sinc on closed curves; see service/core/README.md (issue 21).
+RESOLUTION = 2.0
 #: Memory for keeping the Chebyshev vectors (single precision) so the output needs no second
 #: pass of products: 24 vectors of a 1M-point 3-D system take 288 MB.
 KEEP_BYTES = 512 * 2**20
@@ -199,6 +207,16 @@ def sinc_deviation(apply_op: Callable[[Array], Array], c: Array, flt: SincFilter
     return out
 
 
+def sinc_degree(mu_pb: float, mu_max: float, start: int = DEGREE) -> int:
+    """``start`` doubled (up to :data:`MAX_DEGREE`) until it resolves the pass band ``mu_pb``:
+    ``degree >= RESOLUTION * sqrt(mu_max / mu_pb)``."""
+    need = RESOLUTION * math.sqrt(mu_max / max(mu_pb, 1e-300 * mu_max))
+    degree = start
+    while degree < need and 2 * degree <= MAX_DEGREE:
+        degree *= 2
+    return degree
+
+
 def windowed_sinc(
     apply_op: Callable[[Array], Array],
     c: Array,
@@ -212,7 +230,8 @@ def windowed_sinc(
     """The pass band with ``phi = tau`` (from the moments) and the phi it reaches.
 
     The degree is doubled while even the narrowest pass band deviates less than ``tau``
-    (heavy smoothing needs a filter that resolves ``mu << mu_max``), continuing the same
+    (heavy smoothing needs a filter that resolves ``mu << mu_max``) or while the band found is
+    narrower than the degree resolves (:func:`sinc_degree`), continuing the same
     recurrence (``2N - 1`` products in all for degree ``2N``). With ``keep``, the
     Chebyshev vectors of the returned filter's degree are left in it (see
     :func:`chebyshev_moments`) while they fit in :data:`KEEP_BYTES`; else it is left empty.
@@ -233,7 +252,9 @@ def windowed_sinc(
             rec.drop_vectors()
         moments = rec.extend(max(degree - 1, 1))
         flt, phi, history = _band(moments, tau, mu_max, degree, tolerance)
-        if phi >= tau * (1 - tolerance) or 2 * degree > MAX_DEGREE:
+        mu_pb = (flt.x_pb + 1.0) * mu_max / 2.0
+        met = phi >= tau * (1 - tolerance) and sinc_degree(mu_pb, mu_max, degree) == degree
+        if met or 2 * degree > MAX_DEGREE:
             return flt, phi, history
         degree *= 2
 
@@ -311,7 +332,7 @@ def filter_system(
     keep: list[NDArray[np.float32]] = []
     if tau is None:
         mu_pb = min(lam if lam is not None else mu_max, mu_max)
-        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, DEGREE)
+        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, sinc_degree(mu_pb, mu_max))
     else:
         flt, _, _ = windowed_sinc(apply_op, c, tau, mu_max, tolerance=tolerance, keep=keep)
     # one pass of products: the output from the moments' own vectors when they were kept

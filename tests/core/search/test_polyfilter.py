@@ -12,6 +12,7 @@ from service.core.search.polyfilter import (
     SincFilter,
     chebyshev_moments,
     combine,
+    sinc_degree,
     sinc_deviation,
 )
 from tests.core.core_fixtures import noisy_icosphere
@@ -91,7 +92,7 @@ def test_windowed_sinc_is_the_dense_filter_of_the_same_operator() -> None:
     L = build_laplacian(g, SmoothingParams(lam=1.0))[0].toarray()
     Mt = L.T @ L
     mu_max = 1.01 * (np.abs(L).T @ (np.abs(L) @ np.ones(len(P)))).max()  # Gershgorin of |L|^T|L|
-    flt = SincFilter(2 * res.lam / mu_max - 1, mu_max, 24)  # the starting degree suffices here
+    flt = SincFilter(2 * res.lam / mu_max - 1, mu_max, sinc_degree(res.lam, mu_max))
     mu, V = np.linalg.eigh(Mt)
     x = np.clip(2 * np.clip(mu, 0, None) / mu_max - 1, -1, 1)
     kept = cheb.chebval(x, flt.kept())
@@ -107,3 +108,33 @@ def test_windowed_sinc_needs_the_normalized_laplacian() -> None:
             SmoothingParams(rms=0.01, method="windowed-sinc", laplacian="feature"),
         )
     assert info.value.field == "params.method"
+
+
+def test_the_degree_resolves_the_pass_band() -> None:
+    """degree >= 2 sqrt(mu_max / mu_pb), doubling from 24: 4 -> 24, 200 -> 384, capped at 768."""
+    assert sinc_degree(0.25, 1.0) == 24
+    assert sinc_degree(1e-4, 1.0) == 384  # needs 200: 24, 48, 96, 192 are too coarse
+    assert sinc_degree(1e-12, 1.0) == 768
+
+
+def test_a_narrow_pass_band_on_a_curve_is_the_dense_filter() -> None:
+    """lam given: X = P + q(M) P with the resolving degree, on a closed curve (no fixed points),
+    and the resolved filter keeps the large shape: the circle's radius shrinks less than 1 %."""
+    n = 200
+    t = 2 * np.pi * np.arange(n) / n
+    P = np.column_stack([np.cos(t), np.sin(t)])
+    P = P + 0.02 * np.random.default_rng(1).normal(size=P.shape)
+    E = np.column_stack([np.arange(n), (np.arange(n) + 1) % n])
+    g = Geometry(P, edges=E)
+    lam = 1e-4
+    res = smooth(g, SmoothingParams(lam=lam, method="windowed-sinc"))
+    L = build_laplacian(g, SmoothingParams(lam=1.0))[0].toarray()
+    mu_max = 1.01 * (np.abs(L).T @ (np.abs(L) @ np.ones(n))).max()
+    degree = sinc_degree(lam, mu_max)
+    assert degree >= 2 * np.sqrt(mu_max / lam)
+    mu, V = np.linalg.eigh(L.T @ L)
+    x = np.clip(2 * np.clip(mu, 0, None) / mu_max - 1, -1, 1)
+    kept = cheb.chebval(x, SincFilter(2 * lam / mu_max - 1, mu_max, degree).kept())
+    np.testing.assert_allclose(res.points, V @ (kept[:, None] * (V.T @ P)), atol=1e-8)
+    radius = np.linalg.norm(res.points - res.points.mean(axis=0), axis=1).mean()
+    assert radius > 0.99
