@@ -135,7 +135,8 @@ def tau_message(exc: TauOutOfRange, params: SmoothingParams) -> str:
     return (
         f"--tau {float(exc.tau):g} is out of range for this input: the valid range is "
         f"(0, {tau_max:.6g}), the upper bound phi(0) being the deviation of the fully smoothed "
-        "shape (each connected part collapsed onto its weighted centroid)"
+        "shape (each connected part collapsed onto its weighted centroid, or, with fixed "
+        "points or pinned curve ends, the smoothest shape through them)"
     )
 
 

@@ -7,6 +7,7 @@ import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from service.cli import EXIT_CODES
@@ -52,21 +53,29 @@ def test_malformed_file(cli: Run, tmp_path: Path):
 
 def test_tau_too_large_gives_the_valid_range(cli: Run, data: Callable[[str], Path], tmp_path: Path):
     src = data("korita-zbevnica.obj")
-    res = cli(["smooth", src, "-o", tmp_path / "o.obj", "--tau", "1e15"])
+    doc = read_geometry(src)
+    p = doc.geometry.points
+    # The report's ends (--ends pulled), unit weights, nothing fixed: phi(0) is the squared
+    # deviation from the centroid (eq. 14), taken per connected part (the 3 separate polylines).
+    res = cli(["smooth", src, "-o", tmp_path / "o.obj", "--tau", "1e15", "--ends", "pulled"])
     line = _one_error_line(res, 4)
     match = re.search(r"valid range is \(0, ([0-9.e+-]+)\)", line)
     assert match, line
-    # Unit weights, nothing fixed: phi(0) is the squared deviation from the centroid (eq. 14),
-    # taken per connected part (here the 3 separate polylines).
-    doc = read_geometry(src)
-    p = doc.geometry.points
     phi0 = sum(((p[pl.indices] - p[pl.indices].mean(axis=0)) ** 2).sum() for pl in doc.polylines)
     assert float(match.group(1)) == pytest.approx(phi0, rel=1e-5)
-    assert not (tmp_path / "o.obj").exists()
-
-    res = cli(["smooth", src, "-o", tmp_path / "o.obj", "--rms", "1e6", "--fix-boundary"])
-    assert re.search(r"--rms 1e\+06 is out of range .* valid range is \(0, [0-9]", res.stderr)
-    _one_error_line(res, 4)
+    # The default pins the open polylines' ends (issue 21): the smoothness rows are those of the
+    # free points, and the lambda -> 0 limit makes them zero: with uniform weights each polyline
+    # becomes the straight segment between its ends, at evenly spaced parameters (closed form).
+    # The engine takes the limit at its lambda floor (1e-13 ||M||): within 1e-3 here, below it.
+    res = cli(["smooth", src, "-o", tmp_path / "o.obj", "--tau", "1e15"])
+    match = re.search(r"valid range is \(0, ([0-9.e+-]+)\)", _one_error_line(res, 4))
+    assert match
+    phi0 = 0.0
+    for pl in doc.polylines:
+        q = p[pl.indices]
+        t = np.linspace(0.0, 1.0, len(q))[:, None]
+        phi0 += float(((q - (q[0] + t * (q[-1] - q[0]))) ** 2).sum())
+    assert phi0 * (1 - 1e-3) <= float(match.group(1)) <= phi0
 
 
 def test_fixed_index_out_of_range(cli: Run, data: Callable[[str], Path], tmp_path: Path):
