@@ -7,8 +7,9 @@ Curves: PyVista windowed-sinc and Laplacian on line cells (the only peers that s
 Point clouds: Open3D's point-cloud filters (k-NN Laplacian and Taubin, MLS-style tangent-plane
 projection, bilateral) and PyMeshLab's MLS projections (APSS, RIMLS) on meshes and clouds.
 
-PyMeshLab's MLS filters run in a child process: in pymeshlab 2025.7 they crash the interpreter
-(SIGSEGV in ``GaelMls::MlsSurface::computeNeighborhood``), which is recorded, not fatal.
+PyMeshLab's MLS filters run in a child process (a crash is recorded, not fatal): called on one
+mesh (the filter's default) they crash the interpreter in pymeshlab 2022.2 - 2025.7; with the
+point set and the points to project as two meshes they work (:func:`_ml_mls`).
 Grids use the mean spacing ``h`` (known to any user), never the true noise level.
 """
 
@@ -46,6 +47,7 @@ class QualityPeer:
     run: Run
     grid: Callable[[Shape, bool], Iterable[dict[str, Any]]]
     isolated: bool = False  # run in a child process (may crash the interpreter)
+    revision: int = 0  # bumped when the wrapper changes (a new cache key for this peer only)
 
 
 def _grid(**axes: Iterable[Any]) -> list[dict[str, Any]]:
@@ -177,6 +179,21 @@ def _bilateral_grid(shape: Shape, quick: bool) -> list[dict[str, Any]]:
 
 
 def _ml_mls(P: FloatArray, shape: Shape, s: dict[str, Any]) -> FloatArray:
+    """PyMeshLab's MLS projection of the points onto the MLS surface they define.
+
+    The point set (mesh 0: the noisy points with normals -- the mesh's own, or PCA normals of
+    10 neighbours for a cloud -- and per-vertex radii from 16 neighbours) and the points to
+    project (mesh 1, a copy) must be two meshes: with ``controlmesh == proxymesh`` (the
+    filter's default) pymeshlab 2022.2 - 2025.7 crash (SIGSEGV in
+    ``GaelMls::MlsSurface::computeNeighborhood``), with or without normals and radii.
+    """
+    X = P
+    for _ in range(s.get("passes", 1)):
+        X = _ml_mls_pass(X, shape, s)
+    return X
+
+
+def _ml_mls_pass(P: FloatArray, shape: Shape, s: dict[str, Any]) -> FloatArray:
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
@@ -185,22 +202,28 @@ def _ml_mls(P: FloatArray, shape: Shape, s: dict[str, Any]) -> FloatArray:
     else:
         ms.add_mesh(pymeshlab.Mesh(vertex_matrix=P))
         ms.compute_normal_for_point_clouds(k=10)
+    ms.compute_custom_radius_scalar_attribute_per_vertex(nbneighbors=16)
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=P.copy()))
+    ms.set_current_mesh(0)
+    common = {"controlmesh": 0, "proxymesh": 1, "filterscale": s["filterscale"]}
     if s["method"] == "apss":
-        ms.compute_mls_projection_apss(filterscale=s["filterscale"],
-                                       sphericalparameter=s["spherical"])
+        ms.compute_mls_projection_apss(**common, sphericalparameter=s["spherical"])
     else:
-        ms.compute_mls_projection_rimls(filterscale=s["filterscale"], sigman=s["sigman"])
-    return np.asarray(ms.current_mesh().vertex_matrix(), dtype=np.float64)
+        ms.compute_mls_projection_rimls(**common, sigman=s["sigman"])
+    out = np.asarray(ms.mesh(1).vertex_matrix(), dtype=np.float64)
+    if out.shape != P.shape:
+        raise RuntimeError(f"PyMeshLab changed the vertex count ({P.shape} -> {out.shape})")
+    return out
 
 
 def _apss_grid(shape: Shape, quick: bool) -> list[dict[str, Any]]:
-    return _grid(method=("apss",), filterscale=(2, 4) if quick else (1.5, 2, 3, 4, 6, 8),
-                 spherical=(1.0,) if quick else (0.0, 0.5, 1.0))
+    return _grid(method=("apss",), filterscale=(2, 4) if quick else (2, 3, 4, 6, 8),
+                 spherical=(1.0,) if quick else (0.0, 0.5, 1.0), passes=(1,) if quick else (1, 3))
 
 
 def _rimls_grid(shape: Shape, quick: bool) -> list[dict[str, Any]]:
-    return _grid(method=("rimls",), filterscale=(2, 4) if quick else (1.5, 2, 3, 4, 6, 8),
-                 sigman=(0.75,) if quick else (0.5, 0.75, 1.5))
+    return _grid(method=("rimls",), filterscale=(2, 4) if quick else (2, 3, 4, 6, 8),
+                 sigman=(0.75,) if quick else (0.5, 0.75, 1.5), passes=(1,) if quick else (1, 3))
 
 
 def _child(conn: Any, run: Run, P: FloatArray, shape: Shape, s: dict[str, Any]) -> None:
@@ -251,8 +274,8 @@ QUALITY_PEERS: list[QualityPeer] = [
     QualityPeer("Open3D cloud MLS", "open3d", ("cloud",), _o3d_pc_mls, _mls_grid),
     QualityPeer("Open3D cloud bilateral", "open3d", ("cloud",), _o3d_pc_bilateral,
                 _bilateral_grid),
-    QualityPeer("PyMeshLab APSS", "pymeshlab", ("mesh", "cloud"), _ml_mls, _apss_grid, True),
-    QualityPeer("PyMeshLab RIMLS", "pymeshlab", ("mesh", "cloud"), _ml_mls, _rimls_grid, True),
+    QualityPeer("PyMeshLab APSS", "pymeshlab", ("mesh", "cloud"), _ml_mls, _apss_grid, True, 1),
+    QualityPeer("PyMeshLab RIMLS", "pymeshlab", ("mesh", "cloud"), _ml_mls, _rimls_grid, True, 1),
 ]
 
 

@@ -70,3 +70,57 @@ def test_hemisphere_is_open_and_its_rim_is_measured() -> None:
     rim_z = shape.points[:, 2].min()
     x = np.array([[0.0, 0.0, 2.0], [np.sqrt(1 - rim_z**2) + 0.1, 0.0, rim_z - 0.2]])
     assert np.allclose(shape.distance(x), [1.0, np.hypot(0.1, 0.2)])
+
+
+def test_peer_defaults_are_the_libraries_own() -> None:
+    import trimesh
+    from trimesh.smoothing import filter_humphrey, filter_laplacian, filter_taubin
+
+    from benchmarks.quality.defaults import DEFAULT_PEERS, SUFFIX
+    from benchmarks.quality.peers import QUALITY_PEERS
+
+    assert [p.name for p in DEFAULT_PEERS] == [p.name + SUFFIX for p in QUALITY_PEERS]
+    case = make_case("hemisphere/iso-0.25")
+    F = case.shape.faces
+    assert F is not None
+    twins = {p.name: p for p in DEFAULT_PEERS}
+    for name, f in (("trimesh filter_laplacian", filter_laplacian),
+                    ("trimesh filter_taubin", filter_taubin),
+                    ("trimesh filter_humphrey", filter_humphrey)):
+        twin = twins[name + SUFFIX]
+        (setting,) = twin.grid(case.shape, False)
+        ours = twin.run(case.points, case.shape, setting)
+        theirs = f(trimesh.Trimesh(case.points.copy(), F, process=False)).vertices
+        assert np.allclose(ours, theirs)
+
+
+def test_half_table_counts_the_targets() -> None:
+    from benchmarks.quality.halftable import render, targets
+
+    def case(key: str, auto: tuple[float, float], mode: tuple[float, float],
+             peer: tuple[float, float], flips: int) -> dict[str, object]:
+        return {"key": key, "half": "test", "shape": key.split("/")[0], "noise": "iso",
+                "kind": "mesh", "n": 10, "sigma": 1.0, "input": {"flipped": 2},
+                "auto": {"vertex": auto[0], "surface": auto[1], "flipped": flips,
+                         "report": {"sigma_estimate": 1.1}},
+                "modes": {"default": {"vertex": {"vertex": mode[0]},
+                                      "surface": {"surface": mode[1]}}},
+                "peers": {"p": {"swept": {"vertex": {"vertex": peer[0]},
+                                          "surface": {"surface": peer[1]}},
+                                "defaults": {"vertex": 0.9, "surface": 0.8, "flipped": 0}}}}
+
+    doc = {"machine": {"date": "d", "cpu": "c", "cores": 2, "memory_gib": 1, "os": "o",
+                       "python": "p", "system_blas": "b", "load_average": [1.0]},
+           "peers": {"trimesh": "4"}, "half": "test", "seconds": 1.0, "load_end": [1.0],
+           "modes": ["default"], "refine": 4,
+           "cases": [case("a/iso-1", (0.5, 0.3), (0.4, 0.2), (0.45, 0.35), 1),
+                     case("b/iso-1", (0.6, 0.5), (0.5, 0.5), (0.45, 0.35), 3),
+                     case("c/iso-1", (1.2, 0.9), (0.3, 0.3), (0.4, 0.4), 0)]}
+    t = targets(doc)
+    assert t["auto_le_peer_s"] == (1, 3)  # 0.3 <= 0.35 only
+    assert t["auto_115_peer_v"] == (1, 3)  # 0.5 <= 0.5175; 0.6 and 1.2 are not
+    assert t["best_le_peer_v"] == (2, 3) and t["best_le_peer_s"] == (2, 3)
+    assert t["not_worse"] == (2, 3) and t["sigma_15"] == (3, 3)
+    assert t["flips_le_input"] == (2, 3)
+    text = render(doc)
+    assert "| a/iso-1 | mesh | 10 | 0.500 | 0.300 |" in text and "1/3 (33 %)" in text
