@@ -11,6 +11,7 @@ scale through the two-mesh call of ``peers._ml_mls`` (the filter's own default c
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -71,10 +72,17 @@ DEFAULTS: dict[str, tuple[Run | None, dict[str, Any]]] = {
 }
 
 
+def _one(setting: dict[str, Any]) -> Callable[[Shape, bool], list[dict[str, Any]]]:
+    def grid(shape: Shape, quick: bool) -> list[dict[str, Any]]:
+        return [dict(setting)]
+
+    return grid
+
+
 def _twin(peer: QualityPeer) -> QualityPeer:
     run, setting = DEFAULTS[peer.name]
     return QualityPeer(peer.name + SUFFIX, peer.package, peer.kinds, run or peer.run,
-                       lambda shape, quick, s=setting: [dict(s)], peer.isolated, peer.revision)
+                       _one(setting), peer.isolated, peer.revision)
 
 
 #: The defaults' twins, in the order of ``QUALITY_PEERS``.

@@ -153,13 +153,16 @@ def main(argv: list[str] | None = None) -> int:
                     "ORACLE_MODES)")
     ap.add_argument("--refine", type=int, default=4, help="golden-section steps per metric")
     ap.add_argument("--tag", default="", help="suffix of the output files (e.g. 'before')")
+    ap.add_argument("--reverse", action="store_true",
+                    help="run the cases last to first (the table keeps their order): a second "
+                    "process filling the same cache from the other end")
     args = ap.parse_args(argv)
     cache = args.cache or default_cache()
     keys = args.cases or half_cases(args.half)
     info = machine_info()
     t0 = time.perf_counter()
     results = []
-    for i, key in enumerate(keys, 1):
+    for i, key in enumerate(keys[::-1] if args.reverse else keys, 1):
         r = run_half_case(key, cache, ours=not args.peers_only, modes=args.modes,
                           refine=args.refine)
         results.append(r)
@@ -167,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
              f"(geosmooth {r['seconds_geosmooth']:.1f} s)")
     if args.peers_only:
         return 0
+    results.sort(key=lambda r: keys.index(r["key"]))
     doc = {"machine": info, "peers": peer_versions(), "half": args.half, "cases": results,
            "modes": args.modes or ORACLE_MODES, "refine": args.refine, "decades": DECADES,
            "seconds": time.perf_counter() - t0,
