@@ -46,7 +46,7 @@ def best_peer(c: dict[str, Any], m: str, which: str = "swept") -> tuple[str, flo
 
 def best_mode(c: dict[str, Any], m: str) -> tuple[str, float] | None:
     rows = [(name, v) for name, mode in (c.get("modes") or {}).items()
-            if (v := _val(mode.get(m), m)) is not None]
+            if isinstance(mode.get(m), dict) and (v := _val(mode[m], m)) is not None]
     return min(rows, key=lambda r: r[1]) if rows else None
 
 
@@ -63,6 +63,10 @@ def verdicts(c: dict[str, Any]) -> dict[str, bool | None]:
     mv, ms = best_mode(c, "vertex"), best_mode(c, "surface")
     sr = _sigma_ratio(c)
     flips_in, flips = c["input"].get("flipped"), auto.get("flipped")
+    if "modes" in c and not auto:  # geosmooth ran and the default failed: every auto target
+        failed: dict[str, bool | None] = {k: False for k, _, _ in TARGETS}
+        return {**failed, "best_le_peer_v": None if mv is None or pv is None else mv[1] <= pv[1],
+                "best_le_peer_s": None if ms is None or ps is None else ms[1] <= ps[1]}
     return {
         "auto_le_peer_s": None if asf is None or ps is None else asf <= ps[1],
         "auto_115_peer_v": None if av is None or pv is None else av <= VERTEX_SLACK * pv[1],
@@ -113,7 +117,7 @@ def _case_row(c: dict[str, Any]) -> list[str]:
     auto = c.get("auto") or {}
     cells = [c["key"], c["kind"], f"{c['n']:,}"]
     for m in METRICS:
-        cells.append(_f(_val(auto, m)))
+        cells.append(_f(_val(auto, m)) if c.get("auto") else "failed" if c.get("error") else "—")
     for m in METRICS:
         b = best_mode(c, m)
         cells.append(f"{_f(b[1])} ({b[0]})" if b else "—")
@@ -177,8 +181,8 @@ def render(doc: dict[str, Any]) -> str:
         + " / ".join(f"{x:.2f}" for x in doc["load_end"]),
         "",
         f"Peers: {peers}. Whole run {doc['seconds']:.0f} s. geosmooth's oracle modes: "
-        + _modes(doc["modes"]) + f" (decade scan +-{doc.get('decades', 3)} decades around "
-        f"the automatic lambda, {doc['refine']} golden steps per metric). The split "
+        + _modes(doc["modes"]) + f" (decade scan +-{doc.get('decades', 2)} decades around "
+        f"the automatic lambda, {doc['refine']} parabolic steps per metric). The split "
         "(calibration / test by family, fixed) is `benchmarks/quality/families.py: SPLIT`.",
         "",
         "Errors are fractions of the noisy input's: v = RMS vertex error against the clean "

@@ -9,8 +9,9 @@ and per shape. Writes ``<out>/halves-<half>-<date>.md`` and ``.json``.
 Peer sweeps and the defaults do not depend on geosmooth: they are cached per case and peer
 version in ``--cache`` (default ``$GEOSMOOTH_QUALITY_CACHE`` or ``results/cache``), so a run on
 another geosmooth tree only redoes geosmooth. ``--peers-only`` fills the cache. The oracle is
-kept cheap: two modes per kind (:data:`ORACLE_MODES`), a decade scan of lambda over +-3 decades
-around the automatic lambda, then golden-section steps (``--refine``, default 4).
+kept cheap (:func:`cheap_oracle`): two modes per kind (:data:`ORACLE_MODES`), a decade scan
+of lambda over +-2 decades around the automatic lambda (moved while the minimum is on its edge),
+then parabolic steps (``--refine``, default 2) per metric.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import math
 import os
 import sys
 import time
@@ -33,7 +35,7 @@ from benchmarks.quality.halftable import render
 from benchmarks.quality.ours import _params, _run, geometry_of, modes_for
 from benchmarks.quality.peers import QUALITY_PEERS, peer_versions
 from benchmarks.quality.scores import Scorer
-from benchmarks.quality.sweep import best_of, lambda_oracle, sweep_peer
+from benchmarks.quality.sweep import best_of, sweep_peer
 from service.core.errors import GeosmoothError
 from service.core.operator.build import build_operator
 
@@ -47,7 +49,7 @@ ORACLE_MODES: dict[str, list[str]] = {
     "mesh": ["default", "free, order 2"], "grid": ["default", "free, order 2"],
     "cloud": ["default", "free, order 2"], "curve": ["default", "windowed-sinc"],
 }
-DECADES = 3
+DECADES = 2
 Log = Callable[[str], None]
 
 
@@ -79,6 +81,43 @@ def _peers(case: Any, scorer: Scorer, cache: Path, log: Log) -> dict[str, Any]:
     return out
 
 
+def cheap_oracle(f: Callable[[float], float], center: float, decades: int = DECADES,
+                 refine: int = 2, moves: int = 4) -> float:
+    """The log10 lambda minimising ``f`` (of log10 lambda): decades ``center +- decades``
+    (moved by a decade while the minimum is on the scan's edge, at most ``moves`` times), then
+    ``refine`` steps of parabolic interpolation through the best point and its neighbours.
+    ``f`` should be memoized: the metrics of one mode share its evaluations.
+    """
+    xs = [center + k for k in range(-decades, decades + 1)]
+    vals = {x: f(x) for x in xs}
+    for _ in range(moves):
+        best = min(vals, key=lambda x: vals[x])
+        if not math.isfinite(vals[best]):
+            return best
+        if best == min(vals):
+            vals[best - 1] = f(best - 1)
+        elif best == max(vals):
+            vals[best + 1] = f(best + 1)
+        else:
+            break
+    for _ in range(refine):
+        xs = sorted(vals)
+        i = xs.index(min(vals, key=lambda x: vals[x]))
+        if i == 0 or i == len(xs) - 1:
+            break
+        a, b, c = xs[i - 1], xs[i], xs[i + 1]
+        fa, fb, fc = vals[a], vals[b], vals[c]
+        den = (b - a) * (fb - fc) - (b - c) * (fb - fa)
+        if not all(map(math.isfinite, (fa, fb, fc))) or den == 0:
+            break
+        x = b - 0.5 * ((b - a) ** 2 * (fb - fc) - (b - c) ** 2 * (fb - fa)) / den
+        x = min(max(x, a + 0.05 * (b - a)), c - 0.05 * (c - b))  # strictly inside the bracket
+        if any(abs(x - y) < 1e-3 for y in vals):
+            break
+        vals[x] = f(x)
+    return min(vals, key=lambda x: vals[x])
+
+
 def _oracle(case: Any, scorer: Scorer, kw: dict[str, Any], lam0: float | None,
             refine: int) -> dict[str, Any]:
     memo: dict[float, dict[str, Any] | None] = {}
@@ -88,24 +127,22 @@ def _oracle(case: Any, scorer: Scorer, kw: dict[str, Any], lam0: float | None,
     except GeosmoothError:
         op = None
 
-    def evaluate(lam: float) -> dict[str, Any] | None:
-        p = _params(lam=lam, **kw)
-        return None if p is None else _run(case, scorer, p, op)
+    def run(log_lam: float) -> dict[str, Any] | None:
+        key = round(log_lam, 9)
+        if key not in memo:
+            p = _params(lam=float(10.0**log_lam), **kw)
+            memo[key] = None if p is None else _run(case, scorer, p, op)
+        return memo[key]
 
-    out = {}
+    out: dict[str, Any] = {}
     for m in METRICS:
-        lo, hi = (lam0 * 10.0**-DECADES, lam0 * 10.0**DECADES) if lam0 else (1e-7, 1e3)
-        for _ in range(3):  # an optimum on the scan's edge: move the window past it
-            best = lambda_oracle(evaluate, m, memo, lo, hi, refine)
-            if best is None or not best.get("lam"):
-                break
-            if best["lam"] <= lo * 1.001:
-                lo, hi = lo * 10.0**-(2 * DECADES), lo
-            elif best["lam"] >= hi / 1.001:
-                lo, hi = hi, hi * 10.0 ** (2 * DECADES)
-            else:
-                break
-        out[m] = best
+        def f(x: float, m: str = m) -> float:
+            r = run(x)
+            return math.inf if r is None else float(r[m])
+
+        best = cheap_oracle(f, round(math.log10(lam0)) if lam0 else -2.0, refine=refine)
+        out[m] = run(best)
+    out["evaluations"] = len(memo)
     return out
 
 
@@ -119,7 +156,7 @@ def _ours(case: Any, scorer: Scorer, modes: list[str], refine: int) -> dict[str,
 
 
 def run_half_case(key: str, cache: Path, *, ours: bool = True, modes: list[str] | None = None,
-                  refine: int = 4, log: Log = _log) -> dict[str, Any]:
+                  refine: int = 2, log: Log = _log) -> dict[str, Any]:
     """All measurements of one case (JSON-ready)."""
     t0 = time.perf_counter()
     case = make_case(key)
@@ -134,7 +171,11 @@ def run_half_case(key: str, cache: Path, *, ours: bool = True, modes: list[str] 
     out["peers"] = _peers(case, scorer, cache, log)
     t1 = time.perf_counter()
     if ours:
-        out.update(_ours(case, scorer, modes or ORACLE_MODES[out["kind"]], refine))
+        try:
+            out.update(_ours(case, scorer, modes or ORACLE_MODES[out["kind"]], refine))
+        except Exception as exc:  # a crash of geosmooth on a case is a result, not the end
+            out.update(auto=None, modes={}, error=f"{type(exc).__name__}: {exc}")
+            log(f"    geosmooth failed: {out['error']}")
     out["seconds"] = time.perf_counter() - t0
     out["seconds_geosmooth"] = time.perf_counter() - t1
     return out
@@ -151,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--peers-only", action="store_true", help="fill the peer cache only")
     ap.add_argument("--modes", nargs="+", help="geosmooth oracle modes (default: per kind, "
                     "ORACLE_MODES)")
-    ap.add_argument("--refine", type=int, default=4, help="golden-section steps per metric")
+    ap.add_argument("--refine", type=int, default=2, help="parabolic steps per metric")
     ap.add_argument("--tag", default="", help="suffix of the output files (e.g. 'before')")
     ap.add_argument("--reverse", action="store_true",
                     help="run the cases last to first (the table keeps their order): a second "

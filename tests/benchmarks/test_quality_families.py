@@ -124,3 +124,16 @@ def test_half_table_counts_the_targets() -> None:
     assert t["flips_le_input"] == (2, 3)
     text = render(doc)
     assert "| a/iso-1 | mesh | 10 | 0.500 | 0.300 |" in text and "1/3 (33 %)" in text
+
+
+def test_cheap_oracle_finds_the_minimum_of_a_smooth_valley() -> None:
+    from benchmarks.quality.halves import cheap_oracle
+
+    calls: list[float] = []
+
+    def f(x: float) -> float:
+        calls.append(x)
+        return (x + 3.3) ** 2 + 0.1 * (x + 3.3) ** 4  # minimum at log lambda = -3.3
+
+    x = cheap_oracle(f, 0.0, decades=2, refine=3)  # starts 1.3 decades off the window
+    assert abs(x + 3.3) < 0.05 and len(calls) <= 12
