@@ -22,6 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from benchmarks.quality.curves import circle2d, network2d, network3d, trefoil3d
+from benchmarks.quality.families import NEW_SHAPES
+from benchmarks.quality.noises import NOISE_MODELS
 from benchmarks.quality.shapes import (
     Shape,
     box,
@@ -75,7 +77,7 @@ _CACHE: dict[str, Shape] = {}
 def make_shape(key: str) -> Shape:
     """The clean shape ``key`` of :data:`SHAPES` (built once per process)."""
     if key not in _CACHE:
-        _CACHE[key] = SHAPES[key]()
+        _CACHE[key] = (SHAPES[key] if key in SHAPES else NEW_SHAPES[key])()
     return _CACHE[key]
 
 
@@ -101,14 +103,21 @@ class Case:
 
 
 def make_case(key: str) -> Case:
-    """``"<shape>/<noise>-<level>"``, e.g. ``"sphere-2.5K/aniso-0.5"``."""
+    """``"<shape>/<noise>-<level>"``, e.g. ``"sphere-2.5K/aniso-0.5"``.
+
+    Shapes of :data:`SHAPES` or ``families.NEW_SHAPES``; noise models of this module or of
+    ``noises.NOISE_MODELS`` (issue 21).
+    """
     shape_key, spec = key.split("/")
     noise, level_s = spec.rsplit("-", 1)
-    if noise not in NOISES:
+    if noise not in NOISES and noise not in NOISE_MODELS:
         raise KeyError(f"unknown noise {noise!r}")
     level = float(level_s)
     shape = make_shape(shape_key)
     rng = np.random.default_rng(zlib.crc32(key.encode()))
+    if noise in NOISE_MODELS:
+        drawn = NOISE_MODELS[noise](shape, level, rng)
+        return Case(key, shape, noise, level, shape.points + drawn.E, drawn.sigma, drawn.outliers)
     sigma = level * shape.h
     n, s = shape.points.shape
     c = shape.codim

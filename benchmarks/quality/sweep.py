@@ -34,7 +34,8 @@ def _setting_str(s: dict[str, Any]) -> str:
 
 def _cache_file(cache_dir: Path, case: Case, peer: QualityPeer, quick: bool) -> Path:
     versions = peer_versions()
-    tag = json.dumps([CACHE_VERSION, case.key, peer.name, quick, versions.get(peer.package)])
+    key = [CACHE_VERSION, case.key, peer.name, quick, versions.get(peer.package)]
+    tag = json.dumps([*key, peer.revision] if peer.revision else key)
     digest = hashlib.sha1(tag.encode()).hexdigest()[:12]
     slug = "".join(c if c.isalnum() else "-" for c in f"{case.key}-{peer.name}").strip("-")
     return cache_dir / f"{slug}-{digest}.json"

@@ -1,0 +1,131 @@
+"""Case families and the fixed calibration / test split (issue 21, benchmark hygiene).
+
+A *family* is a shape with a noise model (every level of it). :data:`SPLIT` below is the one
+table that assigns each family to a half: ``calibration`` (defaults and constants may be chosen
+on it) or ``test`` (reported, never tuned on). It is written down, not computed from a hash, so
+adding a case never moves another; a family missing from it is an error
+(:func:`half_of`). Each half holds every kind (mesh, grid, curve, cloud) and roughly half of
+each noise model. The in-repo families of ``cases.FULL`` are in the table too.
+
+New shapes (:mod:`~benchmarks.quality.surfaces`, :mod:`~benchmarks.quality.knots`) and noise
+models (:mod:`~benchmarks.quality.noises`) are registered here; ``cases.make_case`` builds
+``"<shape>/<noise>-<level>"`` from either registry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from benchmarks.quality import knots, surfaces
+from benchmarks.quality.shapes import Shape
+
+__all__ = ["CASES", "KIND", "NEW_SHAPES", "SPLIT", "half_cases", "half_of"]
+
+#: The issue's new shapes (1K - 10K points each).
+NEW_SHAPES: dict[str, Callable[[], Shape]] = {
+    "terrain": surfaces.terrain,
+    "dem": surfaces.dem,
+    "hemisphere": surfaces.hemisphere,
+    "saddle-irr": surfaces.saddle,
+    "sphere-irr": surfaces.sphere_irregular,
+    "torusknot": knots.torus_knot,
+    "fig8": knots.fig8,
+    "helix": knots.helix,
+    "track-2d": knots.track,
+    "cloud-dens-sphere": surfaces.dense_cloud_sphere,
+    "cloud-dens-terrain": surfaces.dense_cloud_terrain,
+}
+
+#: Kind of every shape in the split (``grid``: regular grid triangulations of height fields).
+KIND: dict[str, str] = {
+    **dict.fromkeys(("sphere-642", "sphere-2.5K", "sphere-10K", "sphere-41K", "torus-1.4K",
+                     "torus-5.8K", "torus-40K", "box", "fandisk", "spot", "bunny", "horse",
+                     "hemisphere", "saddle-irr", "sphere-irr"), "mesh"),
+    **dict.fromkeys(("terrain", "dem"), "grid"),
+    **dict.fromkeys(("circle-2d", "trefoil-3d", "network-2d", "network-3d", "torusknot", "fig8",
+                     "helix", "track-2d"), "curve"),
+    **dict.fromkeys(("cloud-sphere", "cloud-torus", "cloud-fandisk", "cloud-bunny",
+                     "cloud-dens-sphere", "cloud-dens-terrain"), "cloud"),
+}
+
+C, T = "calibration", "test"
+
+#: (shape, noise model, half, levels run by the halves' tables). Levels ``()``: an in-repo family
+#: (``cases.FULL`` has its levels), in the split so that nothing is tuned on its test half.
+_TABLE: tuple[tuple[str, str, str, tuple[float, ...]], ...] = (
+    # --- in-repo families (cases.FULL) ---------------------------------------------------------
+    ("sphere-2.5K", "normal", T, ()), ("sphere-2.5K", "iso", C, ()),
+    ("sphere-2.5K", "aniso", T, ()), ("sphere-2.5K", "outliers", C, ()),
+    ("torus-5.8K", "normal", C, ()), ("torus-5.8K", "iso", T, ()), ("torus-5.8K", "aniso", C, ()),
+    ("box", "normal", T, ()), ("box", "iso", C, ()), ("box", "aniso", T, ()),
+    ("fandisk", "normal", C, ()), ("fandisk", "iso", T, ()), ("fandisk", "aniso", C, ()),
+    ("fandisk", "outliers", T, ()),
+    ("spot", "normal", T, ()), ("spot", "iso", C, ()), ("spot", "aniso", T, ()),
+    ("circle-2d", "normal", C, ()), ("circle-2d", "iso", T, ()), ("circle-2d", "aniso", C, ()),
+    ("circle-2d", "outliers", T, ()),
+    ("trefoil-3d", "normal", T, ()), ("trefoil-3d", "iso", C, ()), ("trefoil-3d", "aniso", T, ()),
+    ("cloud-sphere", "normal", C, ()), ("cloud-sphere", "iso", T, ()),
+    ("cloud-sphere", "aniso", C, ()), ("cloud-sphere", "outliers", T, ()),
+    ("sphere-642", "aniso", C, ()), ("sphere-10K", "aniso", T, ()), ("sphere-41K", "aniso", C, ()),
+    ("torus-1.4K", "aniso", T, ()), ("torus-40K", "aniso", C, ()),
+    ("bunny", "aniso", T, ()), ("horse", "aniso", C, ()),
+    ("network-2d", "aniso", C, ()), ("network-3d", "aniso", T, ()),
+    ("cloud-torus", "aniso", T, ()), ("cloud-fandisk", "aniso", C, ()),
+    ("cloud-bunny", "aniso", T, ()),
+    # --- issue 21: new noise models on in-repo shapes --------------------------------------------
+    ("sphere-2.5K", "view", C, (0.5,)), ("sphere-2.5K", "laplace", T, (0.5,)),
+    ("sphere-2.5K", "out10", T, (0.25,)),
+    ("torus-5.8K", "student", C, (0.5,)), ("torus-5.8K", "vary", T, (0.15,)),
+    ("torus-5.8K", "out30", C, (0.25,)),
+    ("spot", "quant", T, (0.5,)), ("spot", "view", C, (0.5,)), ("spot", "out3", T, (0.25,)),
+    ("fandisk", "laplace", C, (0.5,)), ("fandisk", "quant", T, (0.5,)),
+    ("fandisk", "vary", C, (0.15,)),
+    ("box", "view", T, (0.5,)), ("box", "student", C, (0.5,)),
+    ("circle-2d", "laplace", C, (0.5,)), ("circle-2d", "out10", T, (0.25,)),
+    ("trefoil-3d", "quant", C, (0.5,)), ("trefoil-3d", "student", T, (0.5,)),
+    ("cloud-sphere", "view", T, (0.5,)), ("cloud-sphere", "laplace", C, (0.5,)),
+    ("cloud-fandisk", "out10", T, (0.25,)), ("cloud-fandisk", "student", C, (0.5,)),
+    # --- issue 21: new shapes ------------------------------------------------------------------
+    ("sphere-irr", "iso", T, (0.25,)), ("sphere-irr", "aniso", C, (0.5,)),
+    ("sphere-irr", "vary", T, (0.15,)), ("sphere-irr", "out3", C, (0.25,)),
+    ("hemisphere", "iso", C, (0.25,)), ("hemisphere", "view", T, (0.5,)),
+    ("hemisphere", "laplace", T, (0.5,)), ("hemisphere", "out10", C, (0.25,)),
+    ("saddle-irr", "iso", C, (0.25,)), ("saddle-irr", "student", T, (0.5,)),
+    ("saddle-irr", "quant", C, (0.5,)), ("saddle-irr", "out30", T, (0.25,)),
+    ("terrain", "view", T, (0.5,)), ("terrain", "quant", C, (0.5,)),
+    ("terrain", "laplace", C, (0.5,)), ("terrain", "out10", T, (0.25,)),
+    ("terrain", "iso", T, (0.25,)),
+    ("dem", "view", C, (0.5,)), ("dem", "quant", T, (0.5,)), ("dem", "student", T, (0.5,)),
+    ("dem", "vary", C, (0.15,)),
+    ("torusknot", "iso", T, (0.25,)), ("torusknot", "gps", C, (0.5,)),
+    ("torusknot", "out10", C, (0.25,)),
+    ("fig8", "iso", C, (0.25,)), ("fig8", "laplace", T, (0.5,)), ("fig8", "vary", T, (0.15,)),
+    ("helix", "quant", T, (0.5,)), ("helix", "aniso", C, (0.5,)), ("helix", "student", C, (0.5,)),
+    ("track-2d", "gps", T, (0.5,)), ("track-2d", "iso", C, (0.25,)),
+    ("track-2d", "out30", C, (0.25,)), ("track-2d", "out3", T, (0.25,)),
+    ("cloud-dens-sphere", "iso", T, (0.25,)), ("cloud-dens-sphere", "aniso", C, (0.5,)),
+    ("cloud-dens-sphere", "vary", C, (0.15,)), ("cloud-dens-sphere", "out10", T, (0.25,)),
+    ("cloud-dens-terrain", "view", T, (0.5,)), ("cloud-dens-terrain", "out3", C, (0.25,)),
+    ("cloud-dens-terrain", "laplace", C, (0.5,)), ("cloud-dens-terrain", "student", T, (0.5,)),
+)
+
+#: (shape, noise model) -> half.
+SPLIT: dict[tuple[str, str], str] = {(s, nz): half for s, nz, half, _ in _TABLE}
+
+#: The cases the halves' tables run (issue 21's families), in table order.
+CASES: list[str] = [f"{s}/{nz}-{lv:g}" for s, nz, _, levels in _TABLE for lv in levels]
+
+
+def half_of(key: str) -> str:
+    """``"calibration"`` or ``"test"`` for a case key ``"<shape>/<noise>-<level>"``."""
+    shape, spec = key.split("/")
+    noise = spec.rsplit("-", 1)[0]
+    try:
+        return SPLIT[(shape, noise)]
+    except KeyError:
+        raise KeyError(f"family {shape} x {noise} is not in families.SPLIT") from None
+
+
+def half_cases(half: str) -> list[str]:
+    """The issue-21 cases of one half (``"calibration"``, ``"test"`` or ``"all"``)."""
+    return [k for k in CASES if half == "all" or half_of(k) == half]
