@@ -172,6 +172,10 @@ class Report(Mapping[str, Any]):
         "tau_rule": "tau_rule",
         "tau_how": "tau_how",
         "shape_warnings": "shape_warnings",
+        "outlier_count": "outlier_count",
+        "outliers": "outliers",
+        "data_weights": "data_weights",
+        "tangential": "tangential",
     }
     #: JSON member -> the name a service before 2026-11 sent (read when the new one is absent).
     FORMERLY: Mapping[str, str] = {
