@@ -62,7 +62,9 @@ def test_bunny_tau_report_and_progress(cli: Run, data: Callable[[str], Path], tm
     # phi recomputed from the two files: sum of squared displacements (all weights 1).
     d2 = ((after.geometry.points - before.geometry.points) ** 2).sum(axis=1)
     assert report["phi"] == pytest.approx(d2.sum(), rel=1e-6)
-    assert report["max_displacement"] == pytest.approx(np.sqrt(d2.max()), rel=1e-6)
+    # one point's move from float32 coordinates: within a few units of their last place
+    ulp = float(np.finfo(np.float32).eps * np.abs(after.geometry.points).max())
+    assert report["max_displacement"] == pytest.approx(np.sqrt(d2.max()), abs=4 * ulp)
     assert report["rms_displacement"] == pytest.approx(np.sqrt(d2.mean()), rel=1e-6)
 
     # stderr is not a terminal here: one plain line per lambda iteration, then the summary.

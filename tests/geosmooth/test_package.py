@@ -153,9 +153,13 @@ def test_describe_takes_what_smooth_takes() -> None:
     t = np.linspace(0, 4 * np.pi, 300)
     points = np.c_[np.cos(t), np.sin(t), 0.1 * t] + 0.01 * rng.standard_normal((300, 3))
     edges = np.c_[np.arange(299), np.arange(1, 300)]
-    facts = geosmooth.describe(points, edges=edges, weights="uniform")
+    facts = geosmooth.describe(points, edges=edges, weights="uniform", ends="pulled")
     assert (facts["kind"], facts["n_points"], facts["n_edges"]) == ("curve", 300, 299)
     phi0 = float(((points - points.mean(axis=0)) ** 2).sum())  # eq. (14), D = I
-    assert np.isclose(facts["phi0"], phi0, rtol=1e-9)
+    assert np.isclose(facts["phi0"], phi0, rtol=1e-9)  # the report's ends: the centroid
+    facts = geosmooth.describe(points, edges=edges, weights="uniform")  # default: ends pinned
+    s = np.linspace(0.0, 1.0, 300)[:, None]
+    line = float(((points - (points[0] + s * (points[-1] - points[0]))) ** 2).sum())
+    assert line * (1 - 1e-3) <= facts["phi0"] <= line  # the segment between the ends
     _, result = geosmooth.smooth(points, edges=edges, full_output=True)
     assert np.isclose(result.tau, facts["suggested_tau"], rtol=1e-9)  # the default budget

@@ -65,14 +65,21 @@ def test_mesh_upload_without_params(client: httpx.Client) -> None:
 
 def test_curve_preview_in_file_order(client: httpx.Client) -> None:
     path = SAMPLES / "noisy-helix.obj"
-    response = info(
-        client, params={"preview": "true"}, files={"file": (path.name, path.read_bytes())}
-    )
+    files = {"file": (path.name, path.read_bytes())}
+    # the report's ends (pulled): the lambda -> 0 limit is the centroid (eq. 14)
+    report_ends = {"params": json.dumps({"ends": "pulled", "tau": 1})}
+    response = info(client, params={"preview": "true"}, files=files, data=report_ends)
     assert response.status_code == 200, response.text
     out = response.json()
     assert (out["kind"], out["n_polylines"], out["n_points"]) == ("curve", 1, 200)
     points = read_geometry(path).geometry.points
     assert out["phi0"] == pytest.approx(centroid_phi0(points), rel=1e-8)
+    # the default pins the open curve's ends (issue 21): the limit is the straight segment
+    # between them at evenly spaced parameters (uniform weights), reached at the engine's
+    # lambda floor to within 1e-3
+    t = np.linspace(0.0, 1.0, len(points))[:, None]
+    line = float(((points - (points[0] + t * (points[-1] - points[0]))) ** 2).sum())
+    assert line * (1 - 1e-3) <= info(client, files=files).json()["phi0"] <= line
     preview = out["preview"]
     xyz = decode(preview["positions"], "<f4", 3).astype(np.float64) + preview["origin"]
     extent = float(np.ptp(points, axis=0).max())
@@ -86,7 +93,8 @@ def test_params_change_phi0(client: httpx.Client) -> None:
     """Fixed curve ends: the limit is no longer the centroid, so phi(0) changes."""
     path = SAMPLES / "noisy-helix.obj"
     files = {"file": (path.name, path.read_bytes())}
-    free = info(client, files=files).json()["phi0"]
+    pulled = {"params": json.dumps({"ends": "pulled", "tau": 1})}  # the report's ends
+    free = info(client, files=files, data=pulled).json()["phi0"]
     fixed = info(client, files=files, data={"params": json.dumps({"fix_boundary": True, "tau": 1})})
     assert fixed.status_code == 200, fixed.text
     assert 0 < fixed.json()["phi0"] != pytest.approx(free)

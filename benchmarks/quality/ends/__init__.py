@@ -1,7 +1,7 @@
 """Issue 21 items 4-5 (helper *ends*): curves, grids and clouds against VTK, Taubin and MLS.
 
 Scripts, run from the repository root with the peers installed aside (``PEERS_SITE``, a
-``pip install --target`` of pyvista, vtk and pymeshlab; default ``/work/scratch_ends/site``)::
+``pip install --target`` of pyvista, vtk and pymeshlab, when they are not in the environment)::
 
     python -m benchmarks.quality.ends.final calibration circle-2d/iso-0.5,wave-2d/iso-0.25,...
     python -m benchmarks.quality.ends.final test knot35/iso-0.5,helix/quant-1,dem/iso-0.5,...

@@ -1,7 +1,8 @@
 import os
 import sys
 
-sys.path.append(os.environ.get("PEERS_SITE", "/work/scratch_ends/site"))  # pyvista, pymeshlab
+if os.environ.get("PEERS_SITE"):  # pyvista, pymeshlab installed aside
+    sys.path.append(os.environ["PEERS_SITE"])
 import numpy as np
 
 
