@@ -21,7 +21,7 @@ from pathlib import Path
 from benchmarks.measure import machine_info
 from benchmarks.quality.cases import FULL, QUICK
 from benchmarks.quality.peers import peer_versions
-from benchmarks.quality.run import run_case
+from benchmarks.quality.run import run_case, write_tables
 from benchmarks.quality.table import render
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -60,11 +60,7 @@ def main(argv: list[str] | None = None) -> int:
            "seconds": time.perf_counter() - t0, "load_end": list(os.getloadavg())}
     day = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d")
     stem = f"quality-{day}" + ("-quick" if args.quick else "")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=float))
-    text = render(doc)
-    (args.out / f"{stem}.md").write_text(text)
-    print(text)
+    print(write_tables(args.out, stem, doc, render))
     _log(f"wrote {args.out / stem}.md and .json ({doc['seconds']:.0f} s)")
     return 0
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import math
 import os
 import sys
@@ -32,12 +31,11 @@ from benchmarks.quality.cases import make_case
 from benchmarks.quality.defaults import DEFAULT_PEERS, SUFFIX
 from benchmarks.quality.families import KIND, half_cases, half_of
 from benchmarks.quality.halftable import render
-from benchmarks.quality.ours import _params, _run, geometry_of, modes_for
+from benchmarks.quality.ours import _params, _run, modes_for, operator_for
 from benchmarks.quality.peers import QUALITY_PEERS, peer_versions
+from benchmarks.quality.run import write_tables
 from benchmarks.quality.scores import Scorer
 from benchmarks.quality.sweep import best_of, sweep_peer
-from service.core.errors import GeosmoothError
-from service.core.operator.build import build_operator
 
 __all__ = ["main", "run_half_case"]
 
@@ -121,11 +119,7 @@ def cheap_oracle(f: Callable[[float], float], center: float, decades: int = DECA
 def _oracle(case: Any, scorer: Scorer, kw: dict[str, Any], lam0: float | None,
             refine: int) -> dict[str, Any]:
     memo: dict[float, dict[str, Any] | None] = {}
-    p0 = _params(lam=1.0, **kw)
-    try:
-        op = build_operator(geometry_of(case), p0) if p0 is not None else None
-    except GeosmoothError:
-        op = None
+    op = operator_for(case, kw)
 
     def run(log_lam: float) -> dict[str, Any] | None:
         key = round(log_lam, 9)
@@ -218,11 +212,7 @@ def main(argv: list[str] | None = None) -> int:
            "load_end": list(os.getloadavg()), "defaults_suffix": SUFFIX}
     day = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d")
     stem = f"halves-{args.half}-{day}" + (f"-{args.tag}" if args.tag else "")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=float))
-    text = render(doc)
-    (args.out / f"{stem}.md").write_text(text)
-    print(text)
+    print(write_tables(args.out, stem, doc, render))
     _log(f"wrote {args.out / stem}.md and .json ({doc['seconds']:.0f} s)")
     return 0
 

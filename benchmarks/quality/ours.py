@@ -20,9 +20,9 @@ from benchmarks.quality.scores import Scorer
 from benchmarks.quality.sweep import lambda_oracle
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.errors import GeosmoothError
-from service.core.operator.build import build_operator
+from service.core.operator.build import SmoothingOperator, build_operator
 
-__all__ = ["MODES", "geometry_of", "modes_for", "run_auto", "run_mode"]
+__all__ = ["MODES", "geometry_of", "modes_for", "operator_for", "run_auto", "run_mode"]
 
 #: name -> (kinds it applies to, SmoothingParams fields)
 MODES: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
@@ -81,14 +81,20 @@ def _small_report(rep: dict[str, Any]) -> dict[str, Any]:
     return {k: rep[k] for k in keep if k in rep}
 
 
+def operator_for(case: Case, kw: dict[str, Any]) -> SmoothingOperator | None:
+    """The operator of mode ``kw`` on ``case``, built once for its lambda scan (``None`` when
+    this geosmooth lacks the mode or cannot build it: each run then reports its own error)."""
+    p0 = _params(lam=1.0, **kw)
+    try:
+        return build_operator(geometry_of(case), p0) if p0 is not None else None
+    except GeosmoothError:
+        return None
+
+
 def run_mode(case: Case, scorer: Scorer, kw: dict[str, Any]) -> dict[str, Any]:
     """Oracle lambda of one mode for each metric: ``{"vertex": row, "surface": row}``."""
     memo: dict[float, dict[str, Any] | None] = {}
-    p0 = _params(lam=1.0, **kw)
-    try:
-        op = build_operator(geometry_of(case), p0) if p0 is not None else None
-    except GeosmoothError:
-        op = None
+    op = operator_for(case, kw)
 
     def evaluate(lam: float) -> dict[str, Any] | None:
         p = _params(lam=lam, **kw)

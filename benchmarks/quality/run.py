@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -13,7 +14,7 @@ from benchmarks.quality.peers import QUALITY_PEERS
 from benchmarks.quality.scores import Scorer
 from benchmarks.quality.sweep import best_of, sweep_peer
 
-__all__ = ["run_case"]
+__all__ = ["run_case", "write_tables"]
 
 Log = Callable[[str], None]
 METRICS = ("vertex", "surface")
@@ -67,3 +68,13 @@ def run_case(
         out["gcv"] = run_auto(case, scorer, {"tau": "gcv"}, repeats=0) if case.n <= 12000 else None
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+def write_tables(out: Path, stem: str, doc: dict[str, Any],
+                 render: Callable[[dict[str, Any]], str]) -> str:
+    """Write ``doc`` as ``out/stem.json`` and its rendering as ``out/stem.md``; the text."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=float))
+    text = render(doc)
+    (out / f"{stem}.md").write_text(text)
+    return text

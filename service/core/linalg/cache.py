@@ -1,4 +1,5 @@
-"""In-process caches: built operators (neighbourhoods + Laplacian) and CHOLMOD analyses.
+"""In-process caches: built operators (neighbourhoods + Laplacian), CHOLMOD analyses and the
+last normal frames.
 
 The same mesh is often smoothed several times (several tau, the web page's re-runs, a batch of
 scans of one part). Both caches are keyed by a digest of what the cached object depends on, so
@@ -18,7 +19,7 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-__all__ = ["LRU", "analyses", "analysis_of", "clear", "digest", "operators"]
+__all__ = ["LRU", "analyses", "analysis_of", "clear", "digest", "frames", "operators"]
 
 T = TypeVar("T")
 
@@ -83,12 +84,16 @@ operators: LRU[Any] = LRU(2)
 """Built :class:`~service.core.pipeline.SmoothingOperator` objects, by geometry and build params."""
 analyses: LRU[Any] = LRU(4)
 """CHOLMOD symbolic analyses, by sparsity pattern and ordering."""
+frames: LRU[Any] = LRU(1)
+"""The last normal frames (:func:`~service.core.system.displacement.normal_frames`): the normal
+system and the tangential step of one run ask for the same ones."""
 
 
 def clear() -> None:
-    """Empty both caches."""
+    """Empty the caches."""
     operators.clear()
     analyses.clear()
+    frames.clear()
 
 
 def analysis_of(pattern: Any, ordering: str | None = None) -> Any:

@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
-from service.core.linalg.cache import digest
+from service.core.linalg.cache import digest, frames
 from service.core.operator.laplacian import presmooth
 from service.core.operator.neighborhoods import Neighborhoods
 from service.core.params import SmoothingParams
@@ -75,9 +75,6 @@ NORMAL_MAX_ENTRIES = 50_000_000
 FRAME_STEPS = 5
 
 
-_FRAMES: dict[str, NDArray[np.float64]] = {}
-
-
 def normal_frames(
     points: NDArray[np.float64],
     adjacency: sp.csr_matrix,
@@ -110,12 +107,9 @@ def normal_frames(
         kept (the tangential step asks again for the frames the normal system used).
     """
     key = digest(points, adjacency.indptr, adjacency.indices, codim, k, steps, at)
-    hit = _FRAMES.get(key)
-    if hit is None:  # (threads: a race only recomputes)
-        hit = _frames(points, adjacency, codim, k, steps, at)
-        _FRAMES.clear()
-        _FRAMES[key] = hit
-    return hit.copy()
+    return frames.get_or_make(
+        key, lambda: _frames(points, adjacency, codim, k, steps, at), copy=np.copy
+    )
 
 
 def _frames(
