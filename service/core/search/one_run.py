@@ -50,7 +50,7 @@ from service.core.linalg.lanczos_run import (
     true_residual_bound,
 )
 
-__all__ = ["KNEE_CAP", "LAMBDA_RTOL", "SOLUTION_RTOL", "OneRun", "one_run"]
+__all__ = ["KNEE_CAP", "LAMBDA_RTOL", "SOLUTION_RTOL", "KneeRule", "OneRun", "knee_of", "one_run"]
 
 Array = NDArray[np.float64]
 SOLUTION_RTOL = 1e-3
@@ -63,6 +63,8 @@ KNEE_GRID = 240
 KNEE_RTOL = 1e-2
 #: Steps after which the knee is decided from the geometric mean of the two models.
 KNEE_CAP = 400
+#: The old rule's checkpoints (:data:`service.core.search.autotau.KNEE_CHECKPOINTS`).
+GIVE_UP_AT = (40, 60, 90, 135, 200, 300)
 
 
 @dataclass(frozen=True)
@@ -151,9 +153,35 @@ def knee_of(
     return tg is None and tr is None and window and inside, None
 
 
+class KneeRule:
+    """The knee decision over the checkpoints of one run (module docstring, step 1).
+
+    "No knee" is also decided as the old rule did (:func:`service.core.search.autotau.knee_tau`:
+    the geometric mean of the two models has no interior knee at two checkpoints in a row of
+    :data:`GIVE_UP_AT`, from the fourth on): the low end of the window can take the models many
+    steps to resolve (1M torus: below 200 steps both models put it at the lambda floor).
+    """
+
+    def __init__(self, tau0: float, lo: float, ceiling: Callable[[float], float]) -> None:
+        self.tau0, self.lo, self.ceiling = tau0, lo, ceiling
+        self.misses: list[bool] = []
+
+    def update(self, model: TikhonovModel, steps: int) -> tuple[bool, float | None]:
+        """``(decided, tau at the knee or None)`` after ``steps`` steps."""
+        decided, knee = knee_of(model, self.tau0, self.lo, self.ceiling, steps >= KNEE_CAP)
+        if decided or steps not in GIVE_UP_AT:
+            return decided, knee
+        _, mean = knee_of(model, self.tau0, self.lo, self.ceiling, final=True)
+        self.misses.append(mean is None)
+        if len(self.misses) >= 4 and self.misses[-1] and self.misses[-2]:
+            return True, None
+        return False, None
+
+
 def _checkpoint(steps: int) -> bool:
-    """Models every 10 steps up to 100, then every 10 % of the steps."""
-    return steps % max(10, (steps // 10) // 10 * 10) == 0
+    """Models every 10 steps up to 100, then every 10 % of the steps, and at
+    :data:`GIVE_UP_AT`."""
+    return steps % max(10, (steps // 10) // 10 * 10) == 0 or steps in GIVE_UP_AT
 
 
 def one_run(
@@ -192,6 +220,7 @@ def one_run(
     cnorm = float(np.sqrt(np.einsum("ij,ij->", c, c)))
     ceiling = lambda t: max(cnorm / math.sqrt(t), lo)  # noqa: E731
     target: float | None = None if knee else tau
+    rule = KneeRule(tau, lo, ceiling)
     knee_tau: float | None = None
     knee_steps: int | None = None
     lam_g = lam_r = ceiling(tau)
@@ -202,7 +231,7 @@ def one_run(
             continue
         model = run.model(order)
         if target is None:
-            decided, knee_tau = knee_of(model, tau, lo, ceiling, final=run.steps >= KNEE_CAP)
+            decided, knee_tau = rule.update(model, run.steps)
             if not decided:
                 continue
             target, knee_steps = (knee_tau if knee_tau is not None else tau), run.steps
