@@ -61,7 +61,7 @@ class System:
         c2 = np.sum((self.Q.T @ self.c) ** 2, axis=1)
         return float(np.sum(c2 * self.mu ** (2 * k - 2) / (self.mu + lam) ** (2 * k)))
 
-    def exact_E(self, lam: float, k: int) -> np.ndarray:
+    def exact_e(self, lam: float, k: int) -> np.ndarray:
         """``E_k = U - U0`` by dense solves (Deviation's recurrence)."""
         K = self.M.toarray() + lam * np.diag(self.d2)
         E = np.linalg.solve(K, self.b + lam * self.d2[:, None] * self.U0) - self.U0
@@ -139,7 +139,7 @@ def test_root_and_solution_match_dense(name: str, k: int) -> None:
     lam = s.root(tau, k)
     assert got.converged
     assert got.lam == pytest.approx(lam, rel=1e-3)
-    E = s.exact_E(got.lam, k)  # the exact minimiser at the reported lambda
+    E = s.exact_e(got.lam, k)  # the exact minimiser at the reported lambda
     size = np.linalg.norm(s.d * E)
     assert np.linalg.norm(s.d * (got.E - E)) <= 1e-3 * size
     assert got.bound <= 1e-3
@@ -166,7 +166,7 @@ def test_true_residual_bound_bounds_the_error() -> None:
     for k in (1, 2):
         model = run.model(k)
         Y = run.combine(model.chain(lam))
-        err = np.linalg.norm(Y[-1] - s.d * s.exact_E(lam, k))
+        err = np.linalg.norm(Y[-1] - s.d * s.exact_e(lam, k))
         bound = true_residual_bound(s.apply, s.c, Y, lam)
         assert err <= bound
         assert bound == pytest.approx(model.error_bound(lam), rel=1e-4)
@@ -178,7 +178,7 @@ def test_polished_when_the_bound_is_not_met() -> None:
     got = one_run(s.apply, s.c, s.d, tau, s.floor, order=1, rtol=1e-12, max_steps=8)
     assert got.notes and "polished" in got.notes[0]
     assert got.bound <= 1e-12 * 1.01
-    E = s.exact_E(got.lam, 1)
+    E = s.exact_e(got.lam, 1)
     assert np.linalg.norm(s.d * (got.E - E)) <= 1e-9 * np.linalg.norm(s.d * E)
 
 

@@ -177,8 +177,11 @@ class LanczosRun:
             stop = (length < 0) & (self.length == i + 1)
             length[stop] = i + 1
             b_safe = np.where(b > 0, b, 1.0)
-            V_prev, V, b_prev = V, np.where(length < 0, W / b_safe, 0.0), np.where(
-                length < 0, b, 0.0)
+            V_prev, V, b_prev = (
+                V,
+                np.where(length < 0, W / b_safe, 0.0),
+                np.where(length < 0, b, 0.0),
+            )
 
 
 @dataclass(frozen=True)

@@ -104,9 +104,17 @@ def _find(cells: NDArray[np.int64], m: int, key: int) -> int:  # pragma: no cove
 
 @njit(cache=True)
 def _grid_query(
-    P: Array, lo: Array, h: float, keys: NDArray[np.int64], order: NDArray[np.int64],
-    starts: NDArray[np.int64], cells: NDArray[np.int64], k: int, dist: Array,
-    idx: NDArray[np.int64], ok: NDArray[np.bool_],
+    P: Array,
+    lo: Array,
+    h: float,
+    keys: NDArray[np.int64],
+    order: NDArray[np.int64],
+    starts: NDArray[np.int64],
+    cells: NDArray[np.int64],
+    k: int,
+    dist: Array,
+    idx: NDArray[np.int64],
+    ok: NDArray[np.bool_],
 ) -> None:  # pragma: no cover
     """For every occupied cell: its block's runs of candidates, then each of its points' ``k``
     nearest (sorted by distance, ties by index); ``ok`` where the block provably holds them.
@@ -130,7 +138,11 @@ def _grid_query(
         for dx in range(-1, 2):
             for dy in range(-1, 2):
                 for dz in range(-1, 2):
-                    j = -1 if dx == dy == dz == 0 else _find(cells, m, key + (dx * d1 + dy) * d2 + dz)
+                    j = (
+                        -1
+                        if dx == dy == dz == 0
+                        else _find(cells, m, key + (dx * d1 + dy) * d2 + dz)
+                    )
                     if j >= 0:
                         run_a[nr], run_b[nr] = starts[j], starts[j + 1]
                         run_o[nr, 0], run_o[nr, 1], run_o[nr, 2] = dx, dy, dz

@@ -47,8 +47,8 @@ def leave_one_out(
     r = np.full(m, np.nan)
     v = np.full(m, np.nan)
     W = np.ones((m, max(nbr.shape[1] - 1, 0))) if use is None else use.astype(np.float64)
-    _surface_fits(np.ascontiguousarray(points, dtype=np.float64),
-                  np.ascontiguousarray(nbr, dtype=np.int64), np.ascontiguousarray(W), r, v)  # fmt: skip
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    _surface_fits(P, np.ascontiguousarray(nbr, dtype=np.int64), np.ascontiguousarray(W), r, v)
     return r, v
 
 
@@ -66,19 +66,44 @@ def _eig3(
     p = math.sqrt(p2 / 6.0)
     b00, b11, b22 = (c00 - q) / p, (c11 - q) / p, (c22 - q) / p
     b01, b02, b12 = c01 / p, c02 / p, c12 / p
-    det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (
-        b01 * b12 - b11 * b02)
+    det = (
+        b00 * (b11 * b22 - b12 * b12)
+        - b01 * (b01 * b22 - b12 * b02)
+        + b02 * (b01 * b12 - b11 * b02)
+    )
     h = min(max(det / 2.0, -1.0), 1.0)
     phi = math.acos(h) / 3.0
     mu1 = q + 2.0 * p * math.cos(phi)
     mu3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
     mu2 = 3.0 * q - mu1 - mu3
-    a00, a11, a22 = c00 - mu3, c11 - mu3, c22 - mu3
-    # the cross products of the rows of C - mu3 I; the largest is the best conditioned
+    x, y, z = _null3(c00, c01, c02, c11, c12, c22, mu3)
+    if x == y == z == 0.0:
+        return mu1, mu2, 0.0, 0.0, 0.0
+    # the trigonometric mu3 is only sqrt(eps)-accurate when mu1 ~ mu2 (acos near +-1, an
+    # isotropic tangent plane): one Rayleigh quotient makes it eps-accurate, then again
+    mu3 = (x * (c00 * x + c01 * y + c02 * z) + y * (c01 * x + c11 * y + c12 * z)
+           + z * (c02 * x + c12 * y + c22 * z))  # fmt: skip
+    x2, y2, z2 = _null3(c00, c01, c02, c11, c12, c22, mu3)
+    if not x2 == y2 == z2 == 0.0:
+        x, y, z = x2, y2, z2
+    return mu1, mu2, x, y, z
+
+
+@njit(cache=True)
+def _null3(
+    c00: float, c01: float, c02: float, c11: float, c12: float, c22: float, mu: float
+) -> tuple[float, float, float]:  # pragma: no cover
+    """Unit null vector of ``C - mu I`` from the largest cross product of two of its rows
+    (zero when they are all zero)."""
+    a00, a11, a22 = c00 - mu, c11 - mu, c22 - mu
     x1, y1, z1 = c01 * c12 - c02 * a11, c02 * c01 - a00 * c12, a00 * a11 - c01 * c01
     x2, y2, z2 = c01 * a22 - c02 * c12, c02 * c02 - a00 * a22, a00 * c12 - c01 * c02
     x3, y3, z3 = a11 * a22 - c12 * c12, c12 * c02 - c01 * a22, c01 * c12 - a11 * c02
-    n1, n2, n3 = x1 * x1 + y1 * y1 + z1 * z1, x2 * x2 + y2 * y2 + z2 * z2, x3 * x3 + y3 * y3 + z3 * z3
+    n1, n2, n3 = (
+        x1 * x1 + y1 * y1 + z1 * z1,
+        x2 * x2 + y2 * y2 + z2 * z2,
+        x3 * x3 + y3 * y3 + z3 * z3,
+    )
     if n1 >= n2 and n1 >= n3:
         x, y, z, nn = x1, y1, z1, n1
     elif n2 >= n3:
@@ -86,9 +111,9 @@ def _eig3(
     else:
         x, y, z, nn = x3, y3, z3, n3
     if not nn > 0.0:
-        return mu1, mu2, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0
     s = 1.0 / math.sqrt(nn)
-    return mu1, mu2, x * s, y * s, z * s
+    return x * s, y * s, z * s
 
 
 @njit(cache=True)

@@ -122,7 +122,10 @@ def _flattest(lams: Array, phis: Array) -> int | None:
 
 
 def knee_of(
-    model: TikhonovModel, tau0: float, lo: float, ceiling: Callable[[float], float],
+    model: TikhonovModel,
+    tau0: float,
+    lo: float,
+    ceiling: Callable[[float], float],
     final: bool = False,
 ) -> tuple[bool, float | None]:
     """``(decided, tau at the knee or None)`` from the model (module docstring, step 1);
