@@ -14,7 +14,8 @@ import pytest
 import scipy.sparse as sp
 
 from service.core.linalg.lanczos_run import LanczosRun, true_residual_bound
-from service.core.search.one_run import KNEE_WINDOW, _flattest, one_run
+from service.core.search.autotau import KNEE_WINDOW, _flattest
+from service.core.search.one_run import one_run
 
 
 def _grid_laplacian(nu: int, nv: int) -> sp.csr_matrix:

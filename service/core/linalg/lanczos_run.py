@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,7 +49,7 @@ __all__ = ["BASIS_BYTES", "LanczosRun", "TikhonovModel", "true_residual_bound"]
 
 Array = NDArray[np.float64]
 #: Bytes of Lanczos vectors kept for the solution (beyond them: a second pass).
-BASIS_BYTES = 512 * 2**20
+BASIS_BYTES = 2**30
 #: A column whose new ``beta`` falls below this times its largest ``|alpha|`` has found an
 #: invariant subspace: its model is exact and it takes no further part.
 BREAKDOWN = 1e-14
@@ -78,7 +79,7 @@ class LanczosRun:
         self.apply_mt = apply_mt
         self.c = np.asarray(c, dtype=np.float64)
         self.m, self.s = self.c.shape
-        self.beta0 = np.sqrt(np.einsum("ij,ij->j", self.c, self.c))
+        self.beta0 = np.linalg.norm(self.c, axis=0)
         self.length = np.where(self.beta0 > 0, -1, 0)  # steps per column; -1 while running
         safe = np.where(self.beta0 > 0, self.beta0, 1.0)
         self.V = self.c / safe
@@ -86,6 +87,7 @@ class LanczosRun:
         self.b_prev = np.zeros(self.s)
         self.alphas: list[Array] = []
         self.betas: list[Array] = []
+        self._scale = np.zeros(self.s)
         self.products = 0
         self.dtype = dtype
         per_vector = self.m * self.s * np.dtype(dtype).itemsize
@@ -117,19 +119,28 @@ class LanczosRun:
         W -= self.V_prev * self.b_prev
         a = np.einsum("ij,ij->j", self.V, W)
         W -= self.V * a
-        b = np.sqrt(np.einsum("ij,ij->j", W, W))
+        b = np.linalg.norm(W, axis=0)  # as krylov.lanczos: the same coefficients
         running = self.length < 0
         a = np.where(running, a, 0.0)
         b = np.where(running, b, 0.0)
         self.alphas.append(a)
         self.betas.append(b)
-        scale = np.maximum(np.abs(np.array(self.alphas)).max(axis=0), 1e-300)
-        broke = running & ~(b > BREAKDOWN * scale)
+        self._scale = np.maximum(self._scale, np.abs(a))
+        broke = running & ~(b > BREAKDOWN * np.maximum(self._scale, 1e-300))
         self.length[broke] = self.steps
-        b_safe = np.where(b > 0, b, 1.0)
-        V_next = np.where(self.length < 0, W / b_safe, 0.0)
-        self.V_prev, self.V, self.b_prev = self.V, V_next, np.where(self.length < 0, b, 0.0)
+        W /= np.where(b > 0, b, 1.0)  # in place: the values of W / b
+        dead = self.length >= 0
+        if dead.any():
+            W[:, dead] = 0.0
+        self.V_prev, self.V, self.b_prev = self.V, W, np.where(dead, 0.0, b)
         self._keep(self.V)
+
+    def live_coefficients(self) -> tuple[list[Array], list[Array], Array]:
+        """``alpha``, ``beta`` per step and ``||c||`` of the columns that are not zero (the
+        arguments of :func:`service.core.linalg.krylov._models`)."""
+        live = self.beta0 > 0
+        return ([a[live] for a in self.alphas], [b[live] for b in self.betas],
+                self.beta0[live])  # fmt: skip
 
     def model(self, order: int = 1) -> TikhonovModel:
         """Gauss and Gauss-Radau models of ``phi`` (order ``k``) after the steps done."""
@@ -190,12 +201,24 @@ class _Column:
     Z: Array  # eigenvectors of T_j
     beta0: float
     beta_last: float  # beta_j (0 when the column broke down: exact)
-    radau_theta: Array
-    radau_w: Array
+    a: Array  # the coefficients, for the Gauss-Radau rule made on demand
+    b: Array
 
     @property
     def w(self) -> Array:
         return self.beta0**2 * self.Z[0] ** 2
+
+    @cached_property
+    def radau(self) -> tuple[Array, Array]:
+        """Nodes and weights of the Gauss-Radau rule with a node at 0: ``T_j`` extended by one
+        row with ``alpha = b_j^2 e_j^T T_j^-1 e_j`` (Golub's rule)."""
+        th, j = self.theta, self.theta.size
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = float(np.sum(self.Z[-1] ** 2 / th)) if j and np.all(th > 0) else np.inf
+        if self.beta_last == 0.0 or not np.isfinite(inv):
+            return th, self.w
+        rth, rZ = eigh_tridiagonal(np.append(self.a, self.beta_last**2 * inv), self.b[:j])
+        return np.maximum(rth, 0.0), self.beta0**2 * rZ[0] ** 2
 
 
 def _column(a: Array, b: Array, beta0: float, exact: bool) -> _Column:
@@ -204,17 +227,7 @@ def _column(a: Array, b: Array, beta0: float, exact: bool) -> _Column:
         e = np.zeros(0)
         return _Column(e, np.zeros((0, 0)), beta0, 0.0, e, e)
     th, Z = eigh_tridiagonal(a, b[: j - 1])
-    th = np.maximum(th, 0.0)
-    last = 0.0 if exact else float(b[j - 1])
-    # Gauss-Radau (node at 0): T_j extended by one row with alpha = b_j^2 e_j^T T_j^-1 e_j
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = float(np.sum(Z[-1] ** 2 / th)) if np.all(th > 0) else np.inf
-    if exact or not np.isfinite(inv):
-        rth, rw = th, beta0**2 * Z[0] ** 2
-    else:
-        rth, rZ = eigh_tridiagonal(np.append(a, last**2 * inv), b[:j])
-        rth, rw = np.maximum(rth, 0.0), beta0**2 * rZ[0] ** 2
-    return _Column(th, Z, beta0, last, rth, rw)
+    return _Column(np.maximum(th, 0.0), Z, beta0, 0.0 if exact else float(b[j - 1]), a, b)
 
 
 @dataclass(frozen=True)
@@ -226,8 +239,8 @@ class TikhonovModel:
 
     def _rule(self, radau: bool) -> tuple[Array, Array]:
         if radau:
-            return (np.concatenate([c.radau_theta for c in self.columns]),
-                    np.concatenate([c.radau_w for c in self.columns]))  # fmt: skip
+            return (np.concatenate([c.radau[0] for c in self.columns]),
+                    np.concatenate([c.radau[1] for c in self.columns]))  # fmt: skip
         return (np.concatenate([c.theta for c in self.columns]),
                 np.concatenate([c.w for c in self.columns]))  # fmt: skip
 

@@ -3,16 +3,9 @@
 One recurrence on ``M_t = D^-1 M D^-1`` from ``c = D^-1 r`` (:mod:`service.core.linalg.lanczos_run`,
 one product per step for all coordinate columns) is checked every few steps:
 
-1. **Knee** (automatic tau only): the flattest point of ``log phi`` against ``log lambda`` in
-   the window ``KNEE_WINDOW x tau0`` around the discrepancy estimate ``tau0``, the rule of
-   :func:`service.core.search.autotau.knee_tau`, taken from the Gauss and from the Gauss-Radau
-   model separately. It is decided from converged quantities: when both models find a knee and
-   their ``phi`` there agree within :data:`KNEE_RTOL` (the target is what the knee decides; on
-   a plateau its lambda is ill-determined and its tau is not), or when neither finds one and
-   both models put the window's ends at the same lambdas (within the same tolerance); at
-   :data:`KNEE_CAP` steps the geometric mean of the two models decides, as the old rule did at
-   its cap. (For order ``k > 1`` the Radau rule is no upper bound, but it converges to the same
-   ``phi``: agreement still means convergence.) The new target is ``phi`` at the knee.
+1. **Knee** (automatic tau only): :mod:`service.core.search.knee_run` (decided from converged
+   quantities, or by the old rule replayed on the same coefficients). The new target is
+   ``phi`` at the knee.
 2. **lambda**: the root ``lambda_G`` of the Gauss model's ``phi = tau`` and ``lambda_R`` of the
    Radau model's; for order 1 they bracket the root of the exact ``phi`` (Golub and Meurant).
    Stop when ``lambda_R / lambda_G - 1 <= LAMBDA_RTOL`` **and** the model's bound of the solution
@@ -25,6 +18,12 @@ one product per step for all coordinate columns) is checked every few steps:
    orthogonality did to the run. If it does not (a ``float32`` basis at a very small lambda),
    the chain is polished by conjugate gradients from those vectors
    (:func:`~service.core.linalg.krylov.pcg`, same bound).
+
+**Cost model**: with a ``budget`` (products that a factorized solve would cost), once the
+target is set the run extrapolates the decay of the error bound over its last checkpoints and
+stops when the solution would cost more than the budget (or has): it returns lambda and the
+target with ``E = None``, and the caller solves directly (a heavy target at a small lambda
+needs ``O(sqrt(mu_max / lambda))`` steps: 164K icosphere at rms = 1.7 sigma, more than 5000).
 
 ``rtol`` defaults to :data:`SOLUTION_RTOL` = 1e-3, the issue's bar ("the Tikhonov part within
 1e-3 of the exact solution at the reported lambda"), not the 1e-10 of the factorized path: the
@@ -49,22 +48,13 @@ from service.core.linalg.lanczos_run import (
     TikhonovModel,
     true_residual_bound,
 )
+from service.core.search.knee_run import KneeRule
 
-__all__ = ["KNEE_CAP", "LAMBDA_RTOL", "SOLUTION_RTOL", "KneeRule", "OneRun", "knee_of", "one_run"]
+__all__ = ["LAMBDA_RTOL", "SOLUTION_RTOL", "OneRun", "direct_cost", "one_run"]
 
 Array = NDArray[np.float64]
 SOLUTION_RTOL = 1e-3
 LAMBDA_RTOL = 1e-4
-#: The window of tau around the discrepancy estimate (as :data:`autotau.KNEE_WINDOW`).
-KNEE_WINDOW = (0.4, 2.0)
-KNEE_GRID = 240
-#: The knee is decided when the Gauss and the Radau model put tau there within this (log);
-#: "no knee" when neither has one and their windows agree within it at both ends.
-KNEE_RTOL = 1e-2
-#: Steps after which the knee is decided from the geometric mean of the two models.
-KNEE_CAP = 400
-#: The old rule's checkpoints (:data:`service.core.search.autotau.KNEE_CHECKPOINTS`).
-GIVE_UP_AT = (40, 60, 90, 135, 200, 300)
 
 
 @dataclass(frozen=True)
@@ -79,8 +69,9 @@ class OneRun:
         The target met (the knee's ``phi`` when one was found).
     knee : float or None
         ``tau`` at the knee; ``None`` when none was asked or found.
-    E : ndarray, shape (m, s)
-        The deviation ``E_k(lambda)``.
+    E : ndarray, shape (m, s), or None
+        The deviation ``E_k(lambda)``; ``None`` when the cost model left the solve to the
+        caller (``lam`` is then the model's root).
     seeds : dict
         Warm starts ``D^-1 y_i`` (``"Z2"``, ... as :class:`~service.core.system.deviation.Deviation`
         names them; ``"E1"`` for ``E_1``).
@@ -96,12 +87,14 @@ class OneRun:
         Both stopping rules met within ``max_steps``.
     knee_steps : int or None
         Steps at which the knee was decided.
+    notes : list of str
+        How the knee was decided, a polish.
     """
 
     lam: float
     tau: float
     knee: float | None
-    E: Array
+    E: Array | None
     seeds: dict[str, Array]
     phi: float
     bound: float
@@ -113,78 +106,19 @@ class OneRun:
     notes: list[str] = field(default_factory=list)
 
 
-def _flattest(lams: Array, phis: Array) -> int | None:
-    """Index of the flattest point of ``log phi`` against ``log lambda`` (interior only), the
-    rule of :func:`service.core.search.autotau.knee_tau`."""
-    slope = np.gradient(np.log(np.maximum(phis, 1e-300)), np.log(lams))
-    i = int(np.argmax(slope))
-    return i if 2 <= i <= lams.size - 3 else None
-
-
-def knee_of(
-    model: TikhonovModel,
-    tau0: float,
-    lo: float,
-    ceiling: Callable[[float], float],
-    final: bool = False,
-) -> tuple[bool, float | None]:
-    """``(decided, tau at the knee or None)`` from the model (module docstring, step 1);
-    ``ceiling(tau)``: a lambda with ``phi <= tau``."""
-    lo_tau, hi_tau = KNEE_WINDOW[0] * tau0, KNEE_WINDOW[1] * tau0
-    hi = ceiling(lo_tau)
-    knees: list[tuple[float | None, float, float]] = []
-    for radau in (False, True):
-        lam_hi, lam_lo = model.root(lo_tau, lo, hi, radau), model.root(hi_tau, lo, hi, radau)
-        if not lam_lo < lam_hi:
-            knees.append((None, lam_lo, lam_hi))
-            continue
-        grid = np.geomspace(lam_lo, lam_hi, KNEE_GRID)
-        gauss = np.maximum(model.phi(grid), 1e-300)
-        both = np.sqrt(gauss * np.maximum(model.phi(grid, radau=True), 1e-300))
-        phis = both if final else np.maximum(model.phi(grid, radau), 1e-300)
-        i = _flattest(grid, phis)
-        knees.append((None if i is None else float(phis[i]), lam_lo, lam_hi))
-        if final:  # the geometric mean of the two models on the Gauss window (the old rule)
-            return True, knees[0][0]
-    if final:
-        return True, knees[0][0]
-    (tg, glo, ghi), (tr, rlo, rhi) = knees
-    if tg is not None and tr is not None:
-        return abs(math.log(tg / tr)) <= KNEE_RTOL, math.sqrt(tg * tr)
-    window = abs(math.log(glo / rlo)) <= KNEE_RTOL and abs(math.log(ghi / rhi)) <= KNEE_RTOL
-    inside = min(glo, rlo) > lo * (1 + KNEE_RTOL)  # not yet resolved down to the floor
-    return tg is None and tr is None and window and inside, None
-
-
-class KneeRule:
-    """The knee decision over the checkpoints of one run (module docstring, step 1).
-
-    "No knee" is also decided as the old rule did (:func:`service.core.search.autotau.knee_tau`:
-    the geometric mean of the two models has no interior knee at two checkpoints in a row of
-    :data:`GIVE_UP_AT`, from the fourth on): the low end of the window can take the models many
-    steps to resolve (1M torus: below 200 steps both models put it at the lambda floor).
-    """
-
-    def __init__(self, tau0: float, lo: float, ceiling: Callable[[float], float]) -> None:
-        self.tau0, self.lo, self.ceiling = tau0, lo, ceiling
-        self.misses: list[bool] = []
-
-    def update(self, model: TikhonovModel, steps: int) -> tuple[bool, float | None]:
-        """``(decided, tau at the knee or None)`` after ``steps`` steps."""
-        decided, knee = knee_of(model, self.tau0, self.lo, self.ceiling, steps >= KNEE_CAP)
-        if decided or steps not in GIVE_UP_AT:
-            return decided, knee
-        _, mean = knee_of(model, self.tau0, self.lo, self.ceiling, final=True)
-        self.misses.append(mean is None)
-        if len(self.misses) >= 4 and self.misses[-1] and self.misses[-2]:
-            return True, None
-        return False, None
+def direct_cost(size: int) -> int:
+    """Products that one CHOLMOD analysis, factorization and two solves cost on the default's
+    systems (measured on noisy icospheres and the 1M torus, one thread: 830 products at 10K,
+    990 at 41K, 1230 at 164K, 3300 at 1M unknowns; ``52 n^0.3`` within 1.6x of each)."""
+    return int(52 * max(size, 1) ** 0.3)
 
 
 def _checkpoint(steps: int) -> bool:
-    """Models every 10 steps up to 100, then every 10 % of the steps, and at
-    :data:`GIVE_UP_AT`."""
-    return steps % max(10, (steps // 10) // 10 * 10) == 0 or steps in GIVE_UP_AT
+    """Models every 10 steps up to 100, every 20 up to 200, then about every 10 % of the
+    steps (a model costs ``O(j^2)`` per column: at 1300 steps ~25 ms)."""
+    if steps <= 100:
+        return steps % 10 == 0
+    return steps % max(20, (steps // 10) // 10 * 10) == 0
 
 
 def one_run(
@@ -196,8 +130,10 @@ def one_run(
     *,
     order: int = 1,
     knee: bool = False,
+    ceiling: Callable[[float], float] | None = None,
     rtol: float = SOLUTION_RTOL,
     max_steps: int = 5000,
+    budget: int | None = None,
     keep_bytes: int = BASIS_BYTES,
     basis_dtype: type = np.float32,
 ) -> OneRun:
@@ -214,49 +150,93 @@ def one_run(
     tau : float
         The target (internal frame); with ``knee`` the discrepancy estimate ``tau0``.
     lo : float
-        The lambda floor (:meth:`~service.core.system.deviation.SmoothingSystem.lambda_floor`);
-        the ceiling is ``||c||_F / sqrt(tau)`` (``phi <= ||c||^2 / lambda^2``).
+        The lambda floor (:meth:`~service.core.system.deviation.SmoothingSystem.lambda_floor`).
     order : int
         Iterated Tikhonov order ``k``.
+    ceiling : callable, optional
+        ``tau -> ||c||_F / sqrt(tau)`` (``phi <= ||c||^2 / lambda^2``), by default from ``c``.
+    budget : int, optional
+        Products after the target is set beyond which the solve is left to the caller
+        (module docstring; :func:`direct_cost` estimates a factorized solve's).
     """
     run = LanczosRun(apply_mt, c, keep_bytes, basis_dtype)
-    cnorm = float(np.sqrt(np.einsum("ij,ij->", c, c)))
-    ceiling = lambda t: max(cnorm / math.sqrt(t), lo)  # noqa: E731
+    if ceiling is None:
+        cnorm = float(np.linalg.norm(c))
+        ceiling = lambda t: cnorm / math.sqrt(t)  # noqa: E731
+    top = lambda t: max(ceiling(t), lo)  # noqa: E731
+    rule = KneeRule(tau, lo, ceiling, c.shape[0], order) if knee else None
     target: float | None = None if knee else tau
-    rule = KneeRule(tau, lo, ceiling)
     knee_tau: float | None = None
     knee_steps: int | None = None
-    lam_g = lam_r = ceiling(tau)
-    converged = False
-    while run.steps < max_steps and not run.done:
+    lam_g = lam_r = top(tau)
+    trail: list[tuple[int, float]] = []
+    stop = ""
+    while run.steps < max_steps and not run.done and not stop:
         run.step()
-        if not (_checkpoint(run.steps) or run.done or run.steps == max_steps):
+        if not (_checkpoint(run.steps) or run.done or (rule and rule.wants(run.steps))):
             continue
         model = run.model(order)
         if target is None:
-            decided, knee_tau = rule.update(model, run.steps)
+            assert rule is not None
+            decided, knee_tau = rule.update(run, model)
             if not decided:
                 continue
             target, knee_steps = (knee_tau if knee_tau is not None else tau), run.steps
-        hi = ceiling(target)
-        lam_g = model.root(target, lo, hi)
-        lam_r = model.root(target, lo, hi, radau=True)
+        lam_g = model.root(target, lo, top(target))
         size = math.sqrt(max(float(model.phi(lam_g)), 1e-300))
-        if abs(lam_r / lam_g - 1) <= LAMBDA_RTOL and model.error_bound(lam_g) <= rtol * size:
-            converged = True
-            break
+        err = model.error_bound(lam_g) / size
+        trail.append((run.steps, err))
+        if err <= rtol:  # the Radau rule (a second eigendecomposition) only when needed
+            lam_r = model.root(target, lo, top(target), radau=True)
+            if abs(lam_r / lam_g - 1) <= LAMBDA_RTOL:
+                stop = "converged"
+        elif budget is not None and _over_budget(trail, rtol, run, knee_steps or 0, budget):
+            stop = "budget"
+    notes = [f"knee: {rule.how}"] if rule is not None and rule.how else []
     model = run.model(order)
-    if target is None:  # the cap or an invariant subspace before the knee was decided
-        _, knee_tau = knee_of(model, tau, lo, ceiling, final=True)
+    if target is None:  # max_steps before the knee was decided: the last models decide
+        assert rule is not None
+        _, knee_tau = rule.update(run, model)
         target, knee_steps = (knee_tau if knee_tau is not None else tau), run.steps
-        lam_g = model.root(target, lo, ceiling(target))
+        lam_g = model.root(target, lo, top(target))
+    if stop == "budget":
+        return OneRun(lam_g, target, knee_tau, None, {}, math.nan, math.inf, (lam_g, lam_r),
+                      run.steps, run.products, False, knee_steps, notes)  # fmt: skip
+    return _solution(run, model, c, d, lam_g, lam_r, target, knee_tau, knee_steps, rtol,
+                     stop == "converged", notes)  # fmt: skip
+
+
+def _over_budget(
+    trail: list[tuple[int, float]], rtol: float, run: LanczosRun, start: int, budget: int
+) -> bool:
+    """Whether the solve (the steps still needed, plus a second pass over all of them when the
+    basis is not kept) costs more products than ``budget``, from the decay of the error bound
+    over the last two checkpoints; ``start``: the steps done when the target was set."""
+    steps = run.steps
+    if steps - start >= budget:
+        return True
+    if len(trail) < 2:
+        return False
+    (s1, e1), (s2, e2) = trail[-2], trail[-1]
+    rate = (math.log(max(e1, 1e-300)) - math.log(max(e2, 1e-300))) / max(s2 - s1, 1)
+    need = steps + (math.log(e2 / rtol) / rate if rate > 0 else math.inf)
+    kept = run.basis is not None and need <= run.keep_steps
+    return (need - steps) + (0 if kept else need) > budget
+
+
+def _solution(
+    run: LanczosRun, model: TikhonovModel, c: Array, d: Array, lam_g: float, lam_r: float,
+    target: float, knee_tau: float | None, knee_steps: int | None, rtol: float,
+    converged: bool, notes: list[str],
+) -> OneRun:  # fmt: skip
+    """``E_k`` at ``lam_g`` from the basis, verified by its true residuals (polished if
+    needed)."""
     Y = run.combine(model.chain(lam_g))
-    bound = true_residual_bound(apply_mt, c, Y, lam_g)
+    bound = true_residual_bound(run.apply_mt, c, Y, lam_g)
     products = run.products + 1
-    notes: list[str] = []
     size = float(np.sqrt(np.einsum("ij,ij->", Y[-1], Y[-1])))
     if bound > rtol * size:
-        Y, bound, extra = _polish(apply_mt, c, Y, lam_g, rtol)
+        Y, bound, extra = _polish(run.apply_mt, c, Y, lam_g, rtol)
         products += extra
         size = float(np.sqrt(np.einsum("ij,ij->", Y[-1], Y[-1])))
         notes.append(f"Lanczos solution polished by conjugate gradients ({extra} products)")
