@@ -34,7 +34,9 @@ def main(argv: list[str] | None = None) -> int:
     from service.core.pipeline import prepare
     from service.core.search.autotau import auto_tau
     from service.core.search.budget import free_weight, rms_to_tau
-    from service.core.search.one_run import one_run
+    from service.core.search.one_run import direct_cost, one_run
+    from service.core.search.roots import newton_search
+    from service.core.system.deviation import Deviation
 
     kind, _, arg = args.input.partition(":")
     g, sigma, truth = INPUTS[kind](arg)
@@ -53,12 +55,22 @@ def main(argv: list[str] | None = None) -> int:
         for name, tau, knee in (("default", tau0, True), ("rms 1.7 sigma", tau_rms, False)):
             c0 = time.process_time()
             res = one_run(apply, c, d, tau / frame.phi_factor, s.lambda_floor(),
-                          order=pr.params.order, knee=knee, keep_bytes=args.keep_mib * 2**20)  # fmt: skip
+                          order=pr.params.order, knee=knee, keep_bytes=args.keep_mib * 2**20,
+                          budget=direct_cost(s.size))  # fmt: skip
+            E, factorized = res.E, 0
+            if E is None:  # the cost model's choice: the factorized search from the run's lambda
+                dev = Deviation(s, solver="cholmod", order=pr.params.order)
+                t = res.tau
+                found = newton_search(dev, dev.derivative, t, res.lam, dev.floor,
+                                      max(s.lambda_ceiling(t), dev.floor), order=dev.order,
+                                      propose=dev.local_root)  # fmt: skip
+                E, factorized = dev.deviation(found.lam), dev.stats.factorizations
             cpu = time.process_time() - c0
             X = g.points.copy()
-            X[~pr.fixed] = frame.back(pr.to_points(s.U0 + res.E))
+            X[~pr.fixed] = frame.back(pr.to_points(s.U0 + E))
             out[name] = {
                 "cpu": cpu, "products": res.products, "steps": res.steps,
+                "factorizations": factorized, "notes": res.notes,
                 "knee_steps": res.knee_steps, "knee": res.knee is not None,
                 "phi_over_tau": res.phi / res.tau, "bound": res.bound,
                 "quality": _quality(X, truth, args.input), "load": list(os.getloadavg()),
