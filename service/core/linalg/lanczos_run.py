@@ -92,7 +92,7 @@ class LanczosRun:
         self.dtype = dtype
         per_vector = self.m * self.s * np.dtype(dtype).itemsize
         self.keep_steps = int(keep_bytes // max(per_vector, 1))
-        self.basis: list[NDArray[np.floating]] | None = [] if self.keep_steps > 0 else None
+        self.basis: list[NDArray[np.floating]] = []
         self._keep(self.V)
 
     @property
@@ -105,12 +105,8 @@ class LanczosRun:
         return bool(np.all(self.length >= 0))
 
     def _keep(self, V: Array) -> None:
-        if self.basis is None:
-            return
-        if len(self.basis) >= self.keep_steps:
-            self.basis = None  # over budget: the solution takes a second pass
-            return
-        self.basis.append(V.astype(self.dtype))
+        if len(self.basis) < self.keep_steps:  # beyond: a solution from more steps than
+            self.basis.append(V.astype(self.dtype))  # are kept takes a second pass
 
     def step(self) -> None:
         """One Lanczos step (one product with ``M_t``)."""
@@ -142,27 +138,27 @@ class LanczosRun:
         return ([a[live] for a in self.alphas], [b[live] for b in self.betas],
                 self.beta0[live])  # fmt: skip
 
-    def model(self, order: int = 1) -> TikhonovModel:
-        """Gauss and Gauss-Radau models of ``phi`` (order ``k``) after the steps done."""
-        A = np.array(self.alphas).reshape(self.steps, self.s)
-        B = np.array(self.betas).reshape(self.steps, self.s)
+    def model(self, order: int = 1, steps: int | None = None) -> TikhonovModel:
+        """Gauss and Gauss-Radau models of ``phi`` (order ``k``) after the steps done (or the
+        first ``steps`` of them)."""
+        n = self.steps if steps is None else min(steps, self.steps)
+        A = np.array(self.alphas[:n]).reshape(n, self.s)
+        B = np.array(self.betas[:n]).reshape(n, self.s)
         cols = []
         for col in range(self.s):
-            j = int(self.length[col]) if self.length[col] >= 0 else self.steps
-            cols.append(_column(A[:j, col], B[:j, col], float(self.beta0[col]),
-                                self.length[col] >= 0))  # fmt: skip
+            j = min(int(self.length[col]), n) if self.length[col] >= 0 else n
+            exact = 0 <= self.length[col] <= n
+            cols.append(_column(A[:j, col], B[:j, col], float(self.beta0[col]), exact))
         return TikhonovModel(cols, order)
 
     def combine(self, coefs: list[Array]) -> list[Array]:
         """``V_j a`` for each ``a`` of shape ``(j, s)`` (column ``col`` of ``a`` on the basis of
-        column ``col``): from the kept basis, else by running the recurrence again."""
-        j = self.steps
+        column ``col``; ``j`` at most the steps done): from the kept basis when it holds the
+        first ``j`` vectors, else by running the recurrence again."""
+        j = max((a.shape[0] for a in coefs), default=0)
         out = [np.zeros((self.m, self.s)) for _ in coefs]
-        vectors: Iterator[NDArray[np.floating]]
-        if self.basis is not None and len(self.basis) >= j:
-            vectors = iter(self.basis[:j])
-        else:
-            vectors = self._regenerate(j)
+        kept = len(self.basis) >= j
+        vectors = iter(self.basis[:j]) if kept else self._regenerate(j)
         for i, v in enumerate(vectors):
             for o, a in zip(out, coefs, strict=True):
                 row = a[i] if i < a.shape[0] else np.zeros(self.s)

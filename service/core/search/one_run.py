@@ -202,8 +202,26 @@ def one_run(
     if stop == "budget":
         return OneRun(lam_g, target, knee_tau, None, {}, math.nan, math.inf, (lam_g, lam_r),
                       run.steps, run.products, False, knee_steps, notes)  # fmt: skip
+    if stop == "converged":  # the fewest steps whose solution meets the bound (the knee may
+        model = _shortest(run, order, lam_g, rtol)  # have taken many more: no second pass)
     return _solution(run, model, c, d, lam_g, lam_r, target, knee_tau, knee_steps, rtol,
                      stop == "converged", notes)  # fmt: skip
+
+
+def _shortest(run: LanczosRun, order: int, lam: float, rtol: float) -> TikhonovModel:
+    """The model of the fewest steps whose error bound at ``lam`` is at most ``rtol`` of its
+    solution (bisection on the steps; the bound decreases with them in practice, and the
+    caller verifies the vectors anyway)."""
+
+    def ok(j: int) -> bool:
+        m = run.model(order, j)
+        return m.error_bound(lam) <= rtol * math.sqrt(max(float(m.phi(lam)), 1e-300))
+
+    lo, hi = 1, run.steps
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if ok(mid) else (mid + 1, hi)
+    return run.model(order, hi)
 
 
 def _over_budget(
@@ -220,7 +238,7 @@ def _over_budget(
     (s1, e1), (s2, e2) = trail[-2], trail[-1]
     rate = (math.log(max(e1, 1e-300)) - math.log(max(e2, 1e-300))) / max(s2 - s1, 1)
     need = steps + (math.log(e2 / rtol) / rate if rate > 0 else math.inf)
-    kept = run.basis is not None and need <= run.keep_steps
+    kept = need <= run.keep_steps
     return (need - steps) + (0 if kept else need) > budget
 
 
