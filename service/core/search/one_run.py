@@ -4,7 +4,7 @@ One recurrence on ``M_t = D^-1 M D^-1`` from ``c = D^-1 r`` (:mod:`service.core.
 one product per step for all coordinate columns) is checked every few steps:
 
 1. **Knee** (automatic tau only): :mod:`service.core.search.knee_run` (decided from converged
-   quantities, or by the old rule replayed on the same coefficients). The new target is
+   quantities, when the old rule's model is stable, or at the old cap). The new target is
    ``phi`` at the knee.
 2. **lambda**: the root ``lambda_G`` of the Gauss model's ``phi = tau`` and ``lambda_R`` of the
    Radau model's; for order 1 they bracket the root of the exact ``phi`` (Golub and Meurant).
