@@ -21,9 +21,10 @@ one product per step for all coordinate columns) is checked every few steps:
 
 **Cost model**: with a ``budget`` (products that a factorized solve would cost), once the
 target is set the run extrapolates the decay of the error bound over its last checkpoints and
-stops when the solution would cost more than the budget (or has): it returns lambda and the
-target with ``E = None``, and the caller solves directly (a heavy target at a small lambda
-needs ``O(sqrt(mu_max / lambda))`` steps: 164K icosphere at rms = 1.7 sigma, more than 5000).
+stops when the solution would cost more than twice the budget (or has cost the budget): it
+returns lambda and the target with ``E = None``, and the caller solves directly (a heavy
+target at a small lambda needs ``O(sqrt(mu_max / lambda))`` steps: 164K icosphere at rms = 1.7
+sigma, more than 5000).
 
 ``rtol`` defaults to :data:`SOLUTION_RTOL` = 1e-3, the issue's bar ("the Tikhonov part within
 1e-3 of the exact solution at the reported lambda"), not the 1e-10 of the factorized path: the
@@ -227,19 +228,25 @@ def _shortest(run: LanczosRun, order: int, lam: float, rtol: float) -> TikhonovM
 def _over_budget(
     trail: list[tuple[int, float]], rtol: float, run: LanczosRun, start: int, budget: int
 ) -> bool:
-    """Whether the solve (the steps still needed, plus a second pass over all of them when the
-    basis is not kept) costs more products than ``budget``, from the decay of the error bound
-    over the last two checkpoints; ``start``: the steps done when the target was set."""
+    """Whether finishing the solve (the steps still needed, plus a second pass over all of them
+    when the basis is not kept) costs more than ``budget`` products: spent already, or
+    predicted at more than twice the budget from the log-linear decay of the error bound over
+    the last (up to four, at least three) checkpoints; ``start``: the steps done when the
+    target was set. Lanczos converges superlinearly, so early extrapolations overestimate:
+    the factor 2 keeps them from handing over a solve that was about to converge."""
     steps = run.steps
     if steps - start >= budget:
         return True
-    if len(trail) < 2:
+    if len(trail) < 3:
         return False
-    (s1, e1), (s2, e2) = trail[-2], trail[-1]
-    rate = (math.log(max(e1, 1e-300)) - math.log(max(e2, 1e-300))) / max(s2 - s1, 1)
-    need = steps + (math.log(e2 / rtol) / rate if rate > 0 else math.inf)
-    kept = need <= run.keep_steps
-    return (need - steps) + (0 if kept else need) > budget
+    x = np.array([t[0] for t in trail[-4:]], dtype=np.float64)
+    y = np.log(np.maximum([t[1] for t in trail[-4:]], 1e-300))
+    rate = -float(np.polyfit(x, y, 1)[0])
+    if not rate > 0:
+        return True
+    need = steps + max(math.log(trail[-1][1] / rtol), 0.0) / rate
+    cost = (need - steps) + (0 if need <= run.keep_steps else need)
+    return cost > 2 * budget
 
 
 def _solution(
