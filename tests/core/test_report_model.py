@@ -82,7 +82,8 @@ def test_report_has_exactly_the_fields_of_the_model(case: str) -> None:
 def test_every_field_has_a_description_and_an_example_that_validates() -> None:
     for name, field in Report.model_fields.items():
         assert field.description and field.examples, name
-    full = {field.alias or name: field.examples[0] for name, field in Report.model_fields.items()}
+    fields = Report.model_fields.items()
+    full = {f.alias or name: (f.examples or [None])[0] for name, f in fields}
     assert Report.model_validate(full).model_dump(by_alias=True) == full
     assert set(Report.PRESENT_ONLY) <= _members()
 
