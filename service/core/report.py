@@ -2,9 +2,10 @@
 
 Every surface reads the report's shape from here: the HTTP API documents it with this model
 (``service.api.schemas`` re-exports it, the OpenAPI component ``Report`` is generated from
-it), the API's example is :func:`report_example`, and the Python client's field list is
-generated from the OpenAPI document (``make openapi``). A test checks that the members of
-``SmoothResult.report()`` and the fields of :class:`Report` are the same set.
+it), the API's example is :func:`service.core.report.report_example`, and the Python
+client's field list is generated from the OpenAPI document (``make openapi``). A test checks
+that the members of ``SmoothResult.report()`` and the fields of
+:class:`service.core.report.Report` are the same set.
 
 Each field carries its type, description and examples; where a member has another spelling
 it is an alias (docs/names.md): ``lambda`` is ``lam`` in Python (a keyword), and reports of a
