@@ -570,7 +570,7 @@ def test_every_error_class_exit_code_is_a_documented_status() -> None:
     from service.jobs import errors as jobs_errors
     from service.settings import ConfigError
 
-    classes: list[type] = [ConfigError]
+    classes = [ConfigError]
     for module in (core_errors, io_errors, jobs_errors):
         found = [c for c in vars(module).values() if isinstance(c, type)]
         classes += [c for c in found if "exit_code" in vars(c)]
