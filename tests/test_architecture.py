@@ -25,7 +25,8 @@ only. The package's ``__init__`` is its front door, above every room. A module i
 list does not know fails the test until it is placed (``../shared/ARCHITECTURE.md``).
 In ``service.jobs`` the two backends (:data:`BACKENDS`) share the top floor and never reach each
 other, not even through a third module, and of the modules outside them only the composition
-point (:data:`JOBS_COMPOSITION`, ``make_queue``) imports a backend.
+point (:data:`JOBS_COMPOSITION`, ``make_queue``) imports a backend, and lazily: importing any
+module of ``service.jobs`` runs ``service/jobs/__init__.py``, which must load no backend.
 
 Failures list each offending import as ``a -> b (file:line)``. Run
 ``python -m tests.test_architecture`` for the counts, per package, and the arrows against the
@@ -165,24 +166,54 @@ def _resolve(name: str, known: dict[str, Path]) -> str | None:
 
 
 def _imports(module: str, path: Path, known: dict[str, Path]) -> Iterator[Edge]:
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                target = _resolve(alias.name, known)
-                if target:
-                    yield Edge(module, target, node.lineno)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
-                origin = ".".join([*base, *([node.module] if node.module else [])])
-            else:
-                origin = node.module or ""
-            for alias in node.names:
-                full = f"{origin}.{alias.name}"
-                target = full if full in known else _resolve(origin, known)
-                if target:
-                    yield Edge(module, target, node.lineno)
+        yield from _edges_of(node, module, path, known)
+
+
+def _edges_of(node: ast.AST, module: str, path: Path, known: dict[str, Path]) -> Iterator[Edge]:
+    """The edges of one ``import`` statement (none for other nodes)."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    if isinstance(node, ast.Import):
+        for alias in node.names:
+            target = _resolve(alias.name, known)
+            if target:
+                yield Edge(module, target, node.lineno)
+    elif isinstance(node, ast.ImportFrom):
+        if node.level:
+            base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+            origin = ".".join([*base, *([node.module] if node.module else [])])
+        else:
+            origin = node.module or ""
+        for alias in node.names:
+            full = f"{origin}.{alias.name}"
+            target = full if full in known else _resolve(origin, known)
+            if target:
+                yield Edge(module, target, node.lineno)
+
+
+def eager_imports(module: str) -> Iterator[Edge]:
+    """The edges of ``module`` that run when it is imported: at module level (also inside
+    ``if``/``try``/``with``), not inside a function or class, not under ``TYPE_CHECKING``."""
+    known = modules()
+    path = known[module]
+    todo = list(ast.parse(path.read_text(encoding="utf-8"), str(path)).body)
+    while todo:
+        node = todo.pop(0)
+        yield from _edges_of(node, module, path, known)
+        if isinstance(node, ast.If):
+            test = _dotted_name(node.test)
+            todo += node.orelse if test.endswith("TYPE_CHECKING") else [*node.body, *node.orelse]
+        elif isinstance(node, ast.Try):
+            todo += [*node.body, *node.orelse, *node.finalbody]
+            todo += [stmt for handler in node.handlers for stmt in handler.body]
+        elif isinstance(node, ast.With):
+            todo += node.body
+
+
+def _dotted_name(node: ast.expr) -> str:
+    if isinstance(node, ast.Attribute):
+        return f"{_dotted_name(node.value)}.{node.attr}"
+    return node.id if isinstance(node, ast.Name) else ""
 
 
 def import_graph() -> dict[str, dict[str, Edge]]:
@@ -350,6 +381,19 @@ def backend_imports_outside_composition(graph: dict[str, dict[str, Edge]]) -> li
     ]
 
 
+def backends_loaded_by_the_packages() -> list[Edge]:
+    """Imports of a backend that run whenever any module of ``service.jobs`` is imported: the
+    eager imports of the ``__init__`` of ``service`` and ``service.jobs`` (Python runs them
+    first), e.g. an RQ worker importing ``service.jobs.distributed.tasks`` would load the
+    embedded backend through ``service/jobs/__init__.py``."""
+    return [
+        edge
+        for package in ("service", "service.jobs")
+        for edge in eager_imports(package)
+        if room("service.jobs", edge.target) in BACKENDS
+    ]
+
+
 def backends_reaching_each_other(graph: dict[str, dict[str, Edge]]) -> list[list[Edge]]:
     """For every module of one backend that reaches the other backend through imports
     (directly or through other modules), the shortest such path."""
@@ -447,11 +491,14 @@ def summary() -> str:
             f"  modules in rooms not placed in the order: {len(unplaced[package])}",
             *(f"    {m} ({relative(m)})" for m in unplaced[package]),
         ]
+    eager = backends_loaded_by_the_packages()
     lines += [
         f"service.jobs: backend imports not from {JOBS_COMPOSITION}: {len(backend_edges)}",
         *(f"    {e.describe()}" for e in backend_edges),
         f"service.jobs: backend modules reaching the other backend: {len(reaching)}",
         *(f"    {_path_text(p)}" for p in reaching),
+        f"service.jobs: backend imports run by every import of a jobs module: {len(eager)}",
+        *(f"    {e.describe()}" for e in eager),
         f"folders under service/: {len(sizes)}, largest {biggest[0]} with {biggest[1]} modules",
     ]
     return "\n".join(lines)
@@ -502,6 +549,14 @@ def test_the_two_job_backends_never_reach_each_other() -> None:
     store."""
     found = backends_reaching_each_other(import_graph())
     assert not found, _listing("one backend reaching the other", map(_path_text, found))
+
+
+def test_importing_a_jobs_module_loads_no_backend() -> None:
+    """The composition point imports the backends lazily (inside ``make_queue``), so that a
+    process of one backend never loads the other through the packages' ``__init__``."""
+    found = backends_loaded_by_the_packages()
+    title = "backend imports run by every import of a jobs module (make them lazy)"
+    assert not found, _listing(title, map(Edge.describe, found))
 
 
 def test_the_graph_builder_sees_lazy_and_type_only_imports() -> None:
