@@ -1,6 +1,6 @@
 """The one path every geometry request takes: spool the body, then check it in a process.
 
-``POST /v1/jobs``, ``POST /v1/smooth`` and ``POST /v1/info`` call :func:`intake` with the
+``POST /v1/jobs``, ``POST /v1/smooth`` and ``POST /v1/info`` call :meth:`Intake.run` with the
 function of :mod:`service.api.intake.ingest` they need. The body is streamed to the spool directory
 (:mod:`service.api.intake.uploads`), then parsed and checked in a worker process
 (:mod:`service.api.intake.isolation`) with

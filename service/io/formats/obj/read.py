@@ -1,4 +1,4 @@
-"""Wavefront OBJ reading (``v``, ``vt``, ``vn``, ``f``, ``l``); writing is in :mod:`.obj_write`.
+"""Wavefront OBJ reading (``v``, ``vt``, ``vn``, ``f``, ``l``); writing is in :mod:`.obj.write`.
 
 Reading
 -------
@@ -10,7 +10,7 @@ Reading
 * ``l i j k ...``: a polyline; one whose last index repeats its first is closed.
 * Every other line (``vt``, ``g``, ``o``, ``s``, ``usemtl``, ``mtllib``, comments, ...) is kept:
   the file is written back line for line with new ``v`` lines (the input's digits) and
-  recomputed (or dropped) ``vn`` lines (see :mod:`.obj_write`). Unknown statements are counted
+  recomputed (or dropped) ``vn`` lines (see :mod:`.obj.write`). Unknown statements are counted
   in the notes; leading ``#`` lines are the document's comments.
 
 The file is read in bounded blocks of lines; errors name the line.
