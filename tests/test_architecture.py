@@ -33,7 +33,9 @@ PACKAGES = {
     "geosmooth": ROOT / "geosmooth",
     "geosmooth_client": ROOT / "clients" / "python" / "geosmooth_client",
 }
-LAYERS = ("service.core", "service.io", "service.jobs", "service.api", "service.cli")
+LAYERS = (
+    "service.core", "service.io", "service.workflows", "service.jobs", "service.api", "service.cli"
+)
 FACADE_MAY_NOT = ("service.jobs", "service.api", "service.cli")
 #: Top-level modules of ``service`` and the lowest layer that may import them.
 LEAVES = {"service.settings": "service.jobs", "service.exit_codes": "service.api"}

@@ -24,11 +24,10 @@ from pydantic import ValidationError
 from service.api.errors import ApiProblem, finite
 from service.api.http.bounds import Limits
 from service.core.params import SmoothingParams
-from service.core.search.tau_range import check_tau
 from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
 from service.io.dispatch import detect_format, sniff_format
 from service.io.errors import FormatError, UnsupportedFormat
-from service.jobs.queue import JobSize, NewJob
+from service.jobs.queue import NewJob
 
 __all__ = [
     "IngestRequest",
@@ -336,46 +335,57 @@ def parse_request(req: IngestRequest, max_points: int | None = None) -> ParsedRe
 
 def check_job(req: IngestRequest) -> NewJob:
     """``POST /v1/jobs``: the parsed, checked job (format, parameters, file, the key's bounds,
-    ``tau``), typed; the router adds tenant and idempotency key. An inline geometry becomes a
-    JSON file next to the spooled body, written once every check passed."""
+    then the submit check of :func:`service.workflows.admission.check_submit`: estimate, ``tau``,
+    dry run, tiles), typed and carrying the check's :class:`~service.workflows.admission.
+    Admission`; the router adds tenant and idempotency key. An inline geometry becomes a JSON
+    file next to the spooled body, written once every check passed."""
+    from service.workflows.admission import Policy, check_submit
+
     parsed = parse_request(req, req.limits.max_points)
-    from service.api.intake.dryrun import check_time, dry_run  # 422: too slow, or refused
-
-    check_time(parsed.document.geometry, parsed.params, req.options.get("job_timeout"))
-    check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
-
-    dry_run(parsed.document.geometry, parsed.params, int(req.options.get("dry_run_points", 0)))
+    options = req.options
+    policy = Policy(
+        memory_limit=options.get("memory_limit"),
+        time_limit=options.get("job_timeout"),
+        exact_tau_max_points=req.exact_tau_max_points,
+        dry_run_points=int(options.get("dry_run_points", 0)),
+        tile_workers=int(options.get("tile_workers", 1)),
+    )
+    admission = check_submit(parsed.document.geometry, parsed.params, policy)  # 422: refused
     if "geometry" in parsed.extra:
         inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
         inline.write_text(json.dumps(parsed.extra["geometry"], separators=(",", ":")))
         parsed.input_path = str(inline)
     return NewJob(
-        Path(parsed.input_path), parsed.fmt, parsed.params,
-        size=JobSize.of(parsed.document.geometry), filename=req.filename, weld=parsed.weld,
-        webhook_url=parsed.webhook_url,
+        Path(parsed.input_path), parsed.fmt, parsed.params, size=admission.size,
+        filename=req.filename, weld=parsed.weld, webhook_url=parsed.webhook_url,
+        admission=admission,
     )  # fmt: skip
 
 
 def smooth_input(req: IngestRequest) -> dict[str, Any]:
-    """``POST /v1/smooth``: smooth and write the answer to a file next to the spool file."""
-    from service.core import smooth
-    from service.io import write_geometry
-    from service.io.dispatch import check_output
+    """``POST /v1/smooth``: the use case read -> smooth -> write
+    (:func:`service.workflows.smooth_file.smooth_file`) on the parsed document, the answer
+    written to a file next to the spool file."""
+    from service.workflows.admission import check_sync
+    from service.workflows.smooth_file import smooth_file
 
     parsed = parse_request(req, min(req.limits.sync_max_points, req.limits.max_points))
     fmt = req.out_format or parsed.fmt
-    check_output(parsed.document, fmt)  # 422 naming ``format``, before smoothing
-    check_tau(parsed.document.geometry, parsed.params, 0, analyse=False)
-    result = smooth(parsed.document.geometry, parsed.params)
-    report = finite(result.report())
     out = Path(req.work_dir) / (Path(req.path).stem + f".result.{fmt}")
-    if fmt == "json":
-        geometry = write_geometry(parsed.document, "json", result.points).strip()
-        text = json.dumps(report, separators=(",", ":"), allow_nan=False)
-        out.write_bytes(b'{"geometry":' + geometry + b',"report":' + text.encode() + b"}")
-    else:
-        out.write_bytes(write_geometry(parsed.document, fmt, result.points))
-    return {"path": str(out), "fmt": fmt, "report": report, "input_fmt": parsed.fmt}
+    answer: dict[str, Any] = {"path": str(out), "fmt": fmt}
+
+    def store(result: Any, data: bytes) -> None:
+        from service.io.atomic import write_file
+
+        report = answer["report"] = finite(result.report())
+        if fmt == "json":
+            text = json.dumps(report, separators=(",", ":"), allow_nan=False)
+            data = b'{"geometry":' + data.strip() + b',"report":' + text.encode() + b"}"
+        write_file(out, data)
+
+    smooth_file(parsed.document, store, parsed.params, out_fmt=fmt,
+                check=lambda geometry: check_sync(geometry, parsed.params))  # fmt: skip
+    return {**answer, "input_fmt": parsed.fmt}
 
 
 def _bound_only(geometry: Any, params: SmoothingParams, exact_max_points: int) -> bool:
