@@ -268,7 +268,6 @@ def dry_run(
     (4xx) error of the engine, ignore everything else."""
     if max_points <= 0 or len(geometry.points) > max_points:
         return
-    from service.core.errors import GeosmoothError
     from service.workflows.smooth_file import run_engine
 
     est = estimate or _estimate(JobSize.of(geometry), params, None)
@@ -278,8 +277,11 @@ def dry_run(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             run_engine(geometry, params)
-    except GeosmoothError as exc:
-        if 400 <= exc.status < 500:
+    except Exception as exc:  # anything but the engine's typed verdict is left to the job
+        status = getattr(type(exc), "status", None)  # a typed error: class status, to_dict()
+        if not isinstance(status, int) or not callable(getattr(exc, "to_dict", None)):
+            return
+        if 400 <= status < 500:
             raise
 
 
