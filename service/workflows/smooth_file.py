@@ -169,7 +169,7 @@ def streamed_format_of(
     coordinates)."""
     if not params.tile_points or not isinstance(source, Path) or not isinstance(target, Path):
         return None
-    if any(options.values()) if options else False:
+    if options and any(options.values()):
         return None
     from service.io.stream import streamed_format
 

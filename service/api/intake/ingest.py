@@ -8,8 +8,10 @@ replaced by the uploaded file name (no server path ever reaches a client).
 
 Checks, cheapest first: parameters (422) and the key's bounds on them (``k``,
 ``max_iterations``: 422), the format (415), the file (400 malformed, 422 invalid geometry), the
-key's size bounds (points, faces: 413; ``spectrum``: 422), and for a job the smoothing factor
-against ``(0, phi(0))`` (422, as ``POST /v1/smooth`` answers it).
+key's size bounds (points, faces: 413; ``spectrum``: 422). What a job or a synchronous answer
+checks and runs next is the use cases' (:mod:`service.api.intake.smoothing`: the submit check of
+:mod:`service.workflows.admission`, the read -> smooth -> write of
+:mod:`service.workflows.smooth_file`).
 """
 
 from __future__ import annotations
@@ -27,16 +29,8 @@ from service.core.params import SmoothingParams
 from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
 from service.io.dispatch import detect_format, sniff_format
 from service.io.errors import FormatError, UnsupportedFormat
-from service.jobs.queue import NewJob
 
-__all__ = [
-    "IngestRequest",
-    "ParsedRequest",
-    "check_job",
-    "describe_input",
-    "parse_request",
-    "smooth_input",
-]
+__all__ = ["IngestRequest", "ParsedRequest", "describe_input", "parse_request"]
 
 _TRUE, _FALSE = frozenset({"true", "1", "yes", "on"}), frozenset({"false", "0", "no", "off", ""})
 _JSON_MEMBERS = frozenset({"geometry", "params", "weld", "webhook_url"})
@@ -331,61 +325,6 @@ def parse_request(req: IngestRequest, max_points: int | None = None) -> ParsedRe
     _check_size(parsed, req.limits.max_points if max_points is None else max_points, req.limits)
     _check_param_bounds(parsed.params, req.limits, str(parsed.document.geometry.kind))
     return parsed
-
-
-def check_job(req: IngestRequest) -> NewJob:
-    """``POST /v1/jobs``: the parsed, checked job (format, parameters, file, the key's bounds,
-    then the submit check of :func:`service.workflows.admission.check_submit`: estimate, ``tau``,
-    dry run, tiles), typed and carrying the check's :class:`~service.workflows.admission.
-    Admission`; the router adds tenant and idempotency key. An inline geometry becomes a JSON
-    file next to the spooled body, written once every check passed."""
-    from service.workflows.admission import Policy, check_submit
-
-    parsed = parse_request(req, req.limits.max_points)
-    options = req.options
-    policy = Policy(
-        memory_limit=options.get("memory_limit"),
-        time_limit=options.get("job_timeout"),
-        exact_tau_max_points=req.exact_tau_max_points,
-        dry_run_points=int(options.get("dry_run_points", 0)),
-        tile_workers=int(options.get("tile_workers", 1)),
-    )
-    admission = check_submit(parsed.document.geometry, parsed.params, policy)  # 422: refused
-    if "geometry" in parsed.extra:
-        inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
-        inline.write_text(json.dumps(parsed.extra["geometry"], separators=(",", ":")))
-        parsed.input_path = str(inline)
-    return NewJob(
-        Path(parsed.input_path), parsed.fmt, parsed.params, size=admission.size,
-        filename=req.filename, weld=parsed.weld, webhook_url=parsed.webhook_url,
-        admission=admission,
-    )  # fmt: skip
-
-
-def smooth_input(req: IngestRequest) -> dict[str, Any]:
-    """``POST /v1/smooth``: the use case read -> smooth -> write
-    (:func:`service.workflows.smooth_file.smooth_file`) on the parsed document, the answer
-    written to a file next to the spool file."""
-    from service.workflows.admission import check_sync
-    from service.workflows.smooth_file import smooth_file
-
-    parsed = parse_request(req, min(req.limits.sync_max_points, req.limits.max_points))
-    fmt = req.out_format or parsed.fmt
-    out = Path(req.work_dir) / (Path(req.path).stem + f".result.{fmt}")
-    answer: dict[str, Any] = {"path": str(out), "fmt": fmt}
-
-    def store(result: Any, data: bytes) -> None:
-        from service.io.atomic import write_file
-
-        report = answer["report"] = finite(result.report())
-        if fmt == "json":
-            text = json.dumps(report, separators=(",", ":"), allow_nan=False)
-            data = b'{"geometry":' + data.strip() + b',"report":' + text.encode() + b"}"
-        write_file(out, data)
-
-    smooth_file(parsed.document, store, parsed.params, out_fmt=fmt,
-                check=lambda geometry: check_sync(geometry, parsed.params))  # fmt: skip
-    return {**answer, "input_fmt": parsed.fmt}
 
 
 def _bound_only(geometry: Any, params: SmoothingParams, exact_max_points: int) -> bool:

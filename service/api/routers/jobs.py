@@ -36,8 +36,8 @@ from service.api.docs import (
 from service.api.docs import output_format as output_format_of
 from service.api.errors import ApiProblem
 from service.api.http.logs import get_logger
-from service.api.intake.ingest import check_job
 from service.api.intake.request import spool_dir
+from service.api.intake.smoothing import check_job
 from service.api.problems import FiniteJSONResponse
 from service.api.results import pin_file, render_geometry, result_name
 from service.api.schemas import Job, JobList, JobStatusName, OutputFormat, PageLinks, Report
