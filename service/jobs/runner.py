@@ -130,7 +130,9 @@ class JobContext:
 
 
 def smooth_job(ctx: JobContext) -> dict[str, Any]:
-    """The real job: read the input, smooth it, store ``result.npy`` and ``result.<fmt>``.
+    """The real job: the use case read -> smooth -> write
+    (:func:`service.workflows.smooth_file.smooth_file`) storing ``result.npy`` and
+    ``result.<fmt>``.
 
     Parameters
     ----------
@@ -142,23 +144,24 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     dict
         ``SmoothResult.report()``.
     """
-    from service.io import read_geometry, write_geometry
+    from service.workflows.smooth_file import smooth_file
 
-    ctx.stage("reading")
-    doc = read_geometry(ctx.input_path, ctx.fmt, weld=ctx.weld)
-    result = run_smooth(ctx, doc.geometry)  # tiled on local processes with tile_points
-    ctx.stage("writing")
-    buf = io.BytesIO()
-    np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))
-    ctx.write("result.npy", buf.getvalue())
-    ctx.write(f"result.{ctx.fmt}", write_geometry(doc, ctx.fmt, result.points))
-    return result.report()
+    def store(result: SmoothResult, data: bytes) -> None:
+        buf = io.BytesIO()
+        np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))
+        ctx.write("result.npy", buf.getvalue())
+        ctx.write(f"result.{ctx.fmt}", data)
+
+    done = smooth_file(ctx.input_path, store, ctx.params, fmt=ctx.fmt, out_fmt=ctx.fmt,
+                       read_options={"weld": ctx.weld}, stage=ctx.stage,
+                       engine=lambda geometry: run_smooth(ctx, geometry))  # fmt: skip
+    return done.result.report()
 
 
 def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
     """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on
     :func:`local_tiles` with the tile counts in every progress dict (``tiles`` member)."""
-    from service.core.tiles.entry import smooth
+    from service.workflows.smooth_file import run_engine as smooth
 
     params = ctx.params
     if params.tile_points is None or geometry.n <= params.tile_points:
