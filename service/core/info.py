@@ -3,7 +3,7 @@
 Used by ``geosmooth info``, the API's ``POST /v1/info`` and the web page. It builds the
 neighbourhoods and the Laplacian once (as ``smooth`` would) to get ``phi(0)`` of eq. (14), the
 upper end of the valid range of ``tau`` (section 6.1), and estimates the noise level (see
-:mod:`service.core.search.noise`) to suggest a smoothing factor.
+:mod:`service.core.noise.estimate`) to suggest a smoothing factor.
 """
 
 from __future__ import annotations
@@ -102,8 +102,9 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs).
         ``noise`` says whether noise was found and on what evidence.
         ``sigma_estimate`` is the noise level across the shape
-        (:func:`~service.core.search.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
-        rule would choose with ``params`` (:func:`~service.core.search.autotau.auto_tau`) and
+        (:func:`~service.core.noise.estimate.estimate_noise`), ``suggested_tau`` the tau the
+        automatic rule would choose with ``params`` (:func:`~service.core.search.autotau.auto_tau`)
+        and
         ``suggested_rms`` the same budget as an RMS displacement; ``None`` when no estimate
         can be made (too few or degenerate points) or when it falls outside ``(0, phi0)``.
     """

@@ -16,12 +16,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.core.checks.diagnostics import diagnostics
-from service.core.checks.shrinkage import check_preservable, preserve_measure
 from service.core.errors import ParameterError, TauOutOfRange
+from service.core.finish.clip import clip_points
+from service.core.finish.tangential import relax_tangential
+from service.core.finish.volume import check_preservable, preserve_measure
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.linalg.cache import analysis_of
 from service.core.linalg.resources import choose_solver
+from service.core.noise.robust import DataWeights, data_weights, pull_in
 from service.core.operator.build import (
     SmoothingOperator,
     build_laplacian,
@@ -32,15 +35,13 @@ from service.core.params import SmoothingParams
 from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
 from service.core.run import Run
-from service.core.search.maxnorm import bound_deviation, clip_points
+from service.core.search.maxnorm import bound_deviation
 from service.core.search.polyfilter import filter_system
-from service.core.search.robust import DataWeights, data_weights, pull_in
 from service.core.search.roots import LambdaSearch
 from service.core.search.target import check_range, find_lambda, gcv_search, knee, resolve_tau
 from service.core.system.deviation import Deviation, SmoothingSystem
 from service.core.system.displacement import auto_system, normal_mode, resolve_displacement
 from service.core.system.elimination import laplacian_system
-from service.core.system.tangential import relax_tangential
 
 __all__ = [
     "Problem",

@@ -92,7 +92,7 @@ class SmoothResult:
     tau_rule : str
         How lambda was set: ``"lam"``, ``"tau"``, ``"rms"``, ``"auto"`` or ``"gcv"``.
     sigma_estimate : float or None
-        Estimated noise level (``service.core.search.noise``): the automatic tau's (0 when no
+        Estimated noise level (``service.core.noise.estimate``): the automatic tau's (0 when no
         noise was found), or for a given tau/rms/lam the one the shape checks compared with
         (``None`` when no noise was found).
     tau_how : str or None
@@ -110,7 +110,7 @@ class SmoothResult:
         returned unchanged, ``tau_how`` says why); ``None`` for other rules.
     tangential : dict or None
         The tangential step of normal displacement on meshes
-        (:mod:`service.core.system.tangential`): ``share`` (estimated along-surface over normal
+        (:mod:`service.core.finish.tangential`): ``share`` (estimated along-surface over normal
         noise), ``budget`` and ``psi`` (its target and the tangential deviation reached, input
         frame), ``reverted`` (points kept at the normal solve's position to avoid folds);
         ``None`` when the step does not apply.

@@ -25,7 +25,7 @@ class Run:
         self.sigma: float | None = None  # core-quality: automatic tau, max-norm bound
         self.tau_how: str | None = None
         self.bound: dict[str, Any] | None = None
-        self.data_weights: Any = None  # issue 21: service.core.search.robust.DataWeights
+        self.data_weights: Any = None  # issue 21: service.core.noise.robust.DataWeights
 
     def emit(self, stage: str, **kw: Any) -> None:
         if self.progress is not None:

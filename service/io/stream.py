@@ -285,8 +285,8 @@ def smooth_streamed(
 ) -> SmoothResult:
     """Read the coordinates of ``src`` in chunks, smooth them (tiled with
     ``params.tile_points``), write ``dst`` by streaming ``src`` again (module docstring)."""
+    from service.core.entry import smooth
     from service.core.geometry import Geometry
-    from service.core.tiles.entry import smooth
 
     P, faces = read_coordinates(src, fmt)
     result = smooth(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit,

@@ -158,7 +158,7 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
 def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
     """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on
     :func:`local_tiles` with the tile counts in every progress dict (``tiles`` member)."""
-    from service.core.tiles.entry import smooth
+    from service.core.entry import smooth
 
     params = ctx.params
     if params.tile_points is None or geometry.n <= params.tile_points:

@@ -24,7 +24,7 @@ from pydantic import ValidationError
 from service.api.errors import ApiProblem, finite
 from service.api.http.bounds import Limits
 from service.core.params import SmoothingParams
-from service.core.search.tau_range import check_tau
+from service.core.tau_range import check_tau
 from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
 from service.io.dispatch import detect_format, sniff_format
 from service.io.errors import FormatError, UnsupportedFormat
@@ -67,7 +67,7 @@ class IngestRequest:
         ``POST /v1/smooth``: the answer's format (default: the input's).
     exact_tau_max_points : int
         Largest point cloud whose ``tau`` is checked exactly at submit (see
-        :mod:`service.core.search.tau_range`).
+        :mod:`service.core.tau_range`).
     options : dict
         Endpoint-specific options of the worker function (e.g. ``preview`` of ``/v1/info``).
     """
@@ -393,7 +393,7 @@ def _outline(geometry: Any) -> dict[str, Any]:
     import numpy as np
 
     from service.core.info import mean_spacing
-    from service.core.search.tau_range import centroid_bound
+    from service.core.tau_range import centroid_bound
 
     phi0, weight = centroid_bound(geometry)
     pts = geometry.points

@@ -13,16 +13,16 @@ from numpy.typing import NDArray
 from service.core.checks.guards import fold_note, guard_warnings, noise_ratio, shape_checks
 from service.core.checks.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
 from service.core.errors import ShapeLost, SolverError
+from service.core.finish.tangential import TangentialStep
 from service.core.frame import Frame
 from service.core.geometry import Geometry
+from service.core.noise.estimate import codimension, estimate_noise
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.result import SmoothResult, Spectrum
 from service.core.run import Run
-from service.core.search.noise import codimension, estimate_noise
 from service.core.search.roots import LambdaSearch
 from service.core.system.deviation import Deviation
-from service.core.system.tangential import TangentialStep
 
 __all__ = ["diagnostics"]
 

@@ -1,15 +1,15 @@
 """Choosing tau without being told: the automatic rule and generalized cross-validation.
 
 * ``tau="auto"`` (also when none of lam, tau, rms is given): estimate the noise level sigma
-  (:func:`service.core.search.noise.estimate_noise`) and take the discrepancy-principle budget
+  (:func:`service.core.noise.estimate.estimate_noise`) and take the discrepancy-principle budget
   ``tau = c r sigma^2 sum omega_i^2`` over the points that can move
-  (:func:`service.core.search.noise.discrepancy_tau`); the usual lambda search then meets it.
+  (:func:`service.core.noise.estimate.discrepancy_tau`); the usual lambda search then meets it.
 * ``tau="gcv"``: the lambda minimizing the generalized cross-validation score
   ``V(lambda) = (phi(lambda) / (m c)) / (tr(I - H(lambda)) / m)^2`` of the smoothing system
   (Wahba 1977; Golub, Heath and Wahba 1979), where ``I - H`` maps the data ``U0`` to the
   residual, ``(K^-1 M)^k`` for iterated Tikhonov of order ``k``; its trace comes from
   Hutchinson probes solved with the factorization already made for ``phi(lambda)``
-  (:func:`service.core.search.noise.hutchinson_trace`). ``tau`` is then ``phi`` at that lambda.
+  (:func:`service.core.noise.estimate.hutchinson_trace`). ``tau`` is then ``phi`` at that lambda.
 """
 
 from __future__ import annotations
@@ -26,8 +26,13 @@ from scipy.optimize import minimize_scalar
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.linalg.krylov import Quadrature, _models, log_bisect
+from service.core.noise.estimate import (
+    codimension,
+    discrepancy_tau,
+    estimate_noise,
+    hutchinson_trace,
+)
 from service.core.params import SmoothingParams
-from service.core.search.noise import codimension, discrepancy_tau, estimate_noise, hutchinson_trace
 from service.core.system.deviation import Deviation
 from service.core.system.displacement import tangential_ratio
 
@@ -59,11 +64,11 @@ def auto_tau(
     """``tau`` from the estimated noise (discrepancy principle, calibrated factor).
 
     ``tau = 0`` (the run returns its input unchanged, ``rule`` says why) when there is nothing
-    to remove: no noise found (:func:`~service.core.search.noise.estimate_noise`: exactly
+    to remove: no noise found (:func:`~service.core.noise.estimate.estimate_noise`: exactly
     smooth, or residuals that grow with the neighbourhood like the shape's own detail), no
     estimate possible (too few or degenerate points), or no point free to move. ``tau_scale``:
     ``sigma_i / sigma`` per point when the data weights follow the noise
-    (:mod:`~service.core.search.robust`): the budget sums ``(omega_i sigma_i / sigma)^2``.
+    (:mod:`~service.core.noise.robust`): the budget sums ``(omega_i sigma_i / sigma)^2``.
     """
     est = estimate_noise(geometry)
     if est is None:

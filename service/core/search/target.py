@@ -15,12 +15,12 @@ from numpy.typing import NDArray
 from service.core.errors import ParameterError, TauOutOfRange
 from service.core.geometry import Geometry
 from service.core.linalg.resources import prefer_matrix_free
+from service.core.noise.robust import DataWeights
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.run import Run
 from service.core.search.autotau import auto_tau, gcv_lambda, knee_tau
 from service.core.search.budget import free_weight, rms_to_tau
-from service.core.search.robust import DataWeights
 from service.core.search.roots import (
     LambdaSearch,
     estimate_lambda,

@@ -39,10 +39,10 @@ from scipy.spatial import cKDTree
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.linalg.cache import digest, frames
+from service.core.noise.estimate import codimension
 from service.core.operator.laplacian import presmooth
 from service.core.operator.neighborhoods import Neighborhoods
 from service.core.params import SmoothingParams
-from service.core.search.noise import codimension
 from service.core.system.deviation import SmoothingSystem
 
 __all__ = [
@@ -279,7 +279,7 @@ def tangential_ratio(points: NDArray[np.float64], adjacency: sp.csr_matrix, codi
     How much of the roughness of the input lies along the shape rather than across it: near 0
     for noise along the normals on a regular sampling, about 2 for isotropic noise on a
     surface (two tangent directions against one normal direction). The automatic tau of free
-    displacement spends budget on it (:func:`service.core.search.noise.discrepancy_tau`).
+    displacement spends budget on it (:func:`service.core.noise.estimate.discrepancy_tau`).
     """
     deg = np.asarray(adjacency.sum(axis=1)).ravel()
     inv = np.divide(1.0, deg, out=np.zeros_like(deg), where=deg > 0)

@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from service.core.checks.guards import fold_mask
+from service.core.finish.folds import fold_mask
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
