@@ -3,7 +3,7 @@
 * ``tau="auto"`` (also when none of lam, tau, rms is given): estimate the noise level sigma
   (:func:`service.core.noise.estimate.estimate_noise`) and take the discrepancy-principle budget
   ``tau = c r sigma^2 sum omega_i^2`` over the points that can move
-  (:func:`service.core.noise.estimate.discrepancy_tau`); the usual lambda search then meets it.
+  (:func:`discrepancy_tau`); the usual lambda search then meets it.
 * ``tau="gcv"``: the lambda minimizing the generalized cross-validation score
   ``V(lambda) = (phi(lambda) / (m c)) / (tr(I - H(lambda)) / m)^2`` of the smoothing system
   (Wahba 1977; Golub, Heath and Wahba 1979), where ``I - H`` maps the data ``U0`` to the
@@ -28,7 +28,6 @@ from service.core.geometry import Geometry
 from service.core.linalg.krylov import Quadrature, _models, log_bisect
 from service.core.noise.estimate import (
     codimension,
-    discrepancy_tau,
     estimate_noise,
     hutchinson_trace,
 )
@@ -36,11 +35,43 @@ from service.core.params import SmoothingParams
 from service.core.system.deviation import Deviation
 from service.core.system.displacement import tangential_ratio
 
-__all__ = ["GCV_PROBES", "AutoTau", "auto_tau", "gcv_lambda"]
+__all__ = [
+    "GCV_PROBES",
+    "TANGENTIAL_SHARE",
+    "TAU_FACTOR",
+    "AutoTau",
+    "auto_tau",
+    "discrepancy_tau",
+    "gcv_lambda",
+]
 
 GCV_PROBES = 8
 Array = NDArray[np.float64]
 EXACT_TRACE = 400
+
+
+#: ``c`` of the discrepancy rule ``tau = c * r * sigma^2 * sum omega_i^2 * (1 + alpha rho)``
+#: (``r`` normal directions per point), per displacement mode, and ``alpha`` (free
+#: displacement only); calibrated on the quality benchmark (``benchmarks/quality/README.md``).
+TAU_FACTOR: dict[str, float] = {"free": 0.9, "normal": 1.0}
+TANGENTIAL_SHARE = 1.0
+
+
+def discrepancy_tau(
+    sigma: float, weight_sum: float, codim: int, displacement: str, rho: float = 0.0
+) -> float:
+    """``tau = c r sigma^2 sum omega_i^2 (1 + alpha rho)``: the noise energy smoothing removes.
+
+    With noise of standard deviation ``sigma`` across the shape, a smoothing that removes the
+    noise and nothing else moves each point by about ``sigma`` per normal direction; part of
+    the noise stays in the smooth result (the degrees of freedom the filter keeps), which the
+    calibrated factor ``c`` (:data:`TAU_FACTOR`) accounts for. Free displacement also moves
+    points along the shape, in proportion to the roughness along it: ``rho`` is its ratio to
+    the roughness across (:func:`service.core.system.displacement.tangential_ratio`) and ``alpha``
+    (:data:`TANGENTIAL_SHARE`) the calibrated share of it worth spending.
+    """
+    extra = 1.0 + TANGENTIAL_SHARE * rho if displacement == "free" else 1.0
+    return TAU_FACTOR[displacement] * codim * sigma**2 * weight_sum * extra
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from service.core.noise.estimate import codimension, estimate_noise
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.noise.robust import OMEGA_MIN, data_weights, robust_weights
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth
+from service.core.pipeline import smooth_one as smooth
 
 
 def _sheet(n: int = 40, seed: int = 0, sigma: float | np.ndarray = 0.02) -> np.ndarray:
