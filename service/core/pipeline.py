@@ -240,11 +240,11 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
     X, along = relax_tangential(
         problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
     )
-    volume_scale = None
-    if params.preserve_volume:
+    volume_scale, group = None, params.finish
+    if group.preserve_volume:
         X, volume_scale = preserve_measure(problem.geometry, X)
-    if params.max_deviation is not None:
-        X, _ = clip_points(problem.geometry.points, X, params.max_deviation)
+    if group.max_deviation is not None:
+        X, _ = clip_points(problem.geometry.points, X, group.max_deviation)
     return Finished(X, volume_scale, along)
 
 

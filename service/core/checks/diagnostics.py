@@ -10,7 +10,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.checks.guards import fold_note, guard_warnings, noise_ratio, shape_checks
+from service.core.checks.guards import (
+    ShapeChecks,
+    fold_note,
+    guard_warnings,
+    noise_ratio,
+    shape_checks,
+)
 from service.core.checks.spectrum import (
     SPECTRUM_MAX_POINTS,
     Spectrum,
@@ -65,28 +71,9 @@ def diagnostics(
             field="params",
         )
     stats = dev.stats if dev is not None else None
-    timings = dict(op.timings)
-    if stats is not None:
-        timings.update(
-            analysis=stats.analysis,
-            factorization=stats.factorization,
-            solve=stats.solve,
-            matvec=stats.matvec,
-        )
-    checks = shape_checks(geometry, X)
     rms = float(np.sqrt(np.mean(dev_pt**2)))
-    sigma = _noise_for_checks(geometry, params, target, rms)
-    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
-    moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
-    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
-    if shape_warnings and params.strict:
-        raise ShapeLost(shape_warnings, checks.to_dict())
-    run.notes.extend(shape_warnings)
-    note = fold_note(checks, params.displacement)
-    if note:
-        run.notes.append(note)
-    timings["search"] = sol.seconds
-    timings["total"] = time.perf_counter() - run.t0
+    checks, shape_warnings, sigma = _shape(geometry, params, target, X, rms, run.notes)
+    timings = _timings(op, sol, run)
     tau = target.tau
     spectrum = None
     if params.spectrum:
@@ -129,6 +116,52 @@ def diagnostics(
         **_data_weights(weights),
         tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
     )
+
+
+def _shape(
+    geometry: Geometry,
+    params: SmoothingParams,
+    target: Target,
+    X: Array,
+    rms: float,
+    notes: list[str],
+) -> tuple[ShapeChecks, list[str], float | None]:
+    """The shape checks of :mod:`.guards`, their warnings (added to ``notes``) and the noise
+    level they compared with.
+
+    Raises
+    ------
+    ShapeLost
+        ``params.strict`` and a shape warning.
+    """
+    checks = shape_checks(geometry, X)
+    sigma = _noise_for_checks(geometry, params, target, rms)
+    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
+    moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
+    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
+    if shape_warnings and params.strict:
+        raise ShapeLost(shape_warnings, checks.to_dict())
+    notes.extend(shape_warnings)
+    note = fold_note(checks, params.displacement)
+    if note:
+        notes.append(note)
+    return checks, shape_warnings, sigma
+
+
+def _timings(op: SmoothingOperator, sol: Solution, run: Run) -> dict[str, float]:
+    """Seconds per stage: build, analysis, factorization, solve, products, search, total."""
+    timings = dict(op.timings)
+    stats = sol.dev.stats if sol.dev is not None else None
+    if stats is not None:
+        timings.update(
+            analysis=stats.analysis,
+            factorization=stats.factorization,
+            solve=stats.solve,
+            matvec=stats.matvec,
+        )
+    timings["search"] = sol.seconds
+    timings["total"] = time.perf_counter() - run.t0
+    return timings
 
 
 def _data_weights(dw: DataWeights | None) -> dict[str, Any]:
