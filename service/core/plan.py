@@ -125,11 +125,13 @@ def _operator_choices(
         {"kind": geometry.kind, "triangles": triangles},
     )  # fmt: skip
     open_ends = geometry.edges is not None and geometry.faces is None
-    ends = Choice(
-        ends_rule(params),
-        _given(params, "ends") if params.ends != "auto" else "fixed, as VTK's polyline smoothing",
-        {"applies": open_ends},
-    )
+    if not open_ends:
+        ends_why = "no open polylines: the rule does not apply"
+    elif params.ends != "auto":
+        ends_why = _given(params, "ends")
+    else:
+        ends_why = "fixed in place, as VTK's polyline smoothing"
+    ends = Choice(ends_rule(params), ends_why, {"applies": open_ends})
     rule = boundary_rule(params, geometry)
     if geometry.faces is None:
         why = "no mesh boundary: the rule does not apply"
@@ -234,5 +236,5 @@ def with_solution(plan: Plan, target: Target, solver: str, notes: list[str]) -> 
     elif solver == "none":
         why = "no system solved"
     else:
-        why = "; ".join(reasons) or "direct: the factor fits (memory model)"
+        why = "; ".join(reasons) or "direct: nothing selected the matrix-free path"
     return replace(plan, tau_rule=tau_rule, solver=Choice(solver, why, plan.solver.evidence))
