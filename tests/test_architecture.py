@@ -72,7 +72,9 @@ CORE_ROOMS: tuple[tuple[str, ...], ...] = tuple(
         "errors",
         "_arrays",
         "geometry",
+        "frame",  # the internal frame (centre, scale, weight scale) and its conversions
         "progress",
+        "run",  # clock, progress events, notes
         "params",  # flat SmoothingParams + typed views
         "linalg",
         "operator",

@@ -6,7 +6,7 @@
    job time limit it is refused at once (:class:`JobTooLarge`, 422), before the checks below,
    which cost about as much as the job on such inputs (the exact ``phi(0)`` of 50 points in
    200-D held the ingest process until its time limit);
-2. the **smoothing factor** against ``(0, phi(0))`` (:mod:`service.core.search.tau_range`);
+2. the **smoothing factor** against ``(0, phi(0))`` (:mod:`service.core.tau_range`);
 3. the **dry run**: inputs of at most ``dry_run_points`` points are smoothed once, and what the
    engine refuses (one to three points, identical or collinear points, a LAS file whose scale
    makes every point the same, a noise level that cannot be estimated ...) is answered 422 with
@@ -298,7 +298,7 @@ def check_submit(geometry: Geometry, params: SmoothingParams, policy: Policy) ->
     GeosmoothError
         What the engine refuses (the dry run).
     """
-    from service.core.search.tau_range import check_tau
+    from service.core.tau_range import check_tau
 
     size = JobSize.of(geometry)
     est = _estimate(size, params, None)
@@ -312,7 +312,7 @@ def check_submit(geometry: Geometry, params: SmoothingParams, policy: Policy) ->
 
 def check_sync(geometry: Geometry, params: SmoothingParams) -> None:
     """``POST /v1/smooth``: only that ``rms`` gives a positive finite ``tau`` (the engine checks
-    the range itself; :func:`service.core.search.tau_range.check_tau` with ``analyse=False``)."""
-    from service.core.search.tau_range import check_tau
+    the range itself; :func:`service.core.tau_range.check_tau` with ``analyse=False``)."""
+    from service.core.tau_range import check_tau
 
     check_tau(geometry, params, 0, analyse=False)

@@ -60,7 +60,7 @@ class IngestRequest:
         ``POST /v1/smooth``: the answer's format (default: the input's).
     exact_tau_max_points : int
         Largest point cloud whose ``tau`` is checked exactly at submit (see
-        :mod:`service.core.search.tau_range`).
+        :mod:`service.core.tau_range`).
     options : dict
         Endpoint-specific options of the worker function (e.g. ``preview`` of ``/v1/info``).
     """
@@ -342,7 +342,7 @@ def _outline(geometry: Any) -> dict[str, Any]:
     import numpy as np
 
     from service.core.info import mean_spacing
-    from service.core.search.tau_range import centroid_bound
+    from service.core.tau_range import centroid_bound
 
     phi0, weight = centroid_bound(geometry)
     pts = geometry.points

@@ -11,7 +11,7 @@ import pytest
 
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth
+from service.core.pipeline import smooth_one as smooth
 from service.io import GeometryDocument, read_geometry, write_geometry
 from service.jobs import JobStatus
 from service.jobs.distributed.backend import Backend
