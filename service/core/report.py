@@ -230,7 +230,20 @@ class Report(BaseModel):
         default=None,
         description="every automatic choice of the run with the evidence for it, decided once "
         "(issue 29)",
-        examples=[{"displacement": {"choice": "free", "evidence": "cloud: no faces, no normals"}}],
+        examples=[
+            {
+                "displacement": {
+                    "value": "normal",
+                    "why": "the quality benchmark's choice for a mesh",
+                    "evidence": {"kind": "mesh", "dim": 3, "normal_directions": 1},
+                },
+                "solver": {
+                    "value": "cholmod",
+                    "why": "direct: nothing selected the matrix-free path",
+                    "evidence": {},
+                },
+            }
+        ],
     )
 
     @classmethod

@@ -17,10 +17,6 @@ from tests.core.core_fixtures import noisy_icosphere, polyline_edges
 
 ROOT = Path(__file__).resolve().parents[2]
 
-#: Fields the model documents that the engine does not send yet: ``plan`` is filled by the
-#: core-stages change of issue 29 (``SmoothResult.report()``). Empty it when the engine sends
-#: the plan (this test then fails until it is emptied).
-AWAITING: frozenset[str] = frozenset({"plan"})
 
 
 def _mesh() -> Geometry:
@@ -72,10 +68,10 @@ def test_report_has_exactly_the_fields_of_the_model(case: str) -> None:
     Report.model_validate(report)
     keys, fields = set(report), _members()
     assert keys <= fields, f"members no field documents: {keys - fields}"
-    expected_absent = (set(Report.PRESENT_ONLY) - present) | AWAITING
+    expected_absent = set(Report.PRESENT_ONLY) - present
     assert fields - keys == expected_absent, (
-        f"{case}: missing {fields - keys - expected_absent}; sent although listed as absent "
-        f"(empty AWAITING once the engine sends it): {expected_absent & keys}"
+        f"{case}: missing {fields - keys - expected_absent}; sent although listed as absent: "
+        f"{expected_absent & keys}"
     )
 
 
