@@ -1,8 +1,8 @@
 """Worker slots: threads in the server that each run one job at a time in a child process.
 
 Each slot thread claims the oldest queued job, starts a worker process for it
-(:func:`service.jobs.child.main`), then watches it until it exits: it renews the run's lease,
-enforces the time limit, and kills the process (SIGTERM to its process group, SIGKILL after a
+(:func:`service.jobs.embedded.child.main`), then watches it until it exits: it renews the run's
+lease, enforces the time limit, and kills the process (SIGTERM to its process group, SIGKILL after a
 grace period) on cancel, timeout, stop or when the run lost its job. Only the slot thread touches
 its process object; other threads ask for a kill and wait for the slot to settle.
 
@@ -29,16 +29,21 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from service.jobs import child, problems
+from service.jobs import problems
+from service.jobs.embedded import child
 from service.jobs.embedded.store import Claim, JobStore
+
+if TYPE_CHECKING:
+    from service.jobs.config import LocalConfig
 
 __all__ = ["WorkerPool", "default_start_method"]
 
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.jobs.preload")
+_PRELOAD = ("service.jobs.embedded.child", "service.jobs.runner", "service.jobs.preload")
 #: Signals by which a job process kills itself (its own bug or bad input): the job fails. Any
 #: other signal came from outside (the OOM killer's SIGKILL, a stop of the whole service): the
 #: run was interrupted and is retried like a server death.
@@ -93,75 +98,43 @@ class WorkerPool:
 
     Parameters
     ----------
+    config : LocalConfig
+        Slots (``workers``), job function (``runner``), ``job_timeout``, ``lease``,
+        ``kill_grace``, ``poll_interval``, ``start_method``, ``progress_interval``,
+        ``retry_backoff``, ``memory_limit`` (``RLIMIT_AS`` of a job process) and ``threads``
+        (BLAS/OpenMP threads per job process, set in the environment they start with).
     store : JobStore
         Job metadata.
-    data_dir : Path
-        Job store root (passed to the worker processes).
-    workers : int
-        Number of slots (jobs running at once).
     owner : str
         Identity of this server instance in the store's ``owner`` column.
-    runner : str
-        Job function, ``"module:function"``.
-    job_timeout : float or None
-        Seconds a run may take; ``None``: no limit.
-    lease : float
-        Seconds a run's lease lasts; renewed every third of it while the process lives.
-    kill_grace : float
-        Seconds between SIGTERM and SIGKILL.
-    poll_interval : float
-        Seconds between looks at the store when idle (jobs submitted by other processes) and
-        between ownership checks of a running job (cancelled from another process).
-    start_method : str, optional
-        ``"forkserver"`` or ``"spawn"`` (default: :func:`default_start_method`).
-    progress_interval : float
-        Minimum seconds between progress writes of a job.
     on_settled : callable, optional
         Called with the job id after each run ends (for metrics and webhooks).
-    retry_backoff : float
-        Seconds before an interrupted job may run again (doubled per attempt, at most 300 s).
-    memory_limit : int or None
-        Address space (bytes) a job process may add once started (``RLIMIT_AS``).
-    threads : int
-        BLAS/OpenMP threads per job process (set in the environment the job processes start
-        with).
     """
 
     def __init__(
         self,
+        config: LocalConfig,
         store: JobStore,
-        data_dir: Path,
-        workers: int,
         owner: str,
-        runner: str,
-        job_timeout: float | None,
-        lease: float,
-        kill_grace: float,
-        poll_interval: float,
-        start_method: str | None = None,
-        progress_interval: float = 0.2,
         on_settled: Callable[[str], None] | None = None,
-        retry_backoff: float = 0.0,
-        memory_limit: int | None = None,
-        threads: int = 1,
     ) -> None:
-        if workers < 1:
+        if config.workers < 1:
             raise ValueError("workers must be >= 1")
         self.store = store
-        self.data_dir = Path(data_dir)
-        self.workers = workers
+        self.data_dir = config.data_dir
+        self.workers = config.workers
         self.owner = owner
-        self.runner = runner
-        self.job_timeout = job_timeout
-        self.lease = lease
-        self.kill_grace = kill_grace
-        self.poll_interval = poll_interval
-        self.start_method = start_method or default_start_method()
-        self.progress_interval = progress_interval
+        self.runner = config.runner
+        self.job_timeout = config.job_timeout
+        self.lease = config.lease
+        self.kill_grace = config.kill_grace
+        self.poll_interval = config.poll_interval
+        self.start_method = config.start_method or default_start_method()
+        self.progress_interval = config.progress_interval
         self.on_settled = on_settled
-        self.retry_backoff = retry_backoff
-        self.memory_limit = memory_limit
-        self.threads = threads
+        self.retry_backoff = config.retry_backoff
+        self.memory_limit = config.memory_limit
+        self.threads = config.threads
         self._ctx: multiprocessing.context.BaseContext | None = None
         self._threads: list[threading.Thread] = []
         self._runs: dict[str, _Run] = {}
