@@ -59,9 +59,6 @@ class RQQueue(QueueBase[RedisJobStore]):
         self.settings = backend.settings
         self.store = backend.store
         self.blobs = backend.blobs
-        self.memory_limit = config.memory_limit
-        self.sweep_interval = config.sweep_interval
-        self.reconcile_interval = config.reconcile_interval
         self.notifier = Notifier(self.settings, backend.webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._stop = threading.Event()
@@ -106,7 +103,7 @@ class RQQueue(QueueBase[RedisJobStore]):
     # -- the JobQueue protocol -----------------------------------------------------------
     def submit(self, job: NewJob) -> JobRecord:
         """See :meth:`service.jobs.queue.JobQueue.submit`."""
-        row = admit.admit(job, memory_limit=self.memory_limit,
+        row = admit.admit(job, memory_limit=self.config.memory_limit,
                           max_attempts=self.settings.max_attempts)  # fmt: skip
         with self._errors():
             if isinstance(self.blobs, DirectoryBlobs):
@@ -218,9 +215,9 @@ class RQQueue(QueueBase[RedisJobStore]):
         self.epoch.check()  # a Redis that came back empty is logged at once
         backend.recover()
         backend.enqueue_due()
-        if time.monotonic() - self._last_reconcile >= self.reconcile_interval:
+        if time.monotonic() - self._last_reconcile >= self.config.reconcile_interval:
             self._last_reconcile = time.monotonic()
-            backend.reconcile(min_age=self.reconcile_interval)
+            backend.reconcile(min_age=self.config.reconcile_interval)
         backend.expire()
         for job_id in self.store.webhooks_due():
             self.notifier.enqueue(job_id)
@@ -229,7 +226,7 @@ class RQQueue(QueueBase[RedisJobStore]):
             self.blobs.prune_cache(_CACHE_AGE)
 
     def _sweep_loop(self) -> None:
-        while not self._stop.wait(self.sweep_interval):
+        while not self._stop.wait(self.config.sweep_interval):
             try:
                 self.sweep()
             except Exception as exc:

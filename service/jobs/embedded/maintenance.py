@@ -23,6 +23,7 @@ from service.jobs.errors import storage_error
 from service.jobs.files import sole_user
 
 if TYPE_CHECKING:
+    from service.jobs.config import LocalConfig
     from service.jobs.embedded.pool import WorkerPool
     from service.jobs.embedded.store import JobStore
     from service.jobs.files import JobFiles
@@ -84,9 +85,7 @@ class Maintenance:
     pool: WorkerPool
     notifier: Notifier
     owner: str
-    reserve_bytes: int
-    min_free_bytes: int
-    sweep_interval: float
+    config: LocalConfig
     _stop_sweeper: threading.Event
     _last_strays: float
 
@@ -166,11 +165,11 @@ class Maintenance:
                     log.warning("job store maintenance postponed: %s", exc)
 
     def _sweep_loop(self) -> None:
-        while not self._stop_sweeper.wait(self.sweep_interval):
+        while not self._stop_sweeper.wait(self.config.sweep_interval):
             self._maintain()
 
     def _keep_reserve(self) -> None:
-        self.store.keep_reserve(self.reserve_bytes, self.min_free_bytes)
+        self.store.keep_reserve(self.config.reserve_bytes, self.config.min_free_bytes)
 
     def _remove_orphans(self, min_age: float = ORPHAN_AGE) -> None:
         """Job directories without a record: at any age when no other live process uses the

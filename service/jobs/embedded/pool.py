@@ -120,21 +120,11 @@ class WorkerPool:
     ) -> None:
         if config.workers < 1:
             raise ValueError("workers must be >= 1")
+        self.config = config
         self.store = store
-        self.data_dir = config.data_dir
-        self.workers = config.workers
         self.owner = owner
-        self.runner = config.runner
-        self.job_timeout = config.job_timeout
-        self.lease = config.lease
-        self.kill_grace = config.kill_grace
-        self.poll_interval = config.poll_interval
-        self.start_method = config.start_method or default_start_method()
-        self.progress_interval = config.progress_interval
         self.on_settled = on_settled
-        self.retry_backoff = config.retry_backoff
-        self.memory_limit = config.memory_limit
-        self.threads = config.threads
+        self.start_method = config.start_method or default_start_method()
         self._ctx: multiprocessing.context.BaseContext | None = None
         self._threads: list[threading.Thread] = []
         self._runs: dict[str, _Run] = {}
@@ -143,15 +133,20 @@ class WorkerPool:
         self._generation = 0
         self._stopping = threading.Event()
 
+    @property
+    def runner(self) -> str:
+        """The job function, ``"module:function"``."""
+        return self.config.runner
+
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
         """Prepare the process context (start the forkserver) and start the slot threads."""
         self._ctx = multiprocessing.get_context(self.start_method)
         # read by service.jobs.preload in the forkserver: the limit every job process inherits
-        os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.threads)
+        os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.config.threads)
         if self.start_method == "forkserver":
             preload = []
-            names = (*_PRELOAD, self.runner.partition(":")[0], *main_module_imports())
+            names = (*_PRELOAD, self.config.runner.partition(":")[0], *main_module_imports())
             for name in dict.fromkeys(names):
                 try:  # only what imports cleanly here: a broken import must not kill the server
                     importlib.import_module(name)
@@ -164,7 +159,7 @@ class WorkerPool:
         self._stopping.clear()
         self._threads = [
             threading.Thread(target=self._slot, name=f"geosmooth-slot-{i}", daemon=True)
-            for i in range(self.workers)
+            for i in range(self.config.workers)
         ]
         for t in self._threads:
             t.start()
@@ -191,7 +186,7 @@ class WorkerPool:
 
     def backoff(self, attempts: int) -> float:
         """Seconds an interrupted job waits before its next run, after ``attempts`` runs."""
-        return min(_MAX_BACKOFF, self.retry_backoff * 2 ** max(0, attempts - 1))
+        return min(_MAX_BACKOFF, self.config.retry_backoff * 2 ** max(0, attempts - 1))
 
     def kill(self, job_id: str, reason: str = "cancelled", wait: float | None = None) -> bool:
         """Ask the slot running ``job_id`` to kill its process; wait until it has settled.
@@ -204,7 +199,7 @@ class WorkerPool:
                 return False
             if run.reason is None:
                 run.reason = reason
-        run.done.wait(self.kill_grace + 5.0 if wait is None else wait)
+        run.done.wait(self.config.kill_grace + 5.0 if wait is None else wait)
         return True
 
     # -- slots ---------------------------------------------------------------------------
@@ -213,14 +208,14 @@ class WorkerPool:
             with self._cond:
                 generation = self._generation
             try:
-                claim = self.store.claim(self.owner, self.lease)
+                claim = self.store.claim(self.owner, self.config.lease)
             except Exception:
                 log.exception("could not claim a job")
                 claim = None
             if claim is None:
                 with self._cond:
                     if self._generation == generation and not self._stopping.is_set():
-                        self._cond.wait(self.poll_interval)
+                        self._cond.wait(self.config.poll_interval)
                 continue
             try:
                 self._execute(claim)
@@ -234,17 +229,18 @@ class WorkerPool:
             fmt=claim.fmt,
             attempt=claim.attempt,
             owner=self.owner,
-            data_dir=str(self.data_dir),
+            data_dir=str(self.config.data_dir),
             db_path=str(self.store.path),
-            runner=self.runner,
+            runner=self.config.runner,
             server_pid=os.getpid(),
-            progress_interval=self.progress_interval,
-            memory_limit=self.memory_limit,
+            progress_interval=self.config.progress_interval,
+            memory_limit=self.config.memory_limit,
         )
         process = self._ctx.Process(  # type: ignore[attr-defined]
             target=child.main, args=(spec,), name=f"geosmooth-job-{claim.job_id[:8]}", daemon=True
         )
-        deadline = None if not self.job_timeout else time.monotonic() + self.job_timeout
+        timeout = self.config.job_timeout
+        deadline = None if not timeout else time.monotonic() + timeout
         run = _Run(claim, process, deadline)
         try:
             process.start()
@@ -282,8 +278,8 @@ class WorkerPool:
         claim, process = run.claim, run.process
         run_of = (claim.job_id, self.owner, claim.attempt)
         now = time.monotonic()
-        next_check = now + self.poll_interval
-        next_renew = now + self.lease / 3
+        next_check = now + self.config.poll_interval
+        next_renew = now + self.config.lease / 3
         while True:
             process.join(_TICK)
             if process.exitcode is not None:
@@ -295,11 +291,11 @@ class WorkerPool:
             if reason is None and run.deadline is not None and now >= run.deadline:
                 reason = "timeout"
             if reason is None and now >= next_renew:
-                next_renew = now + self.lease / 3
-                if self._lost(lambda: self.store.renew(*run_of, self.lease), claim.job_id):
+                next_renew = now + self.config.lease / 3
+                if self._lost(lambda: self.store.renew(*run_of, self.config.lease), claim.job_id):
                     reason = "lost"
             elif reason is None and now >= next_check:
-                next_check = now + self.poll_interval
+                next_check = now + self.config.poll_interval
                 if self._lost(lambda: self.store.owns(*run_of), claim.job_id):
                     reason = "lost"
             if reason is not None:
@@ -321,7 +317,7 @@ class WorkerPool:
     def _terminate(self, process: multiprocessing.process.BaseProcess) -> None:
         pid = process.pid
         assert pid is not None
-        for sig, wait in ((signal.SIGTERM, self.kill_grace), (signal.SIGKILL, None)):
+        for sig, wait in ((signal.SIGTERM, self.config.kill_grace), (signal.SIGKILL, None)):
             try:  # the worker leads its own process group: take any children of the job too
                 os.killpg(pid, sig)
             except (ProcessLookupError, PermissionError):
@@ -335,8 +331,8 @@ class WorkerPool:
         claim, store = run.claim, self.store
         job_id, attempt, owner = claim.job_id, claim.attempt, self.owner
         if run.reason == "timeout":
-            assert self.job_timeout is not None
-            store.fail(job_id, owner, attempt, problems.timed_out(self.job_timeout))
+            assert self.config.job_timeout is not None
+            store.fail(job_id, owner, attempt, problems.timed_out(self.config.job_timeout))
         elif run.reason == "stop":
             store.requeue(job_id, owner, attempt, count_attempt=False)
         elif run.reason is None and store.owns(job_id, owner, attempt):

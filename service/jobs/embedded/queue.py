@@ -33,7 +33,7 @@ from service.jobs.base import QueueBase
 from service.jobs.config import LocalConfig
 from service.jobs.embedded.health import StorageProbe
 from service.jobs.embedded.maintenance import HOST, LIVE_OWNERS, Maintenance
-from service.jobs.embedded.pool import WorkerPool, default_start_method
+from service.jobs.embedded.pool import WorkerPool
 from service.jobs.embedded.store import JobStore
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.files import JobFiles
@@ -63,22 +63,11 @@ class LocalQueue(QueueBase[JobStore], Maintenance):
         self.config = config
         self.data_dir = config.data_dir
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        self.workers = config.workers
-        self.job_timeout = config.job_timeout
-        self.result_ttl = config.result_ttl
-        self.runner = config.runner
-        self.max_attempts = config.max_attempts
-        self.retry_backoff = config.retry_backoff
-        self.memory_limit = config.memory_limit
-        self.min_free_bytes = config.min_free_bytes
-        self.reserve_bytes = config.reserve_bytes
-        self.start_method = config.start_method or default_start_method()
-        self.sweep_interval = config.sweep_interval
         self.files = JobFiles(self.data_dir)
-        self.store = JobStore(self.data_dir / "jobs.sqlite3", self.result_ttl)
+        self.store = JobStore(self.data_dir / "jobs.sqlite3", config.result_ttl)
         self.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
         self.pool = WorkerPool(config, self.store, self.owner, on_settled=self._finished)
-        self.probe = StorageProbe(self.data_dir, self.min_free_bytes, self.store.check)
+        self.probe = StorageProbe(self.data_dir, config.min_free_bytes, self.store.check)
         self.notifier = Notifier(config.settings, self._webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._histogram = DurationHistogram()
@@ -137,7 +126,8 @@ class LocalQueue(QueueBase[JobStore], Maintenance):
 
         See :meth:`service.jobs.queue.JobQueue.submit`.
         """
-        row = admit.admit(job, memory_limit=self.memory_limit, max_attempts=self.max_attempts)
+        config = self.config
+        row = admit.admit(job, memory_limit=config.memory_limit, max_attempts=config.max_attempts)
         tenant, idempotency_key, input = job.tenant, job.idempotency_key, job.input
         if idempotency_key is not None:
             with admit.storage_errors():
@@ -149,7 +139,7 @@ class LocalQueue(QueueBase[JobStore], Maintenance):
                     input.unlink(missing_ok=True)  # moved into the store: nothing to keep
                 return self._with_report(earlier[0])
         with admit.storage_errors():
-            admit.check_space(self.data_dir, row.input_bytes, self.min_free_bytes)
+            admit.check_space(self.data_dir, row.input_bytes, self.config.min_free_bytes)
             try:
                 self.files.create(row.job_id, row.fmt, input)
                 rec, created = self.store.insert(row)
@@ -197,7 +187,7 @@ class LocalQueue(QueueBase[JobStore], Maintenance):
         """
         return {
             **self._store_counts(),
-            "workers": self.workers,
+            "workers": self.config.workers,
             "busy_workers": self.pool.busy(),
             "finished_total": self._finished_total(),
             **self._histogram.stats(),
