@@ -37,7 +37,15 @@ if TYPE_CHECKING:
 
     from service.settings import Settings
 
-__all__ = ["LEGACY_TASK_MODULES", "RUN_TASK", "Backend", "WorkerConfig", "backoff"]
+__all__ = [
+    "LEGACY_TASK_MODULES",
+    "RUN_TASK",
+    "Backend",
+    "WorkerConfig",
+    "backoff",
+    "configure_worker",
+    "worker_config",
+]
 
 log = logging.getLogger("geosmooth.jobs")
 
@@ -195,10 +203,26 @@ class Backend:
                 self.blobs.remove(job_id)
 
 
+@dataclass(frozen=True)
 class WorkerConfig:
-    """What the work horses of this worker use, set by ``tasks.configure`` in the worker before
-    it forks (read by the job task and the tile task)."""
+    """What the work horses of this worker use: set once by :func:`configure_worker` in the
+    worker before it forks (``worker.make_worker``), read by the job task and the tile task."""
 
-    backend: Backend | None = None
-    runner: str | None = None  # None: the default runner
-    memory_limit: int | None = None
+    backend: Backend
+    runner: str
+    memory_limit: int | None
+
+
+_WORKER: dict[str, WorkerConfig] = {}
+
+
+def configure_worker(config: WorkerConfig) -> None:
+    """Make ``config`` this process's worker configuration (inherited by its work horses)."""
+    _WORKER["config"] = config
+
+
+def worker_config() -> WorkerConfig:
+    """This worker's configuration (only inside a ``geosmooth worker`` and its horses)."""
+    config = _WORKER.get("config")
+    assert config is not None, "runs in a geosmooth worker (service.jobs.distributed.worker)"
+    return config

@@ -23,27 +23,19 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from service.jobs import problems
-from service.jobs.distributed.backend import HOST
-from service.jobs.distributed.backend import WorkerConfig as _Config
+from service.jobs.distributed.backend import HOST, WorkerConfig, worker_config
 from service.jobs.distributed.tiles import rq_tiles
 from service.jobs.errors import StorageUnavailable
 from service.jobs.execute import RunOptions, run_function, write_report
 from service.jobs.limits import limit_memory, set_parent_death_signal
 from service.jobs.progress import final_progress
 from service.jobs.queue import JobStatus
-from service.jobs.runner import DEFAULT_RUNNER, RunLost
+from service.jobs.runner import RunLost
 
 if TYPE_CHECKING:
     from service.jobs.distributed.backend import Backend
 
-__all__ = ["configure", "run_job"]
-
-
-def configure(backend: Backend, runner: str, memory_limit: int | None) -> None:
-    """Set what the work horses of this worker use (called in the worker before it forks)."""
-    _Config.backend = backend
-    _Config.runner = runner
-    _Config.memory_limit = memory_limit
+__all__ = ["run_job"]
 
 
 def _infrastructure(exc: BaseException) -> bool:
@@ -62,10 +54,8 @@ def run_job(job_id: str) -> None:
     worker_pid = int(os.environ.get("GEOSMOOTH_WORKER_PID", "0"))
     if worker_pid and os.getppid() != worker_pid:  # the worker died before the signal was armed
         os._exit(0)
-    backend = _Config.backend
-    assert backend is not None, (
-        "run_job runs in a geosmooth worker (service.jobs.distributed.worker)"
-    )
+    config = worker_config()
+    backend = config.backend
     rq_job = get_current_job()
     assert rq_job is not None
     owner = str(rq_job.worker_name)
@@ -76,16 +66,17 @@ def run_job(job_id: str) -> None:
     signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the kernel kills the horse at the limit
     signal.setitimer(signal.ITIMER_REAL, float(backend.settings.job_timeout))
     try:
-        _run(backend, job_id, owner, attempt)
+        _run(config, job_id, owner, attempt)
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
 
 
-def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
+def _run(config: WorkerConfig, job_id: str, owner: str, attempt: int) -> None:
+    backend = config.backend
     store, blobs = backend.store, backend.blobs
     when = {"owner": owner, "attempts": attempt}
     started = time.perf_counter()
-    options = RunOptions(_Config.runner or DEFAULT_RUNNER, _Config.memory_limit, 0.2, rq_tiles)
+    options = RunOptions(config.runner, config.memory_limit, 0.2, rq_tiles)
 
     def report_progress(progress: dict[str, Any]) -> bool:
         return store.run_update(job_id, owner, attempt, progress=progress)
@@ -94,7 +85,7 @@ def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
         rec = store.get(job_id)
         if rec is None or rec.status is not JobStatus.RUNNING:
             return
-        limit_memory(_Config.memory_limit)  # threads: limited in the worker, inherited
+        limit_memory(config.memory_limit)  # threads: limited in the worker, inherited
         with blobs.workspace(job_id, rec.fmt) as workdir:
             ctx, report = run_function(rec, workdir, workdir / f"input.{rec.fmt}",
                                        report_progress, options)  # fmt: skip

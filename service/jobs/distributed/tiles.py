@@ -34,7 +34,7 @@ import uuid
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from service.jobs.distributed.backend import WorkerConfig
+from service.jobs.distributed.backend import worker_config
 from service.jobs.files import write_durable
 from service.jobs.limits import set_parent_death_signal
 from service.jobs.queue import JobStatus
@@ -52,8 +52,7 @@ SCAN_INTERVAL = 0.5
 
 
 def _backend() -> Backend:
-    assert WorkerConfig.backend is not None, "tiles run in a geosmooth worker"
-    return WorkerConfig.backend
+    return worker_config().backend
 
 
 def _key(backend: Backend, job_id: str, name: str) -> str:
@@ -123,7 +122,7 @@ def run_tile(job_id: str, name: str) -> None:
         return
     from service.jobs.limits import limit_memory
 
-    limit_memory(WorkerConfig.memory_limit)
+    limit_memory(worker_config().memory_limit)
     _run_one(backend, job_id, name, f"{socket.gethostname()} pid {os.getpid()}")
 
 

@@ -37,7 +37,12 @@ from rq import Worker
 from service.core.linalg.threads import limit_threads, threads_per_worker
 from service.jobs import problems
 from service.jobs.config import job_memory_limit
-from service.jobs.distributed.backend import LEGACY_TASK_MODULES, Backend
+from service.jobs.distributed.backend import (
+    LEGACY_TASK_MODULES,
+    Backend,
+    WorkerConfig,
+    configure_worker,
+)
 from service.jobs.distributed.tiles import TILE_TASK
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
@@ -148,7 +153,7 @@ def make_worker(
 
     for legacy in LEGACY_TASK_MODULES:  # the task path of jobs queued by an earlier release
         sys.modules.setdefault(legacy, rq_tasks)
-    rq_tasks.configure(backend, runner, job_memory_limit(backend.settings))
+    configure_worker(WorkerConfig(backend, runner, job_memory_limit(backend.settings)))
     return GeosmoothWorker(backend, name)
 
 
