@@ -101,22 +101,18 @@ CORE_ROOMS: tuple[tuple[str, ...], ...] = tuple(
 JOBS_ROOMS: tuple[tuple[str, ...], ...] = (
     ("errors", "files", "metrics", "preload", "progress", "results"),  # import nothing of jobs
     ("queue",),  # the protocol and its records: JobQueue, JobRecord, JobSize, NewJob
-    ("config", "limits", "problems", "storage_health", "webhooks", "notify"),  # shared services
+    ("limits", "problems", "webhooks", "notify"),  # shared services
     ("admit",),  # what only the queue can check at submit
     ("base",),  # the queue methods both backends share, written once
     ("tiles",),  # the in-process tile map
     ("runner",),  # the job function: read -> smooth -> write (no backend import)
+    ("config", "execute"),  # frozen configs (name the default runner); a run both share
     ("embedded", "distributed"),  # the backends (BACKENDS), never importing each other
 )
 #: The two backends of ``service.jobs``: neither reaches the other, directly or not.
 BACKENDS = ("embedded", "distributed")
-#: The one module outside the backends that imports them (``make_queue``). To be confirmed by
-#: the jobs restructuring (issue 29, item 6).
+#: The one module outside the backends that imports them (``make_queue``, lazily).
 JOBS_COMPOSITION = "service.jobs"
-#: Modules kept at an old path that belong to another room: RQ stores the task path
-#: ``service.jobs.rq_tasks.run_job`` with every enqueued job, so that shim stays where it is and
-#: counts as part of the distributed backend.
-ROOM_ALIASES = {"service.jobs.rq_tasks": "distributed"}
 
 #: Packages whose inside is ordered, with their rooms' floors.
 ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
@@ -323,8 +319,6 @@ def upward_edges(graph: dict[str, dict[str, Edge]]) -> list[Edge]:
 def room(package: str, module: str) -> str | None:
     """The room of ``module`` inside ``package`` (``None``: the package's ``__init__`` itself,
     or a module outside the package)."""
-    if module in ROOM_ALIASES and module.startswith(package + "."):
-        return ROOM_ALIASES[module]
     if not module.startswith(package + "."):
         return None
     return module[len(package) + 1 :].split(".")[0]
@@ -573,10 +567,9 @@ def test_the_graph_builder_sees_lazy_and_type_only_imports() -> None:
 
 
 def test_the_rooms_rules_themselves() -> None:
-    """Rooms, floors, aliases and the backends' reach on a made-up graph."""
+    """Rooms, floors and the backends' reach on a made-up graph."""
     assert room("service.core", "service.core.search.roots") == "search"
     assert room("service.core", "service.core") is None
-    assert room("service.jobs", "service.jobs.rq_tasks") == "distributed"
     assert floor("service.core", "errors") == 0
     assert floor("service.core", "entry") == len(CORE_ROOMS) - 1
     assert floor("service.jobs", "embedded") == floor("service.jobs", "distributed")

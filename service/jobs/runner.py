@@ -1,8 +1,10 @@
 """What one job does, inside its worker process: read, smooth, write.
 
 A *job function* takes a :class:`JobContext` and returns the report dict; the worker process
-(:mod:`service.jobs.child`) records the outcome. :func:`smooth_job` is the real one;
-``LocalQueue(runner="module:function")`` swaps in another (tests use fakes).
+(:mod:`service.jobs.embedded.child`, :mod:`service.jobs.distributed.tasks`, both through
+:func:`service.jobs.execute.run_function`) records the outcome. :func:`smooth_job` is the real
+one; ``LocalConfig(runner="module:function")`` swaps in another (tests use fakes). The backend
+gives the run its tile map (``JobContext.tiles``); nothing here picks a backend.
 """
 
 from __future__ import annotations
@@ -10,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
     from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
     from service.core.result import SmoothResult
-    from service.jobs.tiles.local import RunMap
+    from service.jobs.tiles import RunMap, TileMap
 
 __all__ = ["DEFAULT_RUNNER", "JobContext", "RunLost", "smooth_job"]
 
@@ -68,6 +69,9 @@ class JobContext:
     memory_limit : int or None
         The per-job memory limit (bytes): the engine takes its matrix-free path when the direct
         one would not fit (the process runs under a cap of that size).
+    tiles : TileMap or None
+        What runs a tiled job's tiles, chosen by the backend that runs the job (local processes
+        or RQ tasks); ``None``: :func:`~service.jobs.tiles.local.local_tile_map`.
     """
 
     job_id: str
@@ -79,6 +83,7 @@ class JobContext:
     progress_interval: float = 0.2
     weld: bool = False
     memory_limit: int | None = None
+    tiles: TileMap | None = None
     _tracker: ProgressTracker = field(default_factory=ProgressTracker, repr=False)
     _started: float = field(default_factory=time.monotonic, repr=False)
     _last_write: float = field(default=float("-inf"), repr=False)
@@ -159,8 +164,8 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
 
 
 def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
-    """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on
-    :func:`local_tiles` with the tile counts in every progress dict (``tiles`` member)."""
+    """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on the run's tile
+    map (``ctx.tiles``) with the tile counts in every progress dict (``tiles`` member)."""
     from service.workflows.smooth_file import run_engine as smooth
 
     params = ctx.params
@@ -197,13 +202,7 @@ def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
 def _tiles_of(
     ctx: JobContext, on_tile: Callable[[], None], counter: TileCounter
 ) -> contextlib.AbstractContextManager[RunMap]:
-    """RQ jobs inside a ``geosmooth worker`` (its work horses have ``GEOSMOOTH_WORKER_PID``),
-    else :func:`local_tiles` on this job's worker share."""
-    from service.jobs.limits import tile_workers
-    from service.jobs.tiles.local import local_tiles
+    """The tile map the job's backend gave the run (``ctx.tiles``), else local processes."""
+    from service.jobs.tiles.local import local_tile_map
 
-    if os.environ.get("GEOSMOOTH_WORKER_PID"):
-        from service.jobs.tiles.rq import rq_tiles
-
-        return rq_tiles(ctx.job_id, on_tile, counter)
-    return local_tiles(tile_workers(), on_tile, counter)
+    return (ctx.tiles or local_tile_map)(ctx.job_id, on_tile, counter)

@@ -60,10 +60,10 @@ def clean_spool(settings: Settings, max_age: float | None = None) -> int:
     """Remove spool files older than ``max_age`` seconds (left by a crash); how many.
 
     Default: every one when no other live server uses the spool (a crash left them: see
-    :func:`service.jobs.embedded.maintenance.sole_user`; this process registers as a user),
+    :func:`service.jobs.files.sole_user`; this process registers as a user),
     else those older than an hour (another server may be receiving them).
     """
-    from service.jobs.embedded.maintenance import sole_user
+    from service.jobs.files import sole_user
 
     removed = 0
     now = time.time()

@@ -22,14 +22,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from service.jobs.progress import TileCounter
 
 if TYPE_CHECKING:
-    pass
+    from service.jobs.tiles import RunMap
 
-__all__ = [
-    "local_tiles",
-]
+__all__ = ["local_tile_map", "local_tiles"]
 
 T = TypeVar("T")
-RunMap = Callable[[Callable[..., Any], list[tuple[Any, ...]]], list[Any]]
 #: Tile re-runs after a worker died, per tile.
 MAX_RETRIES = 2
 
@@ -124,6 +121,16 @@ def local_tiles(
         last = state["pool"]
         if last is not None:
             last.shutdown(wait=True)
+
+
+def local_tile_map(
+    job_id: str, on_tile: Callable[[], None] | None, counter: TileCounter
+) -> contextlib.AbstractContextManager[RunMap]:
+    """The :data:`~service.jobs.tiles.TileMap` of a job process: :func:`local_tiles` on its
+    worker share (:func:`service.jobs.limits.tile_workers`)."""
+    from service.jobs.limits import tile_workers
+
+    return local_tiles(tile_workers(), on_tile, counter)
 
 
 def _kill(pool: ProcessPoolExecutor | None) -> None:
