@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
+from service.io.holds import dropped_kinds, input_kinds, is_geographic, output_notes, same_family
 from service.io.registry import (
     FORMATS,
     Format,
@@ -245,36 +246,6 @@ class OutputRefused(FormatError):
 _KIND_WORDS = {"mesh": "faces", "polyline": "lines", "cloud": "a point cloud"}
 
 
-def input_kinds(doc: GeometryDocument) -> frozenset[str]:
-    """What writing ``doc`` needs: ``"mesh"`` (faces), ``"polyline"`` (edges), else ``"cloud"``."""
-    g = doc.geometry
-    kinds = set()
-    if g.faces is not None and len(g.faces):
-        kinds.add("mesh")
-    if g.edges is not None and len(g.edges):
-        kinds.add("polyline")
-    return frozenset(kinds or {"cloud"})
-
-
-def is_geographic(doc: GeometryDocument) -> bool:
-    """Whether ``doc`` holds longitude/latitude read from a geographic format (GPX, GeoJSON)."""
-    frame = getattr(doc.layout, "frame", None)
-    if frame is None or not hasattr(frame, "back"):
-        return False
-    if frame.frame is not None or doc.source_format == "gpx":
-        return True
-    from service.io.formats.geojson import _geographic
-
-    pts = doc.geometry.points
-    return pts.shape[1] >= 2 and _geographic(doc.layout.obj, pts[:, 0], pts[:, 1], None)  # type: ignore[attr-defined]
-
-
-def _same_family(doc: GeometryDocument, spec: Format) -> bool:
-    """Whether the writer gets the input's own layout (the file written back in its format)."""
-    source = doc.source_format
-    return source == spec.name or {source, spec.name} == {"las", "laz"}
-
-
 def _float32_loss(doc: GeometryDocument, spec: Format, points: ArrayLike | None) -> float:
     """Half a float32 step at the coordinates ``spec`` stores, if that loses input precision.
 
@@ -301,9 +272,9 @@ def _float32_loss(doc: GeometryDocument, spec: Format, points: ArrayLike | None)
 
 def _problem(doc: GeometryDocument, spec: Format, points: ArrayLike | None = None) -> str | None:
     """Why ``spec`` cannot hold ``doc`` (``None``: it can)."""
-    if _same_family(doc, spec):
+    if same_family(doc, spec):
         return None
-    missing = sorted(input_kinds(doc) - spec.kinds)
+    missing = sorted(input_kinds(doc) - spec.kinds - set(dropped_kinds(doc, spec)))
     if missing:
         held = " or ".join(_KIND_WORDS[k] for k in sorted(spec.kinds))
         return f"{spec.title} holds {held}, not {_KIND_WORDS[missing[0]]}"
@@ -329,8 +300,13 @@ def _problem(doc: GeometryDocument, spec: Format, points: ArrayLike | None = Non
 
 
 def formats_for(doc: GeometryDocument) -> list[str]:
-    """The writable formats that can hold ``doc``, in registry order."""
-    return [f.name for f in FORMATS.values() if f.write is not None and _problem(doc, f) is None]
+    """The writable formats that hold ``doc`` whole, in registry order (not the point formats
+    that would write a mesh's or a polyline's vertices only)."""
+    return [
+        f.name
+        for f in FORMATS.values()
+        if f.write is not None and _problem(doc, f) is None and not dropped_kinds(doc, f)
+    ]
 
 
 def check_output(doc: GeometryDocument, fmt: str, points: ArrayLike | None = None) -> None:
@@ -349,21 +325,3 @@ def check_output(doc: GeometryDocument, fmt: str, points: ArrayLike | None = Non
         can = ", ".join(formats_for(doc))
         tail = f"write {can} instead" if can else "no format geosmooth writes can hold it"
         raise OutputRefused(f"cannot write {spec.name}: {why}; {tail}", fmt=spec.name)
-
-
-def output_notes(doc: GeometryDocument, fmt: str) -> list[str]:
-    """The reader's notes that stay true for a file written in ``fmt``, and what it drops."""
-    spec = get_format(fmt)
-    if _same_family(doc, spec):
-        return list(doc.notes)
-    lost = [name for name in doc.attributes if not spec.keeps(name)]
-    notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
-    if lost:
-        notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
-    frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
-    if frame is not None and not spec.geographic_only:  # metres about the data's centre
-        notes.append(
-            f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
-            " not longitude/latitude (write GPX or GeoJSON to keep them)"
-        )
-    return notes

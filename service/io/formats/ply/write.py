@@ -7,7 +7,8 @@ dropped, and the input's encoding (``ply_ascii=None``; ``True``/``False`` force 
 little-endian). ASCII values are written with the input's digits (see :mod:`.numfmt`).
 
 Documents of other formats get ``x y z`` (2D points ``z = 0``), normals and attributes as vertex
-properties, ``face`` (``list uchar int vertex_indices``) and an ``edge`` element holding the
+properties (8-bit colours ``red green blue [alpha]`` as ``uchar``, the PLY convention, whatever
+type the input stored them in, e.g. an XYZ file's 0..255 columns), ``face`` (``list uchar int vertex_indices``) and an ``edge`` element holding the
 standalone and polyline edges (PLY has no polylines).
 """
 
@@ -80,6 +81,19 @@ def _ply_type(values: NDArray[Any]) -> tuple[str, NDArray[Any]]:
     return code, values
 
 
+_COLOURS = ("red", "green", "blue", "alpha")
+
+
+def _bytes(values: NDArray[Any]) -> bool:
+    """Whether a colour column holds 8-bit values (integers 0..255, in any dtype)."""
+    if values.dtype.kind not in "iuf" or not values.size:
+        return False
+    if values.dtype.kind == "f" and float(np.max(values)) <= 1.0:  # fractions (OBJ), or unclear
+        return False
+    with np.errstate(invalid="ignore"):
+        return bool(np.all((values >= 0) & (values <= 255) & (values == np.round(values))))
+
+
 def _vertex_props(plain: PlainDocument, layout: PlyLayout | None) -> list[_Prop]:
     cdt = plain.coordinate_dtype()
     specs = plain.coordinate_specs()
@@ -110,7 +124,10 @@ def _vertex_props(plain: PlainDocument, layout: PlyLayout | None) -> list[_Prop]
         names = [name] if values.ndim == 1 else [f"{name}_{j}" for j in range(values.shape[1])]
         for nm, col in zip(names, cols, strict=True):
             code, col = _ply_type(np.asarray(col))
-            attrs[nm] = _Prop(nm, code, col, spec=plain.attribute_spec(name))
+            spec = plain.attribute_spec(name)
+            if vertex is None and nm in _COLOURS and _bytes(col):  # the PLY convention: uchar
+                code, col, spec = "u1", col.astype(np.uint8), "%d"
+            attrs[nm] = _Prop(nm, code, col, spec=spec)
     if vertex is None:
         return out + list(attrs.values())
     ordered: list[_Prop] = []
