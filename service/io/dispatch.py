@@ -18,6 +18,7 @@ from typing import Any, BinaryIO
 
 from numpy.typing import ArrayLike
 
+from service.io._shared.georef import georeference
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
@@ -172,6 +173,7 @@ def write_geometry(
     ply_ascii: bool | None = None,
     normals: NormalsMode = "recompute",
     precision: PrecisionMode = "input",
+    crs: str | int | None = None,
 ) -> bytes:
     """Write a document (optionally with new points) in one of :data:`FORMATS`.
 
@@ -190,6 +192,12 @@ def write_geometry(
         Input normals recomputed from the written geometry, or left out.
     precision : {"input", "float32", "float64"}
         Coordinates as the input stored them (dtype; digits for text formats) or forced.
+    crs : str or int, optional
+        Geographic input (GPX, GeoJSON) written to a projected format: the projected CRS of the
+        output, an EPSG code (``32633``, ``"EPSG:32633"``) or ``"utm"`` (the WGS84 UTM zone of
+        the data's centre); easting, northing and the elevation as read. Default: metres in the
+        local east/north/up frame about the data's centre. Either way the frame is recorded in
+        the formats that hold one (:mod:`service.io._shared.georef`).
 
     Raises
     ------
@@ -198,10 +206,13 @@ def write_geometry(
     UnsupportedFormat
         ``fmt`` is not one of :data:`FORMATS`.
     ValueError
-        ``points`` has the wrong shape, or a bad option.
+        ``points`` has the wrong shape, or a bad option (``crs`` for input that is not
+        geographic, or a CRS that is not projected).
     """
     out = io.BytesIO()
-    save_geometry(doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision)
+    save_geometry(
+        doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision, crs=crs
+    )
     return out.getvalue()
 
 
@@ -214,6 +225,7 @@ def save_geometry(
     ply_ascii: bool | None = None,
     normals: NormalsMode = "recompute",
     precision: PrecisionMode = "input",
+    crs: str | int | None = None,
 ) -> None:
     """Like :func:`write_geometry`, streamed to a path or binary file (no whole-file copy).
 
@@ -225,7 +237,7 @@ def save_geometry(
         fmt = named.name if named is not None else doc.source_format
     spec = get_format(fmt)
     check_output(doc, spec.name, points)
-    plain = _plain(doc, points, normals, precision, ply_ascii)
+    plain = georeference(doc, spec, _plain(doc, points, normals, precision, ply_ascii), crs)
     if isinstance(dest, str | os.PathLike):
         with open(dest, "wb") as fh:
             spec.write_to(plain, fh)

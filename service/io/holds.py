@@ -84,8 +84,9 @@ def uv_count(doc: GeometryDocument) -> int:
 _UV_FORMATS: frozenset[str] = frozenset()
 
 
-def output_notes(doc: GeometryDocument, fmt: str) -> list[str]:
-    """The reader's notes that stay true for a file written in ``fmt``, and what it drops."""
+def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) -> list[str]:
+    """The reader's notes that stay true for a file written in ``fmt``, and what it drops
+    (``crs``: the writer option of :func:`service.io.write_geometry`)."""
     from service.io.registry import get_format
 
     spec = get_format(fmt)
@@ -103,7 +104,9 @@ def output_notes(doc: GeometryDocument, fmt: str) -> list[str]:
         what = " and ".join(_LOST[k] for k in dropped)
         notes.append(f"{spec.title} keeps no {what}: wrote the {doc.n_output} vertices as points")
     frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
-    if frame is not None and not spec.geographic_only:  # metres about the data's centre
+    if frame is not None and not spec.geographic_only and crs is not None:
+        notes.append(f"{spec.title} gets easting/northing in crs {crs}, not longitude/latitude")
+    elif frame is not None and not spec.geographic_only:  # metres about the data's centre
         notes.append(
             f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
             " not longitude/latitude (write GPX or GeoJSON to keep them)"

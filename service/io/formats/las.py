@@ -211,6 +211,12 @@ def _new_header(plain: PlainDocument) -> Any:
     rgb = all(c in attrs for c in ("red", "green", "blue"))
     fmt_id = (2 if rgb else 0) + (1 if "gps_time" in attrs else 0)
     header = laspy.LasHeader(point_format=fmt_id, version="1.2")
+    if plain.georef is not None:  # a WKT VLR needs LAS 1.4 and point format 6 or 7
+        from laspy.vlrs.known import WktCoordinateSystemVlr
+
+        header = laspy.LasHeader(point_format=7 if rgb else 6, version="1.4")
+        header.vlrs.append(WktCoordinateSystemVlr(plain.georef.wkt()))
+        header.global_encoding.wkt = True
     pts = as_xyz(plain.points, "las")
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     extent = float(np.max(hi - lo)) or max(float(np.max(np.abs(pts))), 1.0)
