@@ -101,7 +101,7 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
         notes.append(f"{spec.title} output keeps no texture coordinates: {uvs} UVs not written")
     dropped = dropped_kinds(doc, spec)
     if dropped:
-        what = " and ".join(_LOST[k] for k in dropped)
+        what = " or ".join(_LOST[k] for k in dropped)
         notes.append(f"{spec.title} keeps no {what}: wrote the {doc.n_output} vertices as points")
     frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
     if frame is not None and not spec.geographic_only and crs is not None:

@@ -152,7 +152,7 @@ def _check_round_trip(doc: GeometryDocument, fmt: str, back: Back, moved: NDArra
         return
     assert back.points.shape == expected.shape, fmt
     np.testing.assert_allclose(back.points, expected, rtol=0, atol=tol, err_msg=fmt)
-    if "polyline" in kinds and back.reads_lines:  # the same edges (PLY stores lines as an edge element)
+    if "polyline" in kinds and back.reads_lines:  # the same edges (PLY: an edge element)
         assert _edge_set(back.lines) == _edge_set([p.indices.tolist() for p in doc.polylines]), fmt
     if "red" in doc.attributes and FORMATS[fmt].keeps("red") and back.reads_colours:
         colours = np.column_stack([doc.attributes[c] for c in ("red", "green", "blue")])

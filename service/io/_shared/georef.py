@@ -107,7 +107,9 @@ def _target(option: CrsOption, frame: LocalFrame) -> str:
         return f"EPSG:{utm_epsg(frame.lon0, frame.lat0)}"
     code = text.upper().removeprefix("EPSG:")
     if not code.isdigit():
-        raise ValueError(f"crs must be an EPSG code (e.g. 32633 or 'EPSG:32633') or 'utm', got {option!r}")
+        raise ValueError(
+            f"crs must be an EPSG code (e.g. 32633 or 'EPSG:32633') or 'utm', got {option!r}"
+        )
     return f"EPSG:{int(code)}"
 
 

@@ -292,4 +292,3 @@ def write_pcd(plain: PlainDocument, out: BinaryIO) -> None:
         for j in range(values.shape[1]):
             cols.append((values[:, j], specs.get(nm, default_spec(values.dtype))))
     write_rows(out, cols, n=len(rec))
-

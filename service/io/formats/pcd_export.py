@@ -124,4 +124,3 @@ def _header(rec: NDArray[Any], n: int, binary: bool) -> list[str]:
         f"POINTS {n}",
         "DATA binary" if binary else "DATA ascii",
     ]
-

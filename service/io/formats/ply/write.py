@@ -8,8 +8,9 @@ little-endian). ASCII values are written with the input's digits (see :mod:`.num
 
 Documents of other formats get ``x y z`` (2D points ``z = 0``), normals and attributes as vertex
 properties (8-bit colours ``red green blue [alpha]`` as ``uchar``, the PLY convention, whatever
-type the input stored them in, e.g. an XYZ file's 0..255 columns), ``face`` (``list uchar int vertex_indices``) and an ``edge`` element holding the
-standalone and polyline edges (PLY has no polylines).
+type the input stored them in, e.g. an XYZ file's 0..255 columns), ``face`` (``list uchar int
+vertex_indices``) and an ``edge`` element holding the standalone and polyline edges (PLY has no
+polylines).
 """
 
 from __future__ import annotations
