@@ -79,11 +79,6 @@ def uv_count(doc: GeometryDocument) -> int:
     return data.count(b"\nvt ") + data.startswith(b"vt ")
 
 
-#: Formats that keep texture coordinates written from another format (none yet: OBJ and GLB
-#: keep their own when written back in their format).
-_UV_FORMATS: frozenset[str] = frozenset()
-
-
 def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) -> list[str]:
     """The reader's notes that stay true for a file written in ``fmt``, and what it drops
     (``crs``: the writer option of :func:`service.io.write_geometry`)."""
@@ -96,8 +91,10 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
     notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
     if lost:
         notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
+    from service.io._shared.texture import keeps_uv
+
     uvs = uv_count(doc)
-    if uvs and spec.name not in _UV_FORMATS:
+    if uvs and not keeps_uv(doc, spec.name):
         notes.append(f"{spec.title} output keeps no texture coordinates: {uvs} UVs not written")
     dropped = dropped_kinds(doc, spec)
     if dropped:
