@@ -69,10 +69,8 @@ def is_geographic(doc: GeometryDocument) -> bool:
 
 
 def uv_count(doc: GeometryDocument) -> int:
-    """Texture coordinates of the input: OBJ ``vt`` lines, or a ``uv`` attribute (GLB)."""
-    uv = doc.attributes.get("uv")
-    if uv is not None:
-        return len(uv)
+    """Texture coordinates of an OBJ input (its ``vt`` lines; glTF's are the ``uv`` attribute,
+    named with the other attributes)."""
     data = getattr(doc.layout, "data", None)
     if doc.source_format != "obj" or not isinstance(data, bytes):
         return 0
@@ -87,7 +85,7 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
     spec = get_format(fmt)
     if same_family(doc, spec):
         return list(doc.notes)
-    lost = [name for name in doc.attributes if name != "uv" and not spec.keeps(name)]
+    lost = [name for name in doc.attributes if not spec.keeps(name)]
     notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
     if lost:
         notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")

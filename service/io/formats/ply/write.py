@@ -8,7 +8,8 @@ little-endian). ASCII values are written with the input's digits (see :mod:`.num
 
 Documents of other formats get ``x y z`` (2D points ``z = 0``), normals and attributes as vertex
 properties (8-bit colours ``red green blue [alpha]`` as ``uchar``, the PLY convention, whatever
-type the input stored them in, e.g. an XYZ file's 0..255 columns), ``face`` (``list uchar int
+type the input stored them in, e.g. an XYZ file's 0..255 columns; glTF's ``uv`` as ``s t``, which
+trimesh reads as texture coordinates), ``face`` (``list uchar int
 vertex_indices``) and an ``edge`` element holding the standalone and polyline edges (PLY has no
 polylines).
 """
@@ -123,6 +124,8 @@ def _vertex_props(plain: PlainDocument, layout: PlyLayout | None) -> list[_Prop]
     for name, values in plain.attributes.items():
         cols = [values] if values.ndim == 1 else [values[:, j] for j in range(values.shape[1])]
         names = [name] if values.ndim == 1 else [f"{name}_{j}" for j in range(values.shape[1])]
+        if vertex is None and name == "uv" and len(names) == 2:  # glTF's: PLY's ``s t``
+            names = ["s", "t"]
         for nm, col in zip(names, cols, strict=True):
             code, col = _ply_type(np.asarray(col))
             spec = plain.attribute_spec(name)
