@@ -96,9 +96,9 @@ def test_gpx_to_dxf_in_a_projected_crs(crs: object) -> None:
     doc, lonlat = _gpx()
     pts, header = _dxf_points(write_geometry(doc, "dxf", crs=crs))  # type: ignore[arg-type]
     custom = dict(header.custom_vars)
-    assert custom["GEOSMOOTH_CRS"] == "EPSG:32633"
+    assert custom["CRS"] == "EPSG:32633"
     assert abs(header["$LATITUDE"] - 45.424) < 1e-3 and abs(header["$LONGITUDE"] - 14.076) < 1e-3
-    _close(_unproject(custom["GEOSMOOTH_CRS"], pts), lonlat, ele=1e-6)
+    _close(_unproject(custom["CRS"], pts), lonlat, ele=1e-6)
 
 
 def test_local_frame_is_recorded_in_las_and_dxf() -> None:
@@ -109,8 +109,8 @@ def test_local_frame_is_recorded_in_las_and_dxf() -> None:
     _close(_from_local(parsed.remarks, pts), lonlat, ele=0.0005 * 1.01)
     pts, header = _dxf_points(write_geometry(doc, "dxf"))
     custom = dict(header.custom_vars)
-    assert custom["GEOSMOOTH_CRS"] == "local"
-    pipeline = custom["GEOSMOOTH_FRAME"].split("crs_pipeline ", 1)[1]
+    assert custom["CRS"] == "local"
+    pipeline = custom["CRS_FRAME"].split("crs_pipeline ", 1)[1]
     _close(_from_local(pipeline, pts), lonlat, ele=1e-6)
 
 

@@ -16,7 +16,7 @@ centre (:mod:`.geo`). Written to a format that holds no longitude/latitude (PLY,
 The frame is recorded where the format holds one (:class:`Georef`): LAS/LAZ a WKT VLR (LAS 1.4,
 point format 6/7; the local frame as an engineering CRS whose remark holds the pipeline), DXF the
 ``$LATITUDE``/``$LONGITUDE`` header variables of the origin plus custom properties
-``GEOSMOOTH_CRS`` and ``GEOSMOOTH_FRAME``, PLY/OBJ/XYZ/OFF header comments.
+``CRS`` and ``CRS_FRAME``, PLY/OBJ/XYZ/OFF header comments.
 """
 
 from __future__ import annotations

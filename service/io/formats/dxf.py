@@ -291,11 +291,11 @@ def _replace(
 
 def _georef(doc: Any, georef: Any) -> None:
     """The frame of the coordinates: origin in ``$LATITUDE``/``$LONGITUDE``, the CRS and the
-    frame's description in the custom properties ``GEOSMOOTH_CRS`` and ``GEOSMOOTH_FRAME``."""
+    frame's description in the custom properties ``CRS`` and ``CRS_FRAME``."""
     doc.header["$LONGITUDE"] = float(georef.origin[0])
     doc.header["$LATITUDE"] = float(georef.origin[1])
-    doc.header.custom_vars.append("GEOSMOOTH_CRS", georef.crs)
-    doc.header.custom_vars.append("GEOSMOOTH_FRAME", "; ".join(georef.lines()))
+    doc.header.custom_vars.append("CRS", georef.crs)
+    doc.header.custom_vars.append("CRS_FRAME", "; ".join(georef.lines()))
 
 
 def _fresh(plain: PlainDocument, pts: NDArray[np.float64]) -> Any:
