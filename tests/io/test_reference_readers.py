@@ -3,7 +3,8 @@
 * XYZ -> PCD opened in Open3D as all zeros (binary ``F 8``): georeferenced text is now ASCII
   doubles (Open3D, pypcd4: exact), the mug scene float32 binary (float32 keeps its 6 decimals).
 * XYZ colour columns -> PLY ``uchar`` (trimesh showed white for ``double`` colours).
-* spot.obj -> glTF keeps its 3,225 texture coordinates (trimesh, Open3D), no silent loss.
+* spot.obj -> glTF and PLY keep its 3,225 texture coordinates (trimesh, Open3D), the other
+  formats say they drop them.
 * A mesh -> LAS writes the vertices with a note (as PDAL and CloudCompare do).
 """
 
@@ -124,9 +125,28 @@ def test_obj_uvs_survive_in_gltf(data_dir: Path) -> None:
     assert o3mesh.has_triangle_uvs() and len(o3mesh.triangles) == len(doc.geometry.faces)
 
 
+@pytest.mark.parametrize("ascii_", [False, True])
+def test_obj_uvs_survive_in_ply(data_dir: Path, ascii_: bool) -> None:
+    """PLY keeps the 2930 vertices; each face holds its corners' UVs (MeshLab's texcoord)."""
+    import trimesh
+
+    doc = _doc(data_dir, "spot.obj")
+    data = write_geometry(doc, "ply", ply_ascii=ascii_)
+    assert b"property list uchar float texcoord" in data[:1000]
+    assert not any("texture" in n for n in output_notes(doc, "ply"))
+    ref = trimesh.load(data_dir / "spot.obj", process=False)
+    mesh = trimesh.load(io.BytesIO(data), file_type="ply", process=False)
+    _same_textured_vertices(
+        np.column_stack([mesh.vertices, mesh.visual.uv]),
+        np.column_stack([ref.vertices, ref.visual.uv]),
+    )
+    back = read_geometry(data, "ply")
+    assert back.geometry.n == 2930 and write_geometry(back, "ply", ply_ascii=ascii_) == data
+
+
 def test_formats_without_uvs_say_so(data_dir: Path) -> None:
     doc = _doc(data_dir, "spot.obj")
-    for fmt in ("ply", "stl", "off", "json", "dxf", "las"):
+    for fmt in ("stl", "off", "json", "dxf", "las"):
         assert any("3225 UVs not written" in n for n in output_notes(doc, fmt)), fmt
 
 

@@ -1,9 +1,11 @@
-"""Texture coordinates of a mesh read from OBJ, for formats holding per-vertex UVs (glTF).
+"""Texture coordinates of a mesh read from OBJ, for the other formats that hold them.
 
 OBJ gives every face corner its own ``vt`` index (``f v/vt``), so one vertex can have several
 UVs (at the seams of the texture atlas: spot.obj has 2930 vertices and 3225 ``vt``). glTF holds
 one UV per vertex: the mesh is split into one vertex per distinct (vertex, ``vt``) pair, as
-trimesh and Blender do on import, positions and colours copied from the vertex.
+trimesh and Blender do on import, positions and colours copied from the vertex. PLY keeps the
+vertices and gives each face its corners' UVs (``property list uchar float texcoord``, as
+MeshLab writes; trimesh reads it).
 """
 
 from __future__ import annotations
@@ -17,8 +19,9 @@ from service.io._shared.elements import fan_triangulate
 
 __all__ = ["corner_uvs", "keeps_uv", "split_at_seams", "texture_ready"]
 
-#: Formats that hold the UVs of another format's mesh (one UV per vertex, split at seams).
-UV_FORMATS = frozenset({"glb"})
+#: Formats that hold the UVs of another format's mesh: glTF one UV per vertex (split at seams),
+#: PLY per face corner (MeshLab's face ``texcoord`` list, which trimesh reads).
+UV_FORMATS = frozenset({"glb", "ply"})
 
 
 def texture_ready(doc: Any) -> bool:
@@ -34,9 +37,9 @@ def texture_ready(doc: Any) -> bool:
 
 
 def keeps_uv(doc: Any, fmt: str) -> bool:
-    """Whether writing ``doc`` as ``fmt`` (another format) keeps its texture coordinates: glTF,
-    for a complete OBJ texture without vertex colours (trimesh exports one of the two)."""
-    coloured = all(c in doc.attributes for c in ("red", "green", "blue"))
+    """Whether writing ``doc`` as ``fmt`` (another format) keeps its texture coordinates: PLY,
+    and glTF without vertex colours (trimesh exports one of the two), for a complete texture."""
+    coloured = fmt == "glb" and all(c in doc.attributes for c in ("red", "green", "blue"))
     return fmt in UV_FORMATS and texture_ready(doc) and not coloured
 
 
@@ -49,10 +52,10 @@ def _vt_values(data: bytes, spans: NDArray[np.int64]) -> NDArray[np.float64]:
     return out
 
 
-def corner_uvs(plain: Any) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
+def corner_uvs(plain: Any, fmt: str) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
     """Per triangle corner, its ``vt`` index (shaped like ``plain.faces``), and the ``vt`` values;
-    ``None`` when the input has no complete texture coordinates."""
-    if plain.faces is None or not keeps_uv(plain.source, "glb"):
+    ``None`` when ``fmt`` keeps no texture coordinates of this input (:func:`keeps_uv`)."""
+    if plain.faces is None or not keeps_uv(plain.source, fmt):
         return None
     corner_vt, counts, spans = plain.layout.uv
     tri_vt, _ = fan_triangulate(corner_vt, counts)

@@ -148,7 +148,7 @@ def write_glb(plain: PlainDocument, out: BinaryIO) -> None:
         colors = _bytes(np.column_stack(channels))
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2 if plain.n else np.zeros(3)
     local = pts - centre
-    uvs = corner_uvs(plain)
+    uvs = corner_uvs(plain, "glb")
     if uvs is not None:  # OBJ texture coordinates: one vertex per (vertex, vt) pair
         vertex_of, vt_of, faces = split_at_seams(np.asarray(plain.faces), uvs[0])
         visual = trimesh.visual.TextureVisuals(uv=uvs[1][vt_of])

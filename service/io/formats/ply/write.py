@@ -10,8 +10,9 @@ Documents of other formats get ``x y z`` (2D points ``z = 0``), normals and attr
 properties (8-bit colours ``red green blue [alpha]`` as ``uchar``, the PLY convention, whatever
 type the input stored them in, e.g. an XYZ file's 0..255 columns; glTF's ``uv`` as ``s t``, which
 trimesh reads as texture coordinates), ``face`` (``list uchar int
-vertex_indices``) and an ``edge`` element holding the standalone and polyline edges (PLY has no
-polylines).
+vertex_indices``, plus an OBJ's texture coordinates as ``list uchar float texcoord``, the UVs of
+each face's corners as MeshLab writes them) and an ``edge`` element holding the standalone and
+polyline edges (PLY has no polylines).
 """
 
 from __future__ import annotations
@@ -24,9 +25,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.io._shared.coords import as_xyz
-from service.io._shared.numfmt import ROWS_PER_CHUNK, default_spec, format_column, write_rows
+from service.io._shared.numfmt import (
+    F32,
+    ROWS_PER_CHUNK,
+    default_spec,
+    format_column,
+    write_rows,
+)
 from service.io._shared.plain import PlainDocument
 from service.io._shared.text import header_comments
+from service.io._shared.texture import corner_uvs
 from service.io.errors import FormatError
 from service.io.formats.ply.read import PlyLayout
 
@@ -174,9 +182,12 @@ def _elements(plain: PlainDocument, layout: PlyLayout | None) -> list[_Element]:
         f = plain.faces
         counts = np.full(len(f), 3, dtype=np.uint8)
         items = f.reshape(-1).astype(np.int32)
-        out.append(
-            _Element("face", len(f), [_Prop("vertex_indices", "i4", items, counts, "u1", "%d")])
-        )
+        props = [_Prop("vertex_indices", "i4", items, counts, "u1", "%d")]
+        uvs = corner_uvs(plain, "ply")
+        if uvs is not None:  # OBJ texture coordinates, per face corner (MeshLab's texcoord)
+            flat = uvs[1][uvs[0]].reshape(-1).astype(np.float32)
+            props.append(_Prop("texcoord", "f4", flat, np.full(len(f), 6, np.uint8), "u1", F32))
+        out.append(_Element("face", len(f), props))
     edges = plain.edges()
     if edges is not None and len(edges):
         e = edges.astype(np.int32)
