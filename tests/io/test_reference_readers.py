@@ -159,3 +159,15 @@ def test_mesh_to_las_writes_the_vertices(data_dir: Path) -> None:
     half = 0.51 * float(np.max(las.header.scales))
     np.testing.assert_allclose(pts, doc.geometry.points, rtol=0, atol=half)
     assert "LAS keeps no faces: wrote the 2930 vertices as points" in output_notes(doc, "las")
+
+
+def test_gltf_uvs_survive_in_obj_and_ply(data_dir: Path) -> None:
+    """The other way: glTF's per-vertex UVs as OBJ ``vt`` (``f a/a``) and PLY ``s t``."""
+    import trimesh
+
+    gltf = read_geometry(write_geometry(_doc(data_dir, "spot.obj"), "glb"), "glb")
+    want = np.column_stack([gltf.geometry.points[gltf.weld.index], gltf.attributes["uv"]])  # type: ignore[union-attr]
+    for fmt in ("obj", "ply"):
+        assert not any("uv" in n for n in output_notes(gltf, fmt)), fmt
+        mesh = trimesh.load(io.BytesIO(write_geometry(gltf, fmt)), file_type=fmt, process=False)
+        _same_textured_vertices(np.column_stack([mesh.vertices, mesh.visual.uv]), want)
