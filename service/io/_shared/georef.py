@@ -16,7 +16,8 @@ centre (:mod:`.geo`). Written to a format that holds no longitude/latitude (PLY,
 The frame is recorded where the format holds one (:class:`Georef`): LAS/LAZ a WKT VLR (LAS 1.4,
 point format 6/7; the local frame as an engineering CRS whose remark holds the pipeline), DXF the
 ``$LATITUDE``/``$LONGITUDE`` header variables of the origin plus custom properties
-``CRS`` and ``CRS_FRAME``, PLY/OBJ/XYZ/OFF header comments.
+``CRS`` and ``CRS_FRAME``, PLY/OBJ header comments (and geosmooth JSON's ``comments``). XYZ, OFF,
+PCD, E57 and glTF record nothing (no comment or CRS field geosmooth writes there yet).
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ class Georef:
         )
 
     def lines(self) -> list[str]:
-        """Header comment lines stating the frame (PLY, OBJ, XYZ, OFF)."""
+        """Header comment lines stating the frame (PLY, OBJ, JSON)."""
         lon0, lat0, _ = self.origin
         if self.crs != "local":
             return [f"crs {self.crs} ({self.name}); smoothed about lon {lon0!r} lat {lat0!r}"]
