@@ -91,6 +91,9 @@ def _las(data: bytes) -> Back:
     cols = None
     if {"red", "green", "blue"} <= names:
         cols = np.column_stack([las.red, las.green, las.blue]).astype(np.float64)
+        if cols.max() > 255:  # LAS colours are 16-bit: 8-bit ones are written x 257
+            assert np.all(cols % 257 == 0), "16-bit colours that are not 8-bit ones x 257"
+            cols = cols / 257
     return Back(pts, colours=cols, resolution=float(np.max(las.header.scales)) / 2)
 
 

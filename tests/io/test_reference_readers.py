@@ -2,7 +2,7 @@
 
 * XYZ -> PCD opened in Open3D as all zeros (binary ``F 8``): georeferenced text is now ASCII
   doubles (Open3D, pypcd4: exact), the mug scene float32 binary (float32 keeps its 6 decimals).
-* XYZ colour columns -> PLY ``uchar`` (trimesh showed white for ``double`` colours).
+* XYZ colour columns -> PLY ``uchar`` (trimesh showed white for ``double`` colours), LAS 16-bit.
 * spot.obj -> glTF and PLY keep its 3,225 texture coordinates (trimesh, Open3D), the other
   formats say they drop them.
 * A mesh -> LAS writes the vertices with a note (as PDAL and CloudCompare do).
@@ -171,3 +171,18 @@ def test_gltf_uvs_survive_in_obj_and_ply(data_dir: Path) -> None:
         assert not any("uv" in n for n in output_notes(gltf, fmt)), fmt
         mesh = trimesh.load(io.BytesIO(write_geometry(gltf, fmt)), file_type=fmt, process=False)
         _same_textured_vertices(np.column_stack([mesh.vertices, mesh.visual.uv]), want)
+
+
+def test_xyz_colours_become_16_bit_las(data_dir: Path) -> None:
+    """LAS RGB is 16-bit (the specification): 8-bit colours are written x 257 (255 -> 65535)."""
+    import laspy
+
+    doc = _doc(data_dir, "points_agisoft.xyz")
+    las = laspy.read(io.BytesIO(write_geometry(doc, "las")))
+    cols = np.column_stack([las.red, las.green, las.blue]).astype(np.float64)
+    assert np.array_equal(cols, _colours(doc) * 257)
+    back = read_geometry(write_geometry(doc, "las"), "las")  # and to PCD: 8-bit again
+    pcd = read_geometry(write_geometry(back, "pcd"), "pcd")
+    rgb = pcd.attributes["rgb"].view(np.uint32)
+    got = np.column_stack([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255]).astype(np.float64)
+    assert np.array_equal(got, _colours(doc))
