@@ -32,9 +32,9 @@ BOUNDARY = "pace-boundary-7f3a"
 def _multipart(payload: bytes) -> tuple[bytes, bytes, bytes]:
     """Request head, the file part's own head and the closing tail of a one-file upload."""
     part = (
-        f"--{BOUNDARY}\r\nContent-Disposition: form-data; name=\"params\"\r\n\r\n"
+        f'--{BOUNDARY}\r\nContent-Disposition: form-data; name="params"\r\n\r\n'
         '{"lam": 1.0}\r\n'
-        f"--{BOUNDARY}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"c.xyz\"\r\n"
+        f'--{BOUNDARY}\r\nContent-Disposition: form-data; name="file"; filename="c.xyz"\r\n'
         "Content-Type: text/plain\r\n\r\n"
     ).encode()
     tail = f"\r\n--{BOUNDARY}--\r\n".encode()
@@ -125,7 +125,7 @@ def test_a_trickling_body_gets_408_within_the_window_and_its_spool_is_removed(
 
 def test_fast_and_slow_but_legal_uploads_are_accepted(paced: LiveServer) -> None:
     with paced.client() as c:
-        files = {"file": ("big.xyz", encode("xyz", noisy_plane_cloud(60_000, seed=3), None))}
+        files = {"file": ("big.xyz", encode("xyz", noisy_plane_cloud(20_000, seed=3), None))}
         r = c.post("/v1/jobs", files=files, data={"params": json.dumps({"lam": 1.0})})
         assert r.status_code == 202, r.text
     payload = encode("xyz", noisy_plane_cloud(300, seed=4), None)
@@ -157,3 +157,16 @@ def test_a_server_too_busy_to_read_does_not_refuse_a_legal_body(paced: LiveServe
         sock.sendall(tail)
         answer = sock.recv(65536)
     assert answer.startswith(b"HTTP/1.1 202"), answer[:300]
+
+
+def test_body_pace_credit() -> None:
+    """The credit: spent while waiting, refilled by bytes, never above ``min_rate * window``."""
+    from service.api.http.limits import BodyPace
+
+    pace = BodyPace(1000, 3.0)
+    assert pace.budget() == 3.0
+    assert pace.record(1.0, 0) and pace.budget() == 2.0
+    assert pace.record(0.5, 10**6) and pace.budget() == 3.0  # capped: no banking ahead
+    assert not pace.record(3.5, 100)  # 3.5 s for 100 bytes: behind the floor
+    off = BodyPace(0, 3.0)
+    assert off.budget() == float("inf") and off.record(1e6, 0)
