@@ -52,6 +52,16 @@ def test_redis_buckets_answer_like_the_per_process_ones(redis: RedisServer) -> N
     assert tokens < 0.1 and fresh == burst
 
 
+def test_an_unreachable_redis_lets_requests_through() -> None:
+    from tests.jobs.rq_harness import free_port
+
+    async def run() -> tuple[float, float]:
+        gone = RedisBuckets(f"redis://127.0.0.1:{free_port()}/0", "gone:", timeout=1.0)
+        return await gone.take("k", 0.01, 1), await gone.peek("k", 0.01, 1)
+
+    assert asyncio.run(run()) == (0.0, 1.0)
+
+
 def _replicas(make_server: Callable[..., LiveServer], redis: RedisServer) -> list[LiveServer]:
     env = {
         "GEOSMOOTH_QUEUE": "rq",
