@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from service.core.checks.shrinkage import enclosed_measure
+from service.core.finish.volume import enclosed_measure
 
 __all__ = [
     "SurfaceDistance",

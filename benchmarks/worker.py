@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from benchmarks.measure import self_peak_rss_mb
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.linalg.solver import split_fixed
-from service.core.pipeline import build_laplacian
+from service.core.operator.build import build_laplacian
 
 __all__ = ["main", "replay", "run_ours"]
 

@@ -10,13 +10,15 @@
     geosmooth.describe(points)["suggested_tau"]                   # noise estimate, tau range
     doc = geosmooth.read("bunny.ply")
     geosmooth.write(geosmooth.smooth(doc, tau=2e-4), "bunny-smooth.ply")
+    geosmooth.smooth_file("scan.laz", "scan-smooth.laz", rms=0.01, tile_points=2_000_000)
 
 :func:`smooth` accepts numpy arrays (with ``faces=`` / ``edges=``), :class:`Geometry`,
 documents from :func:`read`, ``trimesh.Trimesh`` / ``PointCloud`` / ``Path3D`` and Open3D
 ``TriangleMesh`` / ``PointCloud`` / ``LineSet``, and returns the same kind of object with the
 input's vertex count, order and connectivity. Parameters are those of
 :class:`SmoothingParams`, the one definition the CLI and the HTTP API share. The engine itself
-is :mod:`service.core`; this package only adapts objects and files to it.
+is :mod:`service.core`, entered through the use cases of :mod:`service.workflows`; this package
+only adapts objects and files to them.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ __all__ = [
     "describe",
     "read",
     "smooth",
+    "smooth_file",
     "write",
 ]
 
@@ -100,14 +103,44 @@ def smooth(
         Invalid geometry, parameters this geometry cannot take (e.g. tau outside
         ``(0, phi(0))``: :class:`TauOutOfRange` carries the range), solver failure.
     """
-    from service import core
     from service.core.linalg.threads import use_default_threads
+    from service.workflows.smooth_file import run_engine
 
     use_default_threads(os.environ)  # GEOSMOOTH_THREADS, default 1 (docs/threads.md)
     doc, rebuild = adapt(geometry, faces=faces, edges=edges)
-    result = core.smooth(doc.geometry, _params(params, values), progress=progress)
+    result = run_engine(doc.geometry, _params(params, values), progress)
     smoothed = rebuild(result.points)
     return (smoothed, result) if full_output else smoothed
+
+
+def smooth_file(
+    source: str | os.PathLike[str],
+    target: str | os.PathLike[str],
+    params: SmoothingParams | dict[str, Any] | None = None,
+    *,
+    fmt: str | None = None,
+    output_format: str | None = None,
+    progress: Any = None,
+    **values: Any,
+) -> SmoothResult:
+    """Read a file, smooth it, write the result to ``target`` atomically: the use case of
+    ``geosmooth smooth`` (:func:`service.workflows.smooth_file.smooth_file`).
+
+    With ``tile_points`` a LAS/LAZ, binary PLY or XYZ file written in its own format is
+    streamed (only its coordinates are held). ``fmt`` / ``output_format`` default to the
+    extensions; parameters as in :func:`smooth`. Returns the :class:`SmoothResult`.
+    """
+    from pathlib import Path
+
+    from service.core.linalg.threads import use_default_threads
+    from service.io import detect_format
+    from service.workflows.smooth_file import smooth_file as run
+
+    use_default_threads(os.environ)
+    out = output_format or detect_format(os.fspath(target))
+    done = run(Path(source), Path(target), _params(params, values), fmt=fmt, out_fmt=out,
+               progress=progress)  # fmt: skip
+    return done.result
 
 
 def describe(
@@ -154,10 +187,9 @@ def write(
     :func:`service.io.write_geometry` (e.g. ``ply_ascii=True``). A document from :func:`read`
     is written back with everything the file held (comments, welded vertices, polylines).
     """
-    from service.io import detect_format, write_geometry
-    from service.io.atomic import write_file
+    from service.io import detect_format
+    from service.workflows.smooth_file import write_document
 
     doc, _ = adapt(geometry)
-    data = write_geometry(doc, fmt or detect_format(os.fspath(path)), **options)
-    write_file(path, data)
+    write_document(doc, os.fspath(path), fmt or detect_format(os.fspath(path)), **options)
 

@@ -20,9 +20,10 @@ runtime_pkgs=(libcholmod3 libopenblas0-pthread)
 # (WebGL: Mesa's software rasterizer); no browser is ever downloaded (fonts: screenshots);
 # tests/jobs start a real redis-server; scripts/check-image.sh builds Debian 12 roots; the
 # Ctrl-C tests read a socket's acknowledged bytes with `ss` (iproute2); tests/docs run the
-# documentation's curl recipes.
+# documentation's curl recipes; tests/io read every output back with Open3D (libusb, libgl1,
+# libgomp1 are what its wheel loads).
 test_pkgs=(chromium firefox-esr xvfb libgl1-mesa-dri fonts-dejavu-core redis-server debootstrap
-           iproute2 curl)
+           iproute2 curl libusb-1.0-0 libgl1 libgomp1)
 pkgs=("${build_pkgs[@]}" "${python_pkgs[@]}")
 bench_pkgs=(libusb-1.0-0 libgl1 libgomp1)
 case "${1:-}" in

@@ -265,6 +265,20 @@ class Settings(BaseSettings):
     timeout_body_read: float = Field(
         default=30.0, gt=0, description="Seconds without a byte of request body before 408."
     )
+    body_min_rate: int = Field(
+        default=1024,
+        ge=0,
+        description="Slowest upload accepted (bytes per second of waiting for the body, averaged "
+        "over body_rate_window): a slower body gets 408 body-timeout and its spool file is "
+        "removed, so a body of S bytes has at most body_rate_window + S / body_min_rate seconds; "
+        "time the server spends elsewhere is not counted. 0: no rate bound.",
+    )
+    body_rate_window: float = Field(
+        default=30.0,
+        gt=0,
+        description="Seconds over which body_min_rate is averaged: a body that falls behind it "
+        "is answered within this (plus one second of grace for a busy server).",
+    )
     timeout_graceful_shutdown: float = Field(
         default=10.0, gt=0, description="Seconds requests get to finish on SIGTERM."
     )

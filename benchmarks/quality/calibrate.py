@@ -3,7 +3,7 @@
 For every calibration case and candidate mode, geosmooth is run at ``tau = k x r sigma^2 n``
 (``sigma`` the *estimated* noise, ``r`` normal directions, ``k`` on a log grid); the errors
 against the ground truth give, per case, the error of any rule ``k(case)`` relative to the best
-``k`` of the grid. The constants of :func:`service.core.search.noise.discrepancy_tau` are those
+``k`` of the grid. The constants of :func:`service.core.search.autotau.discrepancy_tau` are those
 minimizing the mean log ratio over cases and both metrics (vertex error, distance to the true
 surface): ``c`` for normal displacement, ``(c, alpha)`` with ``k = c (1 + alpha rho)`` for free
 displacement. Writes ``results/calibration-<date>.json`` and prints the fit.
@@ -28,8 +28,8 @@ from benchmarks.quality.ours import geometry_of
 from benchmarks.quality.scores import Scorer
 from service.core import SmoothingParams, smooth
 from service.core.errors import GeosmoothError
+from service.core.noise.estimate import codimension, estimate_noise
 from service.core.operator.build import build_operator
-from service.core.search.noise import codimension, estimate_noise
 from service.core.system.displacement import tangential_ratio
 
 RESULTS = Path(__file__).resolve().parent / "results"

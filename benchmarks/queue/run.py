@@ -26,9 +26,10 @@ from benchmarks.queue.cluster import Cluster
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 from service.io import GeometryDocument, write_geometry
-from service.jobs import JobQueue, JobRecord, LocalQueue
-from service.jobs.distributed.backend import Backend
+from service.jobs import JobQueue, JobRecord
+from service.jobs.config import LocalConfig, RQConfig
 from service.jobs.distributed.queue import RQQueue
+from service.jobs.embedded.queue import LocalQueue
 from service.jobs.queue import NewJob
 
 __all__ = ["job_mix", "overhead", "redis_cost", "throughput"]
@@ -113,7 +114,7 @@ def utilization(run: dict[str, float], workers: int) -> float:
 
 def _rq(root: Path, workers: int, name: str) -> tuple[Cluster, RQQueue]:
     cluster = Cluster(root / name, workers, name).start()
-    queue = RQQueue(Backend.connect(cluster.settings), sweep_interval=1.0)
+    queue = RQQueue(RQConfig(cluster.settings, sweep_interval=1.0))
     queue.start()
     return cluster, queue
 
@@ -131,8 +132,8 @@ def throughput(jobs: list[Job], workers: int, backend: str, rounds: int) -> dict
                 queue.stop()
                 cluster.stop()
         else:
-            local = LocalQueue(Path(tmp) / "data", workers=workers, threads_per_job=1,
-                               sweep_interval=5.0)  # fmt: skip
+            local = LocalQueue(LocalConfig(Path(tmp) / "data", workers=workers, threads_per_job=1,
+                                           sweep_interval=5.0))  # fmt: skip
             with local:
                 _run_mix(local, jobs[:2])
                 runs = [_run_mix(local, jobs) for _ in range(rounds)]
@@ -144,7 +145,8 @@ def overhead(n_jobs: int = 30) -> dict[str, Any]:
     tiny = _job(_ring(12, 0), "xyz", SmoothingParams(lam=0.5))
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="bench-overhead-") as tmp:
-        local = LocalQueue(Path(tmp) / "local", workers=1, threads_per_job=1, sweep_interval=5.0)
+        local = LocalQueue(LocalConfig(Path(tmp) / "local", workers=1, threads_per_job=1,
+                                       sweep_interval=5.0))  # fmt: skip
         cluster, rq_queue = _rq(Path(tmp), 1, "overhead")
         try:
             with local:

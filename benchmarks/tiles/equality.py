@@ -21,7 +21,7 @@ import numpy as np
 
 from benchmarks.tiles import terrain
 from service.core import Geometry, SmoothingParams
-from service.core.pipeline import smooth as smooth_untiled
+from service.core.pipeline import smooth_one as smooth_untiled
 from service.core.tiles import smooth_tiled
 
 OUT = Path(__file__).resolve().parent / "results" / "equality.jsonl"

@@ -19,6 +19,7 @@ from service.api.http.guards import AuthGate, HostGuard, InFlightLimit, OriginGu
 from service.api.http.headers import SecurityHeaders
 from service.api.http.limits import BodyLimitMiddleware
 from service.api.http.metrics import Metrics
+from service.api.http.ratelimit import buckets_for
 from service.api.intake.request import Intake, clean_spool
 from service.api.job_events import JobEventLog
 from service.api.problems import PROBLEM_MEDIA_TYPE, FiniteJSONResponse, install_problem_handlers
@@ -151,12 +152,16 @@ def _add_guards(app: FastAPI, settings: Settings, keys: KeyRing) -> None:
         BodyLimitMiddleware,
         max_bytes=settings.max_upload_bytes,
         read_timeout=settings.timeout_body_read,
+        min_rate=settings.body_min_rate,
+        rate_window=settings.body_rate_window,
     )
     app.add_middleware(
         AuthGate,
         keys=keys,
+        buckets=buckets_for(settings, "requests"),
         failure_burst=settings.auth_failure_burst,
         failure_rate=settings.auth_failure_rate,
+        failures=buckets_for(settings, "auth-failures"),
     )
     app.add_middleware(OriginGuard, trusted_origins=origins)
     if origins:

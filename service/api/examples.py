@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from service.core.report import report_example
+
 __all__ = ["GEOMETRY_EXAMPLE", "JOB_EXAMPLE", "REPORT_EXAMPLE"]
 
 
@@ -12,28 +14,8 @@ GEOMETRY_EXAMPLE: dict[str, Any] = {
     "faces": [[0, 1, 2], [0, 2, 3]],
 }
 
-REPORT_EXAMPLE: dict[str, Any] = {
-    "lambda": 0.0123,
-    "phi": 0.4998,
-    "tau": 0.5,
-    "relative_error": 0.0004,
-    "converged": True,
-    "iterations": 6,
-    "factorizations": 6,
-    "history": [{"lambda": 0.01, "phi": 0.41}, {"lambda": 0.0123, "phi": 0.4998}],
-    "n_points": 2930,
-    "dimension": 3,
-    "kind": "mesh",
-    "laplacian": "normalized",
-    "weights": "mean-value",
-    "n_fixed": 0,
-    "rms_displacement": 0.013,
-    "max_displacement": 0.041,
-    "volume_scale": None,
-    "timings": {"laplacian": 0.004, "analysis": 0.002, "solve": 0.011, "total": 0.03},
-    "solver": "cholmod",
-    "warnings": [],
-}
+#: The report's example is the model's (each member every report has, with its example).
+REPORT_EXAMPLE: dict[str, Any] = report_example()
 
 JOB_EXAMPLE: dict[str, Any] = {
     "id": "3f2a9c0d4b5e6f708192a3b4c5d6e7f8",

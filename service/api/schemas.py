@@ -1,6 +1,7 @@
 """Request and response bodies of the HTTP API (documentation and validation).
 
-Smoothing parameters are :class:`service.core.params.SmoothingParams`, reused unchanged.
+Smoothing parameters are :class:`service.core.params.SmoothingParams` and the report is
+:class:`service.core.report.Report` (with its ``HistoryEntry``), both reused unchanged.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pydantic.json_schema import WithJsonSchema
 
 from service.api.examples import GEOMETRY_EXAMPLE, JOB_EXAMPLE, REPORT_EXAMPLE
 from service.core.params import SmoothingParams
+from service.core.report import HistoryEntry, Report
 from service.io.registry import FORMATS
 from service.settings import default
 
@@ -143,120 +145,6 @@ class SmoothJsonRequest(BaseModel):
         description="Weld exactly coincident vertices before smoothing (the result keeps the "
         "input's vertex count and order).",
         examples=[False],
-    )
-
-
-class HistoryEntry(BaseModel):
-    """One lambda tried by the tau search."""
-
-    model_config = ConfigDict(populate_by_name=True)
-
-    lam: float = Field(alias="lambda", description="lambda of eq. (4).", examples=[0.0123])
-    phi: float = Field(description="phi(lambda), eq. (15).", examples=[0.4998])
-
-
-class Report(BaseModel):
-    """Diagnostics of a smoothing run: exactly ``SmoothResult.report()`` of ``service.core``."""
-
-    model_config = ConfigDict(
-        extra="allow", populate_by_name=True, json_schema_extra={"examples": [REPORT_EXAMPLE]}
-    )
-
-    lam: float = Field(alias="lambda", description="The lambda used.")
-    phi: float = Field(description="phi(lambda) = ||D(X - P)||_F^2 reached.")
-    tau: float | None = Field(description="Requested smoothing factor (null when lam was given).")
-    relative_error: float | None = Field(description="|phi - tau| / tau.")
-    converged: bool = Field(description="Whether the tau search met the tolerance.")
-    iterations: int = Field(description="lambda values tried.")
-    factorizations: int = Field(description="Numeric factorizations done.")
-    solves: int = Field(default=0, description="Solves with a factorization (all columns).")
-    matvecs: int = Field(default=0, description="Products with L^T L (Lanczos, CG).")
-    search: str = Field(default="none", description="lambda search: auto, newton, rational, none.")
-    order: int = Field(default=1, description="Iterated Tikhonov order k.")
-    method: str = Field(default="tikhonov", description="tikhonov or windowed-sinc.")
-    history: list[HistoryEntry] = Field(description="(lambda, phi) for every lambda tried.")
-    n_points: int = Field(description="Points smoothed.")
-    dimension: int = Field(description="Coordinates per point.")
-    kind: str = Field(description="mesh, curve or cloud.")
-    laplacian: str = Field(description="Laplacian variant used.")
-    weights: str = Field(description="Weight scheme used.")
-    n_fixed: int = Field(description="Points held fixed.")
-    rms_displacement: float = Field(
-        description="RMS of ||x_i - p_i|| (was ``rms_deviation`` before 2026-11)."
-    )
-    max_displacement: float = Field(
-        description="Maximum of ||x_i - p_i||, a measurement (``params.max_deviation`` is the "
-        "bound; was ``max_deviation`` before 2026-11)."
-    )
-    volume_scale: float | None = Field(description="Scale applied to preserve volume.")
-    timings: dict[str, float] = Field(description="Seconds per stage.")
-    solver: str = Field(description="cholmod, superlu, cg (matrix-free) or none (filter).")
-    warnings: list[str] = Field(description="Anything the user should know.")
-    spectrum: dict[str, list[float]] | None = Field(
-        default=None, description="Singular values and filter factors, when requested."
-    )
-    # --- core-quality keys ---
-    displacement: str = Field(default="free", description="free or normal (along normals only).")
-    tau_rule: str = Field(
-        default="tau", description="How lambda was set: lam, tau, rms, auto or gcv."
-    )
-    sigma_estimate: float | None = Field(
-        default=None, description="Estimated noise level across the shape (automatic tau)."
-    )
-    tau_how: str | None = Field(
-        default=None, description="How the automatic tau was chosen, in words."
-    )
-    bound: dict[str, Any] | None = Field(
-        default=None,
-        description="max_deviation bound: {max_deviation, rounds, clipped}.",
-    )
-    noise_found: bool | None = Field(
-        default=None,
-        description="Automatic tau: whether noise was found (false: the input was returned "
-        "unchanged, tau_how says why).",
-    )
-    outlier_count: int = Field(
-        default=0, description="Points the robust data weights treated as outliers (robust)."
-    )
-    outliers: list[int] = Field(
-        default_factory=list, description="Indices of the points treated as outliers."
-    )
-    data_weights: str | None = Field(
-        default=None,
-        description="Data weights applied beyond the user's: 'robust (<rule>)', 'noise' "
-        "(1/sigma_i, uneven noise) or both; null for none.",
-    )
-    tangential: dict[str, Any] | None = Field(
-        default=None,
-        description="Meshes, normal displacement with the automatic tau: the step along the "
-        "surface (share, budget, psi, steps, reverted); the total deviation is phi + psi.",
-    )
-    shape_warnings: list[str] = Field(
-        default_factory=list,
-        description="The shape checks' warnings (also in warnings); strict fails on any.",
-    )
-    flipped_faces: int | None = Field(
-        default=None, description="Faces whose normal turned against the input's (meshes)."
-    )
-    folded_faces: int | None = Field(
-        default=None, description="Faces folded against their neighbours in the result."
-    )
-    folded_input: int | None = Field(
-        default=None, description="Faces folded against their neighbours in the input."
-    )
-    new_folds: int | None = Field(
-        default=None, description="Folded faces with no folded input face sharing a vertex."
-    )
-    volume_change: float | None = Field(
-        default=None,
-        description="Relative change of the enclosed volume (closed meshes) or area (closed "
-        "2-D polygons).",
-    )
-    area_change: float | None = Field(
-        default=None, description="Relative change of the surface area (meshes) or length."
-    )
-    moved_far: int | None = Field(
-        default=None, description="Points that moved more than 5x the RMS deviation."
     )
 
 

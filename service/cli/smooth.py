@@ -1,4 +1,5 @@
-"""``geosmooth smooth INPUT -o OUTPUT``: read, smooth with :func:`service.core.smooth`, write.
+"""``geosmooth smooth INPUT -o OUTPUT``: the use case read -> smooth -> write
+(:func:`service.workflows.smooth_file.smooth_file`) with the command line's options.
 
 Everything that can be checked without reading the input is checked first (parameters,
 formats, the ``--fixed`` file, whether the output can be written), so a mistake costs nothing.
@@ -9,11 +10,12 @@ them with their class's exit status.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -37,6 +39,7 @@ if TYPE_CHECKING:
     from service.core.errors import TauOutOfRange
     from service.core.geometry import Geometry
     from service.io import GeometryDocument
+    from service.workflows.smooth_file import Smoothed, Store
 
 __all__ = ["read_fixed_indices", "run"]
 
@@ -168,90 +171,97 @@ def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]
     return params, out_fmt
 
 
+def _streamed(ns: argparse.Namespace, params: SmoothingParams, out_fmt: str | None) -> str | None:
+    """The format of a tiled run read and written in chunks (issue 23), else ``None``: a file
+    to a file, no ``--fixed``, no writer option (:func:`service.workflows.smooth_file.
+    streamed_format_of`)."""
+    if ns.fixed or "-" in (ns.input, ns.output):
+        return None
+    from service.workflows.smooth_file import streamed_format_of
+
+    options = {**given_writer_options(ns), "ply_ascii": ns.ascii}
+    return streamed_format_of(Path(ns.input), Path(ns.output), params, fmt=ns.input_format,
+                              out_fmt=out_fmt, weld=ns.weld, xyz_dims=ns.xyz_dims,
+                              options=options)  # fmt: skip
+
+
+@contextlib.contextmanager
+def _cli_errors(params: SmoothingParams, progress: ProgressDisplay) -> Iterator[None]:
+    """The use case's failures as the CLI states them (both paths, one place)."""
+    from service.core.errors import TauOutOfRange
+    from service.workflows.smooth_file import OutputFormatError
+
+    try:
+        yield
+    except TauOutOfRange as exc:
+        raise CliError(tau_message(exc, params), exc.exit_code) from exc
+    except OutputFormatError as exc:  # the format cannot hold this geometry: an output problem
+        raise CliError(f"cannot write {exc.target_fmt}: {exc.message}", EXIT_OUTPUT) from exc
+    finally:
+        progress.finish()
+
+
+def _tile_map(streamed: str | None) -> contextlib.AbstractContextManager[Any]:
+    """Local tile processes of a streamed run (``GEOSMOOTH_TILE_WORKERS``, default 1: none)."""
+    workers = max(1, int(os.environ.get("GEOSMOOTH_TILE_WORKERS", "1") or 1))
+    if not streamed or workers <= 1:
+        return contextlib.nullcontext()
+    from service.jobs.tiles.local import local_tiles
+
+    return local_tiles(workers)
+
+
 def run(ns: argparse.Namespace, err: TextIO) -> int:
     """Run ``geosmooth smooth``; returns the exit status (errors are raised)."""
-    from service import core
-    from service.core.errors import TauOutOfRange
-    from service.io import FormatError, write_geometry
-    from service.io.dispatch import check_output, output_notes
+    from service.workflows.smooth_file import smooth_file
 
     started = time.perf_counter()
     params, out_fmt = _check_options(ns)
-    if params.tile_points and not ns.fixed and "-" not in (ns.input, ns.output):
-        from service.io.stream import streamed_format  # tiles: stream the file (issue 23)
-
-        fmt = streamed_format(Path(ns.input), ns.input_format, out_fmt, ns.weld, ns.xyz_dims)
-        if fmt and not given_writer_options(ns) and not ns.ascii:
-            return _run_streamed(ns, params, fmt, started, err)
-    fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
-    doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
-    geometry = _with_fixed(doc, fixed)
-    out_fmt = out_fmt or doc.source_format
-    check_output(doc, out_fmt)  # a format that cannot hold this input: refused before smoothing
-
+    streamed = _streamed(ns, params, out_fmt)
+    source: Path | GeometryDocument = Path(ns.input)
+    target: Path | Store = Path(ns.output)
+    geometry = doc = None
+    if not streamed:
+        fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
+        source = doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+        geometry = _with_fixed(doc, fixed)
+        target = lambda _result, data: write_output(ns.output, data, "output")  # noqa: E731
     progress = ProgressDisplay(err, enabled=not ns.quiet)
-    try:
-        result = core.smooth(geometry, params, progress=progress)
-    except TauOutOfRange as exc:
-        raise CliError(tau_message(exc, params), exc.exit_code) from exc
-    finally:
-        progress.finish()
-    try:
-        options = given_writer_options(ns)
-        data = write_geometry(doc, out_fmt, points=result.points, ply_ascii=ns.ascii, **options)
-    except FormatError as exc:  # the format cannot hold this geometry: an output problem
-        raise CliError(f"cannot write {out_fmt}: {exc.message}", EXIT_OUTPUT) from exc
-    write_output(ns.output, data, "output")
+    options = {**given_writer_options(ns), "ply_ascii": ns.ascii}
+    with _cli_errors(params, progress), _tile_map(streamed) as run_map:
+        done = smooth_file(source, target, params, fmt=streamed, out_fmt=out_fmt,
+                           read_options={"weld": ns.weld, "xyz_dims": ns.xyz_dims},
+                           write_options=options, geometry=geometry, progress=progress,
+                           run_map=run_map, stage=lambda _name: progress.finish())  # fmt: skip
+    _report(ns, params, done, started, progress)
+    return EXIT_OK
 
-    report: dict[str, Any] = dict(result.report())
+
+def _report(
+    ns: argparse.Namespace,
+    params: SmoothingParams,
+    done: Smoothed,
+    started: float,
+    progress: ProgressDisplay,
+) -> None:
+    """The JSON report (``--report``) and the summary on stderr."""
+    from service.io.dispatch import output_notes
+
+    report: dict[str, Any] = dict(done.result.report())
     if ns.report:
         report.update(
             input=ns.input,
-            input_format=doc.source_format,
+            input_format=done.input_format,
             output=ns.output,
-            output_format=out_fmt,
+            output_format=done.output_format,
             params=params.model_dump(mode="json"),
             geosmooth_version=version(),
             wall_seconds=time.perf_counter() - started,
         )
+        if done.streamed:
+            report["streamed"] = True
         write_json_report(ns.report, report)
-    show_summary(
-        progress,
-        report,
-        ns,
-        params,
-        started,
-        details=_details(doc),
-        notes=output_notes(doc, out_fmt),
-    )
-    return EXIT_OK
-
-
-def _run_streamed(
-    ns: argparse.Namespace, params: SmoothingParams, fmt: str, started: float, err: TextIO
-) -> int:
-    """``smooth`` of a LAS/LAZ, binary PLY or XYZ file in tiles, read and written in chunks."""
-    import contextlib
-
-    from service.core.errors import TauOutOfRange
-    from service.io.stream import smooth_streamed
-    from service.jobs.tiles.local import local_tiles
-
-    workers = max(1, int(os.environ.get("GEOSMOOTH_TILE_WORKERS", "1") or 1))
-    progress = ProgressDisplay(err, enabled=not ns.quiet)
-    try:
-        with local_tiles(workers) if workers > 1 else contextlib.nullcontext() as run_map:
-            result = smooth_streamed(Path(ns.input), Path(ns.output), fmt, params, progress,
-                                     run_map=run_map)  # fmt: skip
-    except TauOutOfRange as exc:
-        raise CliError(tau_message(exc, params), exc.exit_code) from exc
-    finally:
-        progress.finish()
-    report: dict[str, Any] = dict(result.report())
-    if ns.report:
-        report.update(input=ns.input, input_format=fmt, output=ns.output, output_format=fmt,
-                      params=params.model_dump(mode="json"), geosmooth_version=version(),
-                      wall_seconds=time.perf_counter() - started, streamed=True)  # fmt: skip
-        write_json_report(ns.report, report)
-    show_summary(progress, report, ns, params, started, details=["streamed"], notes=[])
-    return EXIT_OK
+    doc = done.document
+    details = ["streamed"] if doc is None else _details(doc)
+    notes = [] if doc is None else output_notes(doc, done.output_format)
+    show_summary(progress, report, ns, params, started, details=details, notes=notes)

@@ -25,7 +25,7 @@ _EXPORTS = {
     "Spectrum": "result",
     "ProgressCallback": "progress",
     "ProgressEvent": "progress",
-    "smooth": "tiles.entry",
+    "smooth": "entry",
     "build_operator": "operator.build",
     "SmoothingOperator": "operator.build",
 }
@@ -52,6 +52,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # pragma: no cover
+    from service.core.entry import smooth
     from service.core.errors import (
         DegenerateElement,
         GeometryError,
@@ -68,7 +69,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.core.params import SmoothingParams
     from service.core.progress import ProgressCallback, ProgressEvent
     from service.core.result import SmoothResult, Spectrum
-    from service.core.tiles.entry import smooth
 
 
 def __getattr__(name: str) -> Any:

@@ -103,6 +103,14 @@ class Frame:
         """``(s w)^2``: ``phi = phi_factor * phi'``."""
         return (self.scale * self.weight_scale) ** 2
 
+    def tau_in(self, tau: float) -> float:
+        """``tau' = tau / (s w)^2``: a budget (or deviation) of the input in the frame."""
+        return tau / self.phi_factor
+
+    def phi_out(self, phi: float) -> float:
+        """``phi = (s w)^2 phi'``: a deviation (or budget) of the frame in the input's numbers."""
+        return phi * self.phi_factor
+
     def _lam_factor(self) -> tuple[float, float]:
         """``w^2 s^(2p)`` as a float (``inf``/0 when not representable) and its logarithm."""
         log = 2 * math.log(self.weight_scale) + 2 * self.power * math.log(self.scale)

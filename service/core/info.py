@@ -3,7 +3,7 @@
 Used by ``geosmooth info``, the API's ``POST /v1/info`` and the web page. It builds the
 neighbourhoods and the Laplacian once (as ``smooth`` would) to get ``phi(0)`` of eq. (14), the
 upper end of the valid range of ``tau`` (section 6.1), and estimates the noise level (see
-:mod:`service.core.search.noise`) to suggest a smoothing factor.
+:mod:`service.core.noise.estimate`) to suggest a smoothing factor.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from service.core.params import SmoothingParams
 from service.core.search.budget import free_weight, tau_to_rms
 
 if TYPE_CHECKING:
-    from service.core.pipeline import Problem
+    from service.core.problem import Problem
 
 __all__ = ["describe", "mean_spacing", "valid_range"]
 
@@ -32,14 +32,14 @@ def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, in
     """``phi(0)`` of the mode ``params`` selects (eq. 14 per component for free displacement,
     fixed points as boundary values; the system's limit for normal displacement), the weight
     sum ``sum omega_i^2`` over the points that can move, the number of neighbour pairs and
-    the problem :func:`~service.core.pipeline.prepare` set up (as ``smooth`` would)."""
+    the problem :func:`~service.core.pipeline.plan_and_prepare` set up (as ``smooth`` would)."""
     import scipy.sparse as sp
 
-    from service.core.pipeline import prepare
+    from service.core.pipeline import plan_and_prepare
     from service.core.search.target import phi_at_zero_of
     from service.core.system.deviation import Deviation
 
-    problem = prepare(geometry, params)
+    _, problem = plan_and_prepare(geometry, params)
     adj = problem.op.neighborhoods.adjacency
     n_edges = int(sp.triu(adj + adj.T, k=1).nnz)
     fixed = problem.fixed
@@ -52,7 +52,7 @@ def _phi0(geometry: Geometry, params: SmoothingParams) -> tuple[float, float, in
             problem.params,
         )  # fmt: skip
     w2 = free_weight(geometry, fixed)
-    return float(phi0) * problem.frame.phi_factor, w2, n_edges, problem
+    return problem.phi_out(float(phi0)), w2, n_edges, problem
 
 
 def _solver(params: SmoothingParams) -> Literal["cholmod", "superlu"]:
@@ -71,15 +71,15 @@ def valid_range(geometry: Geometry, params: SmoothingParams) -> tuple[float, flo
 
 
 def _knee(problem: Problem, tau0: float) -> float:
-    """The automatic tau as :func:`~service.core.pipeline.smooth` chooses it: the knee of
+    """The automatic tau as :func:`~service.core.pipeline.smooth_one` chooses it: the knee of
     ``phi(lambda)`` near the discrepancy estimate ``tau0`` (Lanczos, no factorization)."""
     from service.core.search.autotau import knee_tau
     from service.core.system.deviation import Deviation
 
     params, frame = problem.params, problem.frame
     dev = Deviation(problem.system, solver=_solver(params), order=params.order)
-    tau = knee_tau(dev, tau0 / frame.phi_factor)
-    return tau0 if tau is None else tau * frame.phi_factor
+    tau = knee_tau(dev, frame.tau_in(tau0))
+    return tau0 if tau is None else frame.phi_out(tau)
 
 
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
@@ -102,8 +102,9 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
         counts neighbour pairs (mesh edges, curve edges, cloud neighbourhood pairs).
         ``noise`` says whether noise was found and on what evidence.
         ``sigma_estimate`` is the noise level across the shape
-        (:func:`~service.core.search.noise.estimate_noise`), ``suggested_tau`` the tau the automatic
-        rule would choose with ``params`` (:func:`~service.core.search.autotau.auto_tau`) and
+        (:func:`~service.core.noise.estimate.estimate_noise`), ``suggested_tau`` the tau the
+        automatic rule would choose with ``params`` (:func:`~service.core.search.autotau.auto_tau`)
+        and
         ``suggested_rms`` the same budget as an RMS displacement; ``None`` when no estimate
         can be made (too few or degenerate points) or when it falls outside ``(0, phi0)``.
     """

@@ -1,60 +1,54 @@
-"""``smooth()``: the single entry point of the engine (exported as ``service.core.smooth``).
+"""``smooth_one()``: one run of the engine on one geometry, as stages in run order.
 
-Pipeline (report sections 4-8): neighbourhoods and the Laplacian (:mod:`.operator`) -> the free
-points (fixed ones eliminated, section 8) -> the smoothing system (:mod:`.system`) -> lambda
-(given, or searched so that ``phi(lambda) = tau``, :mod:`.tau`) -> the points ``X`` -> optional
-volume/area rescaling -> diagnostics. Everything between the operator and ``X`` runs in the
-internal frame of :mod:`.frame`.
+plan (:mod:`.plan`: every automatic choice, once) -> prepare (:mod:`.problem`: neighbourhoods
+and ``L``, report section 4; free points, section 8; the system of eq. 4) -> target (tau of
+eq. 3, :mod:`.search.target`) -> solve (lambda so that ``phi(lambda) = tau``, eqs. 15-17 and
+section 6; the max-norm bound of section 9) -> finish (:mod:`.finish`: outliers, tangential
+step, volume, clipping) -> report (:mod:`.checks.diagnostics`). Each stage takes records and
+returns one; :class:`~service.core.run.Run` only keeps the clock, the progress callback and the
+notes. The public ``smooth()`` (untiled or tiled) is :func:`service.core.entry.smooth`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-
-import numpy as np
-from numpy.typing import NDArray
+import time
+from dataclasses import replace
 
 from service.core.checks.diagnostics import diagnostics
-from service.core.checks.shrinkage import check_preservable, preserve_measure
-from service.core.errors import ParameterError, TauOutOfRange
-from service.core.frame import Frame
+from service.core.errors import TauOutOfRange
+from service.core.finish.clip import clip_points
+from service.core.finish.finished import Finished
+from service.core.finish.tangential import relax_tangential
+from service.core.finish.volume import preserve_measure
 from service.core.geometry import Geometry
 from service.core.linalg.cache import analysis_of
 from service.core.linalg.resources import choose_solver
-from service.core.operator.build import (
-    SmoothingOperator,
-    build_laplacian,
-    build_operator,
-    operator_key,
-)
+from service.core.noise.robust import pull_in
+from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
+from service.core.plan import Plan, make_plan, with_problem, with_solution
+from service.core.problem import Problem, prepare
 from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
 from service.core.run import Run
-from service.core.search.maxnorm import bound_deviation, clip_points
+from service.core.search.maxnorm import bound_deviation
 from service.core.search.polyfilter import filter_system
-from service.core.search.robust import DataWeights, data_weights, pull_in
 from service.core.search.roots import LambdaSearch
-from service.core.search.target import check_range, find_lambda, gcv_search, knee, resolve_tau
-from service.core.system.deviation import Deviation, SmoothingSystem
-from service.core.system.displacement import auto_system, normal_mode, resolve_displacement
-from service.core.system.elimination import laplacian_system
-from service.core.system.tangential import relax_tangential
+from service.core.search.target import (
+    Solution,
+    Target,
+    check_range,
+    find_lambda,
+    gcv_search,
+    knee,
+    resolve_tau,
+)
+from service.core.system.deviation import Deviation
 
-__all__ = [
-    "Problem",
-    "ProgressCallback",
-    "build_laplacian",
-    "build_operator",
-    "prepare",
-    "smooth",
-]
-
-Array = NDArray[np.float64]
+__all__ = ["finish", "plan_and_prepare", "report", "smooth_one", "solve", "target", "tikhonov"]
 
 
-def smooth(
+def smooth_one(
     geometry: Geometry,
     params: SmoothingParams,
     progress: ProgressCallback | None = None,
@@ -62,24 +56,14 @@ def smooth(
     operator: SmoothingOperator | None = None,
     memory_limit: int | None = None,
 ) -> SmoothResult:
-    """Smooth points, curves or meshes (report KU Leuven TW 451).
+    """Smooth one geometry (report KU Leuven TW 451), untiled.
 
-    Solves ``X* = argmin ||L X||_F^2 + lambda ||D (X - P)||_F^2`` (eq. 4): ``L`` the chosen
-    Laplacian (section 4), ``D`` the per-point weights, fixed points eliminated (section 8),
-    ``lambda`` given or found so that ``phi(lambda) = ||D(X - P)||_F^2 = tau`` (eqs. 3, 15).
-    Steps: neighbourhoods and L -> free points -> system -> lambda -> X -> diagnostics.
-
-    Parameters
-    ----------
-    geometry : Geometry
-    params : SmoothingParams
-    progress : callable, optional
-        Called with a :class:`~service.core.progress.ProgressEvent` per stage and per lambda
-        tried; from the ``analysis`` stage on ``event.tau`` is the resolved target.
-    operator : SmoothingOperator, optional
-        From :func:`build_operator` for this geometry and build parameters (reuse across tau).
-    memory_limit : int, optional
-        Bytes for the run: with ``solver="auto"`` a factor that would not fit selects CG.
+    ``X* = argmin ||L X||_F^2 + lambda ||D (X - P)||_F^2`` (eq. 4), fixed points eliminated
+    (section 8), ``lambda`` given or found so that ``phi(lambda) = ||D(X - P)||_F^2 = tau``
+    (eqs. 3, 15). ``progress`` gets a :class:`~service.core.progress.ProgressEvent` per stage
+    and per lambda tried; ``operator`` (from
+    :func:`~service.core.operator.build.build_operator`) is reused across tau; with
+    ``solver="auto"`` a factor that would not fit ``memory_limit`` bytes selects CG.
 
     Raises
     ------
@@ -87,267 +71,190 @@ def smooth(
     """
     run = Run(progress)
     run.emit("neighborhoods")
-    problem = prepare(geometry, params, operator=operator, notes=run.notes)
-    params, op, fixed, n_fixed = problem.params, problem.op, problem.fixed, problem.n_fixed
-    run.frame = frame = problem.frame
-    system, to_points = problem.system, problem.to_points
-    geometry, run.data_weights = problem.geometry, problem.weights  # omega_i of the data term
-    run.tau = resolve_tau(params, geometry, fixed, run, op, problem.weights)
-    run.emit("analysis")
-    automatic = params.tau_rule == "auto"
-    if system.empty and automatic and run.tau:
-        run.tau_how = (run.tau_how or "") + "; but nothing can move (all fixed or uncoupled)"
-    if system.empty or (automatic and not run.tau):
-        return _unchanged(geometry, params, op, run, n_fixed)
-    if params.method == "windowed-sinc":
-        return _filtered(geometry, params, op, run, system, to_points, fixed, n_fixed)
-    dev = _deviation(system, params, memory_limit, run)
-    try:
-        if automatic:
-            knee(dev, run)
-        if params.tau_rule == "gcv":
-            search = gcv_search(dev, geometry, params, fixed, run)
-        else:
-            search = find_lambda(dev, op, fixed, params, run)
-    except TauOutOfRange as exc:
-        if not automatic:
-            raise
-        run.tau_how = (run.tau_how or "") + (
-            f"; this tau is not below phi(0) = {exc.tau_max:.6g}, the deviation of the fully "
-            "smoothed shape: the estimated noise is as large as the shape"
-        )
-        run.tau = None
-        return _unchanged(geometry, params, op, run, n_fixed)
-    run.emit("postprocess", iteration=len(dev.history))
-    U, search = _bounded(dev, search, params, run, system.size // max(int((~fixed).sum()), 1))
-    X = geometry.points.copy()
-    X[~fixed] = frame.back(to_points(U))
-    if problem.weights is not None:  # outliers with no data weight: eq. (4) places them
-        X = pull_in(X, op.L, problem.weights.pulled)
-    X, along = relax_tangential(geometry, params, op, fixed, frame, X, search)
-    volume_scale = None
-    if params.preserve_volume:
-        X, volume_scale = preserve_measure(geometry, X)
-    if params.max_deviation is not None:
-        X, _ = clip_points(geometry.points, X, params.max_deviation)
-    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed, volume_scale, along)
+    plan, problem = plan_and_prepare(geometry, params, operator, run.notes)
+    aim = target(problem, plan)
+    run.emit("analysis", tau=aim.tau)
+    solution = solve(problem, plan, aim, run, memory_limit)
+    finished = finish(problem, plan, solution)
+    return report(problem, plan, run, solution, finished)
 
 
-@dataclass(frozen=True)
-class Problem:
-    """Everything :func:`smooth` sets up before lambda (the opening every analysis shares).
-
-    Attributes
-    ----------
-    geometry : Geometry
-    params : SmoothingParams
-        With ``displacement`` resolved (``"auto"`` replaced by the mode used).
-    op : SmoothingOperator
-        Neighbourhoods, weights, ``L`` (sections 2-4).
-    fixed : ndarray of bool, shape (n,)
-        Points eliminated from the system (section 8), see :func:`free_set`.
-    n_fixed : int
-        Points fixed by the input or ``fix_boundary``.
-    frame : Frame
-        The internal frame, weighted by the free points' ``omega``.
-    system : SmoothingSystem
-        Eq. (4) (or the normal-displacement system) in that frame.
-    to_points : callable
-        From the system's solution ``U`` to the free points (still in the frame).
-    """
-
-    geometry: Geometry
-    params: SmoothingParams
-    op: SmoothingOperator
-    fixed: NDArray[np.bool_]
-    n_fixed: int
-    frame: Frame
-    system: SmoothingSystem
-    to_points: Callable[[Array], Array]
-    weights: DataWeights | None = None
-
-
-def prepare(
+def plan_and_prepare(
     geometry: Geometry,
     params: SmoothingParams,
-    *,
     operator: SmoothingOperator | None = None,
     notes: list[str] | None = None,
-) -> Problem:
-    """Neighbourhoods and ``L`` -> free points -> the system of the selected mode.
-
-    The opening of :func:`smooth`, shared by :func:`service.core.info.describe` and
-    :func:`service.core.info.valid_range`. ``notes`` collects what the caller should be told
-    (e.g. ``fix_boundary`` without a boundary).
-    """
-    requested = params.displacement
-    params = resolve_displacement(params, geometry)
-    op = _operator(geometry, params, operator)
-    fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes)
-    geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
-    if weights is not None and notes is not None:
-        notes.extend(weights.notes)
-    frame = op.frame.weighted(geometry.omega()[~fixed])
-    params, system, to_points = auto_system(
-        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+) -> tuple[Plan, Problem]:
+    """The plan (:func:`~service.core.plan.make_plan`) and the problem it sets up
+    (:func:`~service.core.problem.prepare`), the plan completed with what that decided."""
+    plan = make_plan(geometry, params)
+    problem = prepare(
+        geometry, plan.params, params.displacement, operator=operator, notes=notes
     )
-    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points, weights)
+    return with_problem(plan, problem), problem
 
 
-def _deviation(
-    system: SmoothingSystem, params: SmoothingParams, memory_limit: int | None, run: Run
-) -> Deviation:
-    """phi(lambda) of ``system`` on the path :func:`choose_solver` picks, reporting to ``run``."""
+def target(problem: Problem, plan: Plan) -> Target:
+    """tau of eq. (3), resolved once in the input's frame (:func:`resolve_tau`)."""
+    aim = resolve_tau(
+        problem.params, problem.geometry, problem.fixed, problem.op, problem.weights
+    )
+    if problem.system.empty and plan.automatic_tau and aim.tau:
+        aim = aim.noted("; but nothing can move (all fixed or uncoupled)")
+    return aim
+
+
+def solve(
+    problem: Problem, plan: Plan, aim: Target, run: Run, memory_limit: int | None
+) -> Solution:
+    """Nothing to solve, the windowed-sinc filter, or the default strategy (:func:`tikhonov`:
+    knee, lambda search, solve; the one place another strategy is swapped in)."""
+    if problem.system.empty or (plan.automatic_tau and not aim.tau):
+        return unchanged(problem, plan, aim, run)
+    if problem.params.method == "windowed-sinc":
+        return filtered(problem, aim, run)
+    return tikhonov(problem, plan, aim, run, memory_limit)
+
+
+def tikhonov(
+    problem: Problem, plan: Plan, aim: Target, run: Run, memory_limit: int | None
+) -> Solution:
+    """Eq. (4) of order ``k``: the automatic tau moved to the knee of ``phi(lambda)``, lambda
+    found (section 6.3) or by GCV, the solution ``U`` (max-norm bounded, section 9)."""
+    params, frame = problem.params, problem.frame
+    solver = choose_solver(problem.system, params, memory_limit, run.notes)
     dev = Deviation(
-        system,
-        solver=choose_solver(system, params, memory_limit, run.notes),
+        problem.system,
+        solver=solver,
         order=params.order,
         reuse=params.search != "rational",
         symbolic=analysis_of,
     )
-    dev.listener = run.evaluated
-    return dev
-
-
-def _operator(
-    geometry: Geometry, params: SmoothingParams, operator: SmoothingOperator | None
-) -> SmoothingOperator:
-    if operator is None:
-        return build_operator(geometry, params)
-    if operator.key != operator_key(geometry, params):
-        raise ParameterError(
-            "the operator was built for another geometry or other build parameters "
-            "(laplacian, weights, neighborhood, k, sigma_h, sigma_f)",
-            field="operator",
+    dev.listener = run.listener(frame, aim.tau)
+    seconds = 0.0
+    try:
+        if plan.automatic_tau:
+            aim = knee(dev, aim, frame)
+            dev.listener = run.listener(frame, aim.tau)
+        if params.tau_rule == "gcv":
+            search, aim = gcv_search(dev, problem.geometry, params, problem.fixed, frame)
+        else:
+            t0 = time.perf_counter()
+            search = find_lambda(dev, problem.op, problem.fixed, params, aim, frame, run.notes)
+            seconds = time.perf_counter() - t0
+    except TauOutOfRange as exc:
+        if not plan.automatic_tau:
+            raise
+        aim = aim.noted(
+            f"; this tau is not below phi(0) = {exc.tau_max:.6g}, the deviation of the fully "
+            "smoothed shape: the estimated noise is as large as the shape"
         )
-    return operator
+        return unchanged(problem, plan, replace(aim, tau=None), run)
+    run.emit("postprocess", tau=aim.tau, iteration=len(dev.history))
+    dev.listener = run.listener(frame, aim.tau)
+    return _bounded(problem, dev, Solution(aim, search, None, dev, None, seconds), run)
 
 
-def free_set(
-    geometry: Geometry, op: SmoothingOperator, params: SmoothingParams, notes: list[str]
-) -> tuple[NDArray[np.bool_], int]:
-    """Points eliminated from the system: fixed ones (section 8) and uncoupled ones.
-
-    Returns
-    -------
-    fixed : ndarray of bool, shape (n,)
-        Given fixed points, the boundary with ``fix_boundary``, and points without any
-        coupling in ``L`` (they pass through bit-identical).
-    n_fixed : int
-        Points fixed by the input or ``fix_boundary``.
-    """
-    nb = op.neighborhoods
-    fixed = geometry.fixed_mask()
-    if params.fix_boundary:
-        if nb.source == "knn":
-            notes.append("fix_boundary has no effect on k-NN neighbourhoods (no boundary defined)")
-        fixed = fixed | nb.boundary
-    if params.preserve_volume:
-        check_preservable(geometry, fixed)
-    L = op.L
-    coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
-    pinned = op.pinned if op.pinned is not None else False  # open-curve ends (issue 21)
-    return fixed | ~coupled | pinned, int(fixed.sum())
-
-
-def smoothing_system(
-    geometry: Geometry,
-    op: SmoothingOperator,
-    fixed: NDArray[np.bool_],
-    frame: Frame,
-    params: SmoothingParams,
-) -> tuple[SmoothingSystem, Callable[[Array], Array]]:
-    """The system of the selected mode, in the internal frame (the mode dispatch point), and
-    the map from its solution ``U`` to the free points.
-
-    ``free`` displacement: eq. (4) with the fixed points eliminated
-    (:func:`~service.core.system.elimination.laplacian_system`); ``normal``: one unknown per normal
-    direction of each point (:func:`~service.core.system.displacement.normal_mode`).
-    """
-    P = frame.points(geometry.points)
-    omega = geometry.omega() / frame.weight_scale
-    if params.displacement == "normal":
-        return normal_mode(geometry, op.L, op.neighborhoods, P, omega, fixed)
-    return laplacian_system(op.L, P, omega, fixed), lambda U: U
-
-
-def _bounded(
-    dev: Deviation, search: LambdaSearch, params: SmoothingParams, run: Run, group: int
-) -> tuple[Array, LambdaSearch]:
-    """The solution ``U``; with ``max_deviation``, reweighted until every point is within it."""
+def _bounded(problem: Problem, dev: Deviation, sol: Solution, run: Run) -> Solution:
+    """``sol`` with the solution ``U``; with ``max_deviation``, reweighted until every point is
+    within it (section 9, :func:`~service.core.search.maxnorm.bound_deviation`)."""
+    params, frame, search = problem.params, problem.frame, sol.search
     if params.max_deviation is None:
-        return dev.solution(search.lam), search
-    assert run.frame is not None
-    frame = run.frame
-    tau = None if run.tau is None or params.tau_rule == "gcv" else run.tau / frame.phi_factor
+        return replace(sol, U=dev.solution(search.lam))
+    aim = sol.target
+    tau = None if aim.tau is None or params.tau_rule == "gcv" else frame.tau_in(aim.tau)
     hi = dev.system.lambda_ceiling(tau) if tau else search.lam
     res = bound_deviation(
         dev,
         params.max_deviation / frame.scale,
         search.lam,
-        group=group,
+        group=problem.system.size // max(int((~problem.fixed).sum()), 1),
         tau=tau,
         bracket=(dev.floor, max(hi, search.lam)),
         tolerance=params.tolerance,
     )
     run.notes.extend(res.warnings)
-    run.bound = {
-        "max_deviation": params.max_deviation,
-        "rounds": res.rounds,
-        "clipped": res.clipped,
-    }
-    history = [*search.history, *res.history]
+    bound = {"max_deviation": params.max_deviation, "rounds": res.rounds, "clipped": res.clipped}
     converged = tau is None or abs(res.phi - tau) <= params.tolerance * tau
-    return dev.system.U0 + res.E, LambdaSearch(res.lam, res.phi, converged, history)
+    history = [*search.history, *res.history]
+    bounded = LambdaSearch(res.lam, res.phi, converged, history)
+    return replace(sol, search=bounded, U=dev.system.U0 + res.E, bound=bound)
 
 
-def _filtered(
-    geometry: Geometry,
-    params: SmoothingParams,
-    op: SmoothingOperator,
-    run: Run,
-    system: SmoothingSystem,
-    to_points: Callable[[Array], Array],
-    fixed: NDArray[np.bool_],
-    n_fixed: int,
-) -> SmoothResult:
-    """``method="windowed-sinc"`` (:func:`~service.core.search.polyfilter.filter_system`)."""
-    assert run.frame is not None
-    frame = run.frame
+def filtered(problem: Problem, aim: Target, run: Run) -> Solution:
+    """``method="windowed-sinc"``: a polynomial filter of ``L`` whose pass band meets tau
+    (:func:`~service.core.search.polyfilter.filter_system`; products with ``M``, no solve)."""
+    params, frame, system = problem.params, problem.frame, problem.system
     dev = Deviation(system, solver="cg")  # products with M (counted), no solve
-    tau = None if run.tau is None else run.tau / frame.phi_factor
+    tau = None if aim.tau is None else frame.tau_in(aim.tau)
     lam = None if params.lam is None else frame.lam_in(params.lam)
     bound = system.phi0 if system.phi0 is not None else system.phi0_bound
     if tau is not None and bound is not None and tau >= bound:
-        check_range(dev, op, fixed, params, run)
+        check_range(dev, problem.op, problem.fixed, params, aim, frame)
     U, search = filter_system(dev, params.laplacian, tau, lam, params.tolerance)
     if not search.converged:
         run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
-    run.evaluated(search.lam, search.phi, 1)
-    X = geometry.points.copy()
-    X[~fixed] = frame.back(to_points(U))
-    return diagnostics(geometry, params, op, run, X, dev, search, n_fixed)
+    run.listener(frame, aim.tau)(search.lam, search.phi, 1)
+    return Solution(aim, search, U, dev)
 
 
-def _unchanged(
-    geometry: Geometry, params: SmoothingParams, op: SmoothingOperator, run: Run, n_fixed: int
-) -> SmoothResult:
+def unchanged(problem: Problem, plan: Plan, aim: Target, run: Run) -> Solution:
     """Nothing to do: every point fixed, a zero Laplacian, or an automatic tau that finds no
-    noise or no valid budget (the reason is in ``tau_how`` and the notes)."""
-    if params.tau_rule == "auto":
-        run.notes.append(
-            "not smoothed: " + (run.tau_how or "nothing can move").removeprefix("automatic: ")
-        )
-        run.tau = None
-    elif run.tau is not None:
+    noise or no valid budget (the reason is in ``tau_how`` and the notes).
+
+    Raises
+    ------
+    TauOutOfRange
+        A given tau or rms when nothing can move.
+    """
+    params = problem.params
+    if plan.automatic_tau:
+        reason = (aim.how or "nothing can move").removeprefix("automatic: ")
+        run.notes.append("not smoothed: " + reason)
+        aim = replace(aim, tau=None)
+    elif aim.tau is not None:
         raise TauOutOfRange(
             "nothing can move (every point is fixed or uncoupled): no smoothing factor can be "
             "met; valid range is empty",
             field="params.tau" if params.tau is not None else "params.rms",
-            tau=run.tau,
+            tau=aim.tau,
             tau_max=0.0,
         )
     else:
         run.notes.append("nothing to smooth: the input is returned unchanged")
-    search = LambdaSearch(float(params.lam or 0.0), 0.0, True, [])
-    return diagnostics(geometry, params, op, run, geometry.points.copy(), None, search, n_fixed)
+    return Solution(aim, LambdaSearch(float(params.lam or 0.0), 0.0, True, []))
+
+
+def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
+    """The points in the input's frame: outliers placed by eq. (4) as ``omega_i -> 0``, the
+    tangential step, volume/area kept (sections 8-9), the max-norm clip (section 9)."""
+    if sol.U is None:
+        return Finished(problem.geometry.points.copy())
+    X = problem.points(sol.U)
+    params = problem.params
+    if params.method == "windowed-sinc":
+        return Finished(X)
+    if problem.weights is not None:  # outliers with no data weight: eq. (4) places them
+        X = pull_in(X, problem.op.L, problem.weights.pulled)
+    enabled = plan.tangential.value == "auto"
+    X, along = relax_tangential(
+        problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
+    )
+    volume_scale, group = None, params.finish
+    if group.preserve_volume:
+        X, volume_scale = preserve_measure(problem.geometry, X)
+    if group.max_deviation is not None:
+        X, _ = clip_points(problem.geometry.points, X, group.max_deviation)
+    return Finished(X, volume_scale, along)
+
+
+def report(
+    problem: Problem, plan: Plan, run: Run, sol: Solution, fin: Finished
+) -> SmoothResult:
+    """The :class:`SmoothResult`: the diagnostics' numbers and the completed plan."""
+    fields = diagnostics(
+        problem.geometry, problem.params, problem.op, problem.frame, run, sol, fin,
+        problem.n_fixed, problem.weights,
+    )  # fmt: skip
+    plan = with_solution(plan, sol.target, fields["solver"], run.notes)
+    return SmoothResult(**fields, plan=plan)

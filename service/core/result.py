@@ -3,32 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from service.core.checks.spectrum import Spectrum
+
+if TYPE_CHECKING:  # pragma: no cover
+    from service.core.plan import Plan
+
 __all__ = ["SmoothResult", "Spectrum"]
-
-
-@dataclass(frozen=True)
-class Spectrum:
-    """Spectral view of report section 5 (eq. 12).
-
-    Attributes
-    ----------
-    sigma : ndarray
-        Singular values of ``L`` (``D = I``) or generalized singular values of ``(L, D)``,
-        in decreasing order.
-    gamma : ndarray
-        Filter factors ``gamma_i = lambda / (sigma_i^2 + lambda)`` at the chosen lambda.
-    """
-
-    sigma: NDArray[np.float64]
-    gamma: NDArray[np.float64]
-
-    def to_dict(self) -> dict[str, list[float]]:
-        return {"sigma": self.sigma.tolist(), "gamma": self.gamma.tolist()}
 
 
 @dataclass(frozen=True)
@@ -92,7 +77,7 @@ class SmoothResult:
     tau_rule : str
         How lambda was set: ``"lam"``, ``"tau"``, ``"rms"``, ``"auto"`` or ``"gcv"``.
     sigma_estimate : float or None
-        Estimated noise level (``service.core.search.noise``): the automatic tau's (0 when no
+        Estimated noise level (``service.core.noise.estimate``): the automatic tau's (0 when no
         noise was found), or for a given tau/rms/lam the one the shape checks compared with
         (``None`` when no noise was found).
     tau_how : str or None
@@ -110,7 +95,7 @@ class SmoothResult:
         returned unchanged, ``tau_how`` says why); ``None`` for other rules.
     tangential : dict or None
         The tangential step of normal displacement on meshes
-        (:mod:`service.core.system.tangential`): ``share`` (estimated along-surface over normal
+        (:mod:`service.core.finish.tangential`): ``share`` (estimated along-surface over normal
         noise), ``budget`` and ``psi`` (its target and the tangential deviation reached, input
         frame), ``reverted`` (points kept at the normal solve's position to avoid folds);
         ``None`` when the step does not apply.
@@ -176,6 +161,7 @@ class SmoothResult:
     omega: NDArray[np.float64] | None = None
     pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     tangential: dict[str, Any] | None = None  # issue 21: the tangential step
+    plan: Plan | None = None  # issue 29: every automatic choice and its evidence
 
     @property
     def rms_deviation(self) -> float:
@@ -239,6 +225,7 @@ class SmoothResult:
             outlier_count=int(self.outliers.size),
             outliers=[int(i) for i in self.outliers],
             data_weights=self.data_weights,
+            plan=None if self.plan is None else self.plan.to_dict(),
         )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()

@@ -1,9 +1,15 @@
-"""The bookkeeping of one :func:`~service.core.pipeline.smooth` call: clock, progress events,
-the resolved target and the notes that end up in the report's ``warnings``."""
+"""The bookkeeping of one :func:`~service.core.pipeline.smooth_one` call: the clock, the
+progress callback and the notes that end up in the report's ``warnings`` (in run order).
+
+Everything a stage decides travels in the record it returns (:class:`~service.core.plan.Plan`,
+:class:`~service.core.problem.Problem`, :class:`~service.core.search.target.Target`, ...), not
+here.
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 from service.core.frame import Frame
@@ -13,27 +19,27 @@ __all__ = ["Run"]
 
 
 class Run:
-    """Clock, progress events and notes of one :func:`smooth` call (input-frame numbers)."""
+    """Clock, progress events and notes of one run (input-frame numbers)."""
 
-    def __init__(self, progress: ProgressCallback | None, frame: Frame | None = None) -> None:
+    def __init__(self, progress: ProgressCallback | None) -> None:
         self.t0 = time.perf_counter()
         self.progress = progress
-        self.tau: float | None = None
-        self.frame = frame
         self.notes: list[str] = []
-        self.search_seconds = 0.0
-        self.sigma: float | None = None  # core-quality: automatic tau, max-norm bound
-        self.tau_how: str | None = None
-        self.bound: dict[str, Any] | None = None
-        self.data_weights: Any = None  # issue 21: service.core.search.robust.DataWeights
 
-    def emit(self, stage: str, **kw: Any) -> None:
+    def emit(self, stage: str, tau: float | None = None, **kw: Any) -> None:
+        """One progress event; ``tau`` is the resolved target from the ``analysis`` stage on."""
         if self.progress is not None:
             elapsed = time.perf_counter() - self.t0
-            self.progress(ProgressEvent(stage, tau=self.tau, elapsed=elapsed, **kw))
+            self.progress(ProgressEvent(stage, tau=tau, elapsed=elapsed, **kw))
 
-    def evaluated(self, lam: float, phi: float, iteration: int) -> None:
-        """One ``search`` event per lambda tried (internal numbers converted)."""
-        assert self.frame is not None
-        f = self.frame
-        self.emit("search", iteration=iteration, lam=f.lam_out(lam), phi=phi * f.phi_factor)
+    def listener(self, frame: Frame, tau: float | None) -> Callable[[float, float, int], None]:
+        """The callback of :class:`~service.core.system.deviation.Deviation`: one ``search``
+        event per lambda tried, internal numbers converted to the input's."""
+
+        def evaluated(lam: float, phi: float, iteration: int) -> None:
+            self.emit(
+                "search", tau=tau, iteration=iteration, lam=frame.lam_out(lam),
+                phi=frame.phi_out(phi),
+            )  # fmt: skip
+
+        return evaluated

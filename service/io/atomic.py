@@ -13,9 +13,10 @@ import contextlib
 import os
 import stat
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["in_place", "is_special", "real_target", "write_file"]
+__all__ = ["atomic_path", "in_place", "is_special", "real_target", "write_file"]
 
 
 def is_special(target: str) -> bool:
@@ -44,8 +45,11 @@ def _umask() -> int:
     return mask
 
 
-def write_file(target: str | os.PathLike[str], data: bytes) -> None:
-    """Write ``data`` to ``target``: atomically for regular files, in place otherwise.
+@contextlib.contextmanager
+def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
+    """A path to write the new content of ``target`` into: for a regular file, a temporary in
+    the same directory that is fsynced and renamed over the target when the block ends without
+    an error (and removed when it raises); for anything else (module docstring), the target.
 
     Raises
     ------
@@ -53,9 +57,8 @@ def write_file(target: str | os.PathLike[str], data: bytes) -> None:
         As the system reports it; a failed atomic write leaves no temporary file behind.
     """
     name = os.fspath(target)
-    if in_place(name):
-        with open(name, "wb") as fh:  # a device, FIFO, terminal or /dev/stdout: never replace
-            fh.write(data)
+    if in_place(name):  # a device, FIFO, terminal or /dev/stdout: never replace
+        yield Path(name)
         return
     path = real_target(name)
     try:
@@ -63,10 +66,10 @@ def write_file(target: str | os.PathLike[str], data: bytes) -> None:
     except FileNotFoundError:
         mode = 0o666 & ~_umask()
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
+        yield Path(tmp)
+        with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.chmod(tmp, mode)
         os.replace(tmp, path)
@@ -74,3 +77,16 @@ def write_file(target: str | os.PathLike[str], data: bytes) -> None:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def write_file(target: str | os.PathLike[str], data: bytes) -> None:
+    """Write ``data`` to ``target``: atomically for regular files, in place otherwise
+    (:func:`atomic_path`).
+
+    Raises
+    ------
+    OSError
+        As the system reports it; a failed atomic write leaves no temporary file behind.
+    """
+    with atomic_path(target) as path, open(path, "wb") as fh:
+        fh.write(data)

@@ -18,9 +18,11 @@ from typing import Any, BinaryIO
 
 from numpy.typing import ArrayLike
 
+from service.io._shared.georef import georeference
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
+from service.io.holds import dropped_kinds, input_kinds, is_geographic, output_notes, same_family
 from service.io.registry import (
     FORMATS,
     Format,
@@ -171,6 +173,7 @@ def write_geometry(
     ply_ascii: bool | None = None,
     normals: NormalsMode = "recompute",
     precision: PrecisionMode = "input",
+    crs: str | int | None = None,
 ) -> bytes:
     """Write a document (optionally with new points) in one of :data:`FORMATS`.
 
@@ -189,6 +192,12 @@ def write_geometry(
         Input normals recomputed from the written geometry, or left out.
     precision : {"input", "float32", "float64"}
         Coordinates as the input stored them (dtype; digits for text formats) or forced.
+    crs : str or int, optional
+        Geographic input (GPX, GeoJSON) written to a projected format: the projected CRS of the
+        output, an EPSG code (``32633``, ``"EPSG:32633"``) or ``"utm"`` (the WGS84 UTM zone of
+        the data's centre); easting, northing and the elevation as read. Default: metres in the
+        local east/north/up frame about the data's centre. Either way the frame is recorded in
+        the formats that hold one (:mod:`service.io._shared.georef`).
 
     Raises
     ------
@@ -197,10 +206,13 @@ def write_geometry(
     UnsupportedFormat
         ``fmt`` is not one of :data:`FORMATS`.
     ValueError
-        ``points`` has the wrong shape, or a bad option.
+        ``points`` has the wrong shape, or a bad option (``crs`` for input that is not
+        geographic, or a CRS that is not projected).
     """
     out = io.BytesIO()
-    save_geometry(doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision)
+    save_geometry(
+        doc, out, fmt, points, ply_ascii=ply_ascii, normals=normals, precision=precision, crs=crs
+    )
     return out.getvalue()
 
 
@@ -213,6 +225,7 @@ def save_geometry(
     ply_ascii: bool | None = None,
     normals: NormalsMode = "recompute",
     precision: PrecisionMode = "input",
+    crs: str | int | None = None,
 ) -> None:
     """Like :func:`write_geometry`, streamed to a path or binary file (no whole-file copy).
 
@@ -224,7 +237,7 @@ def save_geometry(
         fmt = named.name if named is not None else doc.source_format
     spec = get_format(fmt)
     check_output(doc, spec.name, points)
-    plain = _plain(doc, points, normals, precision, ply_ascii)
+    plain = georeference(doc, spec, _plain(doc, points, normals, precision, ply_ascii), crs)
     if isinstance(dest, str | os.PathLike):
         with open(dest, "wb") as fh:
             spec.write_to(plain, fh)
@@ -243,36 +256,6 @@ class OutputRefused(FormatError):
 
 
 _KIND_WORDS = {"mesh": "faces", "polyline": "lines", "cloud": "a point cloud"}
-
-
-def input_kinds(doc: GeometryDocument) -> frozenset[str]:
-    """What writing ``doc`` needs: ``"mesh"`` (faces), ``"polyline"`` (edges), else ``"cloud"``."""
-    g = doc.geometry
-    kinds = set()
-    if g.faces is not None and len(g.faces):
-        kinds.add("mesh")
-    if g.edges is not None and len(g.edges):
-        kinds.add("polyline")
-    return frozenset(kinds or {"cloud"})
-
-
-def is_geographic(doc: GeometryDocument) -> bool:
-    """Whether ``doc`` holds longitude/latitude read from a geographic format (GPX, GeoJSON)."""
-    frame = getattr(doc.layout, "frame", None)
-    if frame is None or not hasattr(frame, "back"):
-        return False
-    if frame.frame is not None or doc.source_format == "gpx":
-        return True
-    from service.io.formats.geojson import _geographic
-
-    pts = doc.geometry.points
-    return pts.shape[1] >= 2 and _geographic(doc.layout.obj, pts[:, 0], pts[:, 1], None)  # type: ignore[attr-defined]
-
-
-def _same_family(doc: GeometryDocument, spec: Format) -> bool:
-    """Whether the writer gets the input's own layout (the file written back in its format)."""
-    source = doc.source_format
-    return source == spec.name or {source, spec.name} == {"las", "laz"}
 
 
 def _float32_loss(doc: GeometryDocument, spec: Format, points: ArrayLike | None) -> float:
@@ -301,9 +284,9 @@ def _float32_loss(doc: GeometryDocument, spec: Format, points: ArrayLike | None)
 
 def _problem(doc: GeometryDocument, spec: Format, points: ArrayLike | None = None) -> str | None:
     """Why ``spec`` cannot hold ``doc`` (``None``: it can)."""
-    if _same_family(doc, spec):
+    if same_family(doc, spec):
         return None
-    missing = sorted(input_kinds(doc) - spec.kinds)
+    missing = sorted(input_kinds(doc) - spec.kinds - set(dropped_kinds(doc, spec)))
     if missing:
         held = " or ".join(_KIND_WORDS[k] for k in sorted(spec.kinds))
         return f"{spec.title} holds {held}, not {_KIND_WORDS[missing[0]]}"
@@ -329,8 +312,13 @@ def _problem(doc: GeometryDocument, spec: Format, points: ArrayLike | None = Non
 
 
 def formats_for(doc: GeometryDocument) -> list[str]:
-    """The writable formats that can hold ``doc``, in registry order."""
-    return [f.name for f in FORMATS.values() if f.write is not None and _problem(doc, f) is None]
+    """The writable formats that hold ``doc`` whole, in registry order (not the point formats
+    that would write a mesh's or a polyline's vertices only)."""
+    return [
+        f.name
+        for f in FORMATS.values()
+        if f.write is not None and _problem(doc, f) is None and not dropped_kinds(doc, f)
+    ]
 
 
 def check_output(doc: GeometryDocument, fmt: str, points: ArrayLike | None = None) -> None:
@@ -349,21 +337,3 @@ def check_output(doc: GeometryDocument, fmt: str, points: ArrayLike | None = Non
         can = ", ".join(formats_for(doc))
         tail = f"write {can} instead" if can else "no format geosmooth writes can hold it"
         raise OutputRefused(f"cannot write {spec.name}: {why}; {tail}", fmt=spec.name)
-
-
-def output_notes(doc: GeometryDocument, fmt: str) -> list[str]:
-    """The reader's notes that stay true for a file written in ``fmt``, and what it drops."""
-    spec = get_format(fmt)
-    if _same_family(doc, spec):
-        return list(doc.notes)
-    lost = [name for name in doc.attributes if not spec.keeps(name)]
-    notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
-    if lost:
-        notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
-    frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
-    if frame is not None and not spec.geographic_only:  # metres about the data's centre
-        notes.append(
-            f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
-            " not longitude/latitude (write GPX or GeoJSON to keep them)"
-        )
-    return notes

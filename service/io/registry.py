@@ -232,7 +232,7 @@ _TABLE: dict[str, Format] = {
             "OBJ",
             writer=("formats.obj.write", "write_obj"),
             sniff=_obj,
-            attributes=_COLOURS[:3],
+            attributes=(*_COLOURS[:3], "uv"),
         ),
         _f(
             "xyz",

@@ -8,7 +8,9 @@ triangles; :func:`rewrite` streams the input again and writes it with the new co
 other dimension, property, column and byte left as it was (LAS/LAZ: scaled to the file's own
 scale and offset; PLY: cast to the vertex properties' types; XYZ: printed with the input's
 decimals). So the process holds the coordinates twice and one chunk of records, never the
-input's attribute table.
+input's attribute table. Running the engine between the two is the use case's
+(:func:`service.workflows.smooth_file.smooth_streamed`); this module only turns bytes into
+coordinates and back.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from __future__ import annotations
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,14 +25,8 @@ from numpy.typing import NDArray
 from service.io.errors import FormatError
 from service.io.formats.ply.header import PlyHeader, parse_header
 
-if TYPE_CHECKING:
-    from service.core.params import SmoothingParams
-    from service.core.progress import ProgressCallback
-    from service.core.result import SmoothResult
-
 __all__ = [
-    "CHUNK", "STREAMED", "read_coordinates", "rewrite", "smooth_streamed", "streamable",
-    "streamed_format",
+    "CHUNK", "STREAMED", "read_coordinates", "rewrite", "streamable", "streamed_format",
 ]
 
 CHUNK = 1 << 20
@@ -260,7 +255,6 @@ def _xyz_rewrite(src: Path, dst: Path, points: Array) -> None:
             at += 1
 
 
-
 def streamed_format(
     src: Path, given: str | None, out_fmt: str | None, weld: bool | None, xyz_dims: int | None
 ) -> str | None:
@@ -272,25 +266,3 @@ def streamed_format(
     if fmt not in STREAMED or (out_fmt not in (None, fmt)) or weld or xyz_dims not in (None, 3):
         return None
     return fmt if src.is_file() and streamable(src, fmt) else None
-
-
-def smooth_streamed(
-    src: Path,
-    dst: Path,
-    fmt: str,
-    params: SmoothingParams,
-    progress: ProgressCallback | None = None,
-    memory_limit: int | None = None,
-    run_map: Any = None,
-) -> SmoothResult:
-    """Read the coordinates of ``src`` in chunks, smooth them (tiled with
-    ``params.tile_points``), write ``dst`` by streaming ``src`` again (module docstring)."""
-    from service.core.geometry import Geometry
-    from service.core.tiles.entry import smooth
-
-    P, faces = read_coordinates(src, fmt)
-    result = smooth(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit,
-                    run_map=run_map)  # fmt: skip
-    del P
-    rewrite(src, dst, fmt, result.points)
-    return result

@@ -1,12 +1,14 @@
 """What every backend checks before it accepts a job (the shared half of ``submit``).
 
-A :class:`~service.jobs.queue.NewJob` arrives checked (format, parameters, file, ``tau``: the
-API's intake, or :meth:`NewJob.check <service.jobs.queue.NewJob.check>`); what is left needs the
-queue:
+A :class:`~service.jobs.queue.NewJob` arrives checked (format, parameters, file, ``tau``, the
+estimate and the tiles decision: the API's intake through
+:func:`service.workflows.admission.check_submit`, or
+:meth:`NewJob.check <service.jobs.queue.NewJob.check>`); what is left needs the queue:
 
 * idempotency: the fingerprint of a request (:func:`request_hash`) that an ``Idempotency-Key``
   is bound to;
-* the resource estimate against the per-job memory limit (:func:`admit_size`);
+* the submit check's decision against the per-job memory limit (:func:`admit_size`; decided
+  here only for a job that comes without one, or with one made against other limits);
 * free space in the store (:func:`check_space`): a submit that would leave less than
   ``min_free_bytes`` is refused with 507 before anything is written, so running jobs keep room
   for their results and the store for its metadata.
@@ -24,9 +26,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from service.jobs.errors import JobTooLarge, StorageError, StorageFull, storage_error
-from service.jobs.limits import auto_tile_points, check_admission, tile_workers
+from service.jobs.errors import StorageError, StorageFull, storage_error
+from service.jobs.limits import _job_time_limit, tile_workers
 from service.jobs.queue import JobInput, JobSize, NewJob
+from service.workflows.admission import decide
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
@@ -82,10 +85,19 @@ def request_hash(data: JobInput, fmt: str, params: dict[str, Any], **fields: Any
 
 
 def admit_size(job: NewJob, limit: int | None) -> SmoothingParams:
-    """Refuse the job if its memory estimate is above ``limit`` or its time estimate above the
-    job time limit (reads the input when the job came without its ``size`` and a memory limit
-    is set). Returns the job's params, with ``tile_points`` set when only a tiled run fits the
-    memory limit (:func:`service.jobs.tiles.auto_tile_points`)."""
+    """The job's params as the submit check decided them
+    (:func:`service.workflows.admission.decide`): refused (:class:`JobTooLarge`) when its
+    memory estimate is above ``limit`` or its time estimate above the job time limit, with
+    ``tile_points`` set when only a tiled run fits the memory limit.
+
+    The decision the job carries (:attr:`NewJob.admission <service.jobs.queue.NewJob>`) is
+    taken when it was made against this queue's limits; otherwise it is made here (reading the
+    input when the job came without its ``size`` and a memory limit is set).
+    """
+    time_limit, workers = _job_time_limit(), tile_workers()
+    carried = job.admission
+    if carried is not None and carried.limits == (limit, time_limit, workers):
+        return carried.accepted()  # the intake's estimate: not made again
     params = job.params
     if job.size is None and limit is None:
         return params
@@ -94,16 +106,7 @@ def admit_size(job: NewJob, limit: int | None) -> SmoothingParams:
         from service.io import read_geometry
 
         size = JobSize.of(read_geometry(job.input, job.fmt, weld=job.weld).geometry)
-    try:
-        check_admission(size, params, limit)
-    except JobTooLarge:
-        tile = None
-        if not params.tile_points and limit is not None:
-            tile = auto_tile_points(size, params, limit, tile_workers())
-        if tile is None:
-            raise
-        return params.model_copy(update={"tile_points": tile})
-    return params
+    return decide(size, params, limit, time_limit, workers).accepted()
 
 
 def check_space(directory: Path, needed: int, min_free: int) -> None:

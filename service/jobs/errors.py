@@ -12,6 +12,8 @@ import errno
 import sqlite3
 from typing import Any, ClassVar
 
+from service.workflows.admission import JobTooLarge  # the submit check's refusal
+
 __all__ = [
     "IdempotencyConflict",
     "JobTooLarge",
@@ -71,18 +73,6 @@ class IdempotencyConflict(JobsError):
                 f"the idempotency key {key!r} was used for a different request",
                 field="Idempotency-Key",
             )
-
-
-class JobTooLarge(JobsError):
-    """The job's estimated memory is above the per-job limit (refused at submit).
-
-    Extras: ``estimate_bytes``, ``limit_bytes``, ``estimate_seconds``, ``path``.
-    """
-
-    code = "job-too-large"
-    title = "Job too large"
-    status = 422
-    exit_code = 2
 
 
 class WebhookUrlRejected(JobsError):

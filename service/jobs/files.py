@@ -17,10 +17,19 @@ import json
 import os
 import re
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["JobFiles", "is_job_id", "move_durable", "result_name", "write_durable"]
+__all__ = [
+    "JobFiles",
+    "is_job_id",
+    "move_durable",
+    "probe_directory",
+    "result_name",
+    "sole_user",
+    "write_durable",
+]
 
 _JOB_ID = re.compile(r"^[0-9a-f]{32}$")
 _FMT = re.compile(r"^[a-z0-9]{1,16}$")
@@ -197,3 +206,52 @@ class JobFiles:
                 if age >= min_age:
                     out.append(entry.name)
         return out
+
+
+# -- directories in use: health and who else uses one -------------------------------------
+
+
+def probe_directory(path: Path, min_free: int) -> str:
+    """``"ok"``, ``"full"`` (less than ``min_free`` bytes or ENOSPC), ``"read-only"`` or
+    ``"unavailable"``."""
+    try:
+        st = os.statvfs(path)
+        fd, name = tempfile.mkstemp(prefix=".probe-", dir=path)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return "full"
+        if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+            return "read-only"
+        return "unavailable"
+    return "full" if st.f_bavail * st.f_frsize < min_free else "ok"
+
+
+_HELD: list[int] = []  # lock files of the directories this process uses (kept open)
+
+
+def sole_user(directory: Path, name: str = ".live") -> bool:
+    """Register this process as a user of ``directory``; whether no other live process is one.
+
+    Every user holds a shared ``flock`` on ``directory/name`` for its whole life (the kernel
+    drops it when the process dies, SIGKILL included). Before taking it, an exclusive lock is
+    tried: granted means nobody else holds one, so whatever a crash left in the directory
+    (partial uploads, orphan job directories) belongs to no live process and can go at once;
+    refused means other servers share it, and their files in flight are left to the age rule.
+    """
+    import fcntl
+
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / name
+    if not path.exists():
+        path.touch()
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)  # read-only: a remount ro stays possible
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        alone = True
+    except OSError:
+        alone = False
+    fcntl.flock(fd, fcntl.LOCK_SH)
+    _HELD.append(fd)
+    return alone

@@ -25,11 +25,17 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from service.jobs.errors import JobTooLarge
+from service.workflows import admission
+from service.workflows.admission import (  # the admission's tiles decision, named here too
+    HALO_FACTOR,
+    MIN_TILE_POINTS,
+    PARENT_BYTES_PER_POINT,
+    auto_tile_points,
+)
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
-    from service.jobs.queue import JobSize
+    from service.workflows.admission import JobSize
 
 __all__ = [
     "HALO_FACTOR",
@@ -46,13 +52,6 @@ __all__ = [
 
 _GIB = 1024**3
 _PR_SET_PDEATHSIG = 1
-#: A tile's points (core + halo) per core point assumed at admission.
-HALO_FACTOR = 2.0
-#: Bytes per point the job process itself holds in a tiled run (input, output, tile index
-#: arrays, a tile being cut): float64 coordinates twice, the mask and index arrays.
-PARENT_BYTES_PER_POINT = 160
-#: Smallest tile admission chooses (the halo would dominate below).
-MIN_TILE_POINTS = 20_000
 
 
 def physical_memory() -> int:
@@ -89,46 +88,16 @@ def _job_time_limit() -> float | None:
 def check_admission(
     size: JobSize, params: SmoothingParams, limit: int | None, time_limit: float | None = None
 ) -> None:
-    """Refuse a job whose estimated peak memory is above ``limit`` bytes (``None``: no limit)
-    or whose estimated time is above ``time_limit`` seconds (default: the job time limit of the
-    settings, at which the job would be stopped anyway).
-
-    The estimate counts the dimension and, for normal displacement, the codimension: every
-    entry of the system is then a ``codim x codim`` block (50 points in 200-D: 198^2 times the
-    entries of the same points in 3-D).
+    """:func:`service.workflows.admission.check_admission` with the job time limit of the
+    settings by default (at which the job would be stopped anyway).
 
     Raises
     ------
     JobTooLarge
         With the estimates and the limits (bytes, GiB and seconds in the message).
     """
-    from service.core.linalg.resources import estimate_resources
-
     time_limit = _job_time_limit() if time_limit is None else time_limit
-    est = estimate_resources(size.n, size.dim, size.kind, params, n_faces=size.n_faces,
-                             memory_limit=limit)  # fmt: skip
-    extras = {
-        "estimate_bytes": int(est.memory_bytes),
-        "estimate_seconds": float(est.seconds),
-        "path": est.path,
-    }
-    where = f"{size.n} points in {size.dim}-D, {est.path} solver path"
-    if limit is not None and est.memory_bytes > limit:
-        raise JobTooLarge(
-            f"the job needs about {est.memory_bytes / _GIB:.2f} GiB of memory ({where}),"
-            f" above the per-job limit of {limit / _GIB:.2f} GiB",
-            field="file",
-            limit_bytes=int(limit),
-            **extras,
-        )
-    if time_limit is not None and est.seconds > time_limit:
-        raise JobTooLarge(
-            f"the job needs about {est.seconds:.0f} s ({where}), above the job time limit of"
-            f" {time_limit:g} s",
-            field="file",
-            limit_seconds=float(time_limit),
-            **extras,
-        )
+    admission.check_admission(size, params, limit, time_limit)
 
 
 _MAP_FAILURES = ("failed to map segment", "cannot allocate memory", "out of memory")
@@ -189,31 +158,6 @@ def tile_workers() -> int:
         return max(1, int(os.environ.get("OMP_NUM_THREADS", "1")))
     except ValueError:
         return 1
-
-
-def auto_tile_points(
-    size: JobSize, params: SmoothingParams, limit: int, workers: int = 1
-) -> int | None:
-    """The largest ``n / 2^m`` whose tiled run fits ``limit`` bytes (``None``: none does, or
-    the parameters have no tiled form)."""
-    from service.core.errors import ParameterError
-    from service.core.linalg.resources import estimate_resources
-    from service.core.tiles import check_tileable
-
-    try:
-        check_tileable(params)
-    except ParameterError:
-        return None
-    tile = size.n
-    while tile >= 2 * MIN_TILE_POINTS:
-        tile = (tile + 1) // 2
-        members = min(int(HALO_FACTOR * tile), size.n)
-        faces = None if size.n_faces is None else int(size.n_faces * members / size.n)
-        est = estimate_resources(members, size.dim, size.kind, params, n_faces=faces,
-                                 memory_limit=limit // max(workers, 1))  # fmt: skip
-        if PARENT_BYTES_PER_POINT * size.n + workers * est.memory_bytes <= limit:
-            return tile
-    return None
 
 
 def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:

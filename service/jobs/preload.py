@@ -23,7 +23,7 @@ from service.core.geometry import Geometry
 from service.core.linalg.resources import factor_size
 from service.core.linalg.threads import limit_threads
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth
+from service.core.pipeline import smooth_one as smooth
 from service.io import GeometryDocument, read_geometry, write_geometry
 
 __all__ = ["apply_thread_limit", "warm_up"]

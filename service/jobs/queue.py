@@ -18,8 +18,9 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
+from service.workflows.admission import Admission, JobSize  # the submit check NewJob carries
+
 if TYPE_CHECKING:
-    from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
     from service.io import GeometryDocument
 
@@ -76,36 +77,16 @@ def job_location(job_id: str) -> str:
 
 
 @dataclass(frozen=True)
-class JobSize:
-    """What the resource estimate of a job needs (known to the API once it parsed the input):
-    points ``n``, coordinates per point ``dim``, ``kind`` (``"mesh"``, ``"curve"``, ``"cloud"``)
-    and the faces of a mesh."""
-
-    n: int
-    dim: int
-    kind: str
-    n_faces: int | None = None
-
-    @classmethod
-    def of(cls, geometry: Geometry) -> JobSize:
-        """The size of a parsed geometry."""
-        faces = geometry.faces
-        return cls(
-            n=int(geometry.n),
-            dim=int(geometry.dim),
-            kind=str(geometry.kind),
-            n_faces=None if faces is None else len(faces),
-        )
-
-
-@dataclass(frozen=True)
 class NewJob:
     """A checked request to run a job: what the API's intake produces and ``submit`` stores.
 
     ``input``: the file's bytes, or a spooled file moved into the store; ``fmt`` a known format
     and ``params`` validated (the intake also checked the file, the key's bounds and ``tau``);
     ``size`` from the parsed input (``None``: the queue reads the input if it has a memory
-    limit); the rest as in :class:`JobRecord`. ``submit`` checks only what needs the queue.
+    limit); ``admission`` the submit check's result
+    (:func:`service.workflows.admission.check_submit`): the queue takes its decision instead of
+    estimating again when it was made against the queue's own limits; the rest as in
+    :class:`JobRecord`. ``submit`` checks only what needs the queue.
     """
 
     input: JobInput
@@ -117,6 +98,7 @@ class NewJob:
     tenant: str | None = None
     webhook_url: str | None = None
     idempotency_key: str | None = None
+    admission: Admission | None = None
 
     @classmethod
     def check(

@@ -1,8 +1,10 @@
 """What one job does, inside its worker process: read, smooth, write.
 
 A *job function* takes a :class:`JobContext` and returns the report dict; the worker process
-(:mod:`service.jobs.child`) records the outcome. :func:`smooth_job` is the real one;
-``LocalQueue(runner="module:function")`` swaps in another (tests use fakes).
+(:mod:`service.jobs.embedded.child`, :mod:`service.jobs.distributed.tasks`, both through
+:func:`service.jobs.execute.run_function`) records the outcome. :func:`smooth_job` is the real
+one; ``LocalConfig(runner="module:function")`` swaps in another (tests use fakes). The backend
+gives the run its tile map (``JobContext.tiles``); nothing here picks a backend.
 """
 
 from __future__ import annotations
@@ -10,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
     from service.core.geometry import Geometry
     from service.core.params import SmoothingParams
     from service.core.result import SmoothResult
-    from service.jobs.tiles.local import RunMap
+    from service.jobs.tiles import RunMap, TileMap
 
 __all__ = ["DEFAULT_RUNNER", "JobContext", "RunLost", "smooth_job"]
 
@@ -68,6 +69,9 @@ class JobContext:
     memory_limit : int or None
         The per-job memory limit (bytes): the engine takes its matrix-free path when the direct
         one would not fit (the process runs under a cap of that size).
+    tiles : TileMap or None
+        What runs a tiled job's tiles, chosen by the backend that runs the job (local processes
+        or RQ tasks); ``None``: :func:`~service.jobs.tiles.local.local_tile_map`.
     """
 
     job_id: str
@@ -79,6 +83,7 @@ class JobContext:
     progress_interval: float = 0.2
     weld: bool = False
     memory_limit: int | None = None
+    tiles: TileMap | None = None
     _tracker: ProgressTracker = field(default_factory=ProgressTracker, repr=False)
     _started: float = field(default_factory=time.monotonic, repr=False)
     _last_write: float = field(default=float("-inf"), repr=False)
@@ -130,7 +135,9 @@ class JobContext:
 
 
 def smooth_job(ctx: JobContext) -> dict[str, Any]:
-    """The real job: read the input, smooth it, store ``result.npy`` and ``result.<fmt>``.
+    """The real job: the use case read -> smooth -> write
+    (:func:`service.workflows.smooth_file.smooth_file`) storing ``result.npy`` and
+    ``result.<fmt>``.
 
     Parameters
     ----------
@@ -142,23 +149,24 @@ def smooth_job(ctx: JobContext) -> dict[str, Any]:
     dict
         ``SmoothResult.report()``.
     """
-    from service.io import read_geometry, write_geometry
+    from service.workflows.smooth_file import smooth_file
 
-    ctx.stage("reading")
-    doc = read_geometry(ctx.input_path, ctx.fmt, weld=ctx.weld)
-    result = run_smooth(ctx, doc.geometry)  # tiled on local processes with tile_points
-    ctx.stage("writing")
-    buf = io.BytesIO()
-    np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))
-    ctx.write("result.npy", buf.getvalue())
-    ctx.write(f"result.{ctx.fmt}", write_geometry(doc, ctx.fmt, result.points))
-    return result.report()
+    def store(result: SmoothResult, data: bytes) -> None:
+        buf = io.BytesIO()
+        np.save(buf, np.ascontiguousarray(result.points, dtype=np.float64))
+        ctx.write("result.npy", buf.getvalue())
+        ctx.write(f"result.{ctx.fmt}", data)
+
+    done = smooth_file(ctx.input_path, store, ctx.params, fmt=ctx.fmt, out_fmt=ctx.fmt,
+                       read_options={"weld": ctx.weld}, stage=ctx.stage,
+                       engine=lambda geometry: run_smooth(ctx, geometry))  # fmt: skip
+    return done.result.report()
 
 
 def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
-    """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on
-    :func:`local_tiles` with the tile counts in every progress dict (``tiles`` member)."""
-    from service.core.tiles.entry import smooth
+    """The job's smoothing: :func:`service.core.smooth`, its tiles (if any) on the run's tile
+    map (``ctx.tiles``) with the tile counts in every progress dict (``tiles`` member)."""
+    from service.workflows.smooth_file import run_engine as smooth
 
     params = ctx.params
     if params.tile_points is None or geometry.n <= params.tile_points:
@@ -194,13 +202,7 @@ def run_smooth(ctx: JobContext, geometry: Geometry) -> SmoothResult:
 def _tiles_of(
     ctx: JobContext, on_tile: Callable[[], None], counter: TileCounter
 ) -> contextlib.AbstractContextManager[RunMap]:
-    """RQ jobs inside a ``geosmooth worker`` (its work horses have ``GEOSMOOTH_WORKER_PID``),
-    else :func:`local_tiles` on this job's worker share."""
-    from service.jobs.limits import tile_workers
-    from service.jobs.tiles.local import local_tiles
+    """The tile map the job's backend gave the run (``ctx.tiles``), else local processes."""
+    from service.jobs.tiles.local import local_tile_map
 
-    if os.environ.get("GEOSMOOTH_WORKER_PID"):
-        from service.jobs.tiles.rq import rq_tiles
-
-        return rq_tiles(ctx.job_id, on_tile, counter)
-    return local_tiles(tile_workers(), on_tile, counter)
+    return (ctx.tiles or local_tile_map)(ctx.job_id, on_tile, counter)

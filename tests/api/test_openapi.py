@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from service.api.app import create_app
-from service.api.openapi_export import openapi_spec, render
+from service.api.openapi_export import CLIENT_FIELDS, client_report_fields, openapi_spec, render
 from service.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -24,17 +24,26 @@ def test_committed_openapi_is_not_stale() -> None:
     assert COMMITTED.read_text() == render(openapi_spec())
 
 
+def test_client_report_fields_are_generated_from_the_committed_spec() -> None:
+    """The client's list of report members is the export step's, from openapi/openapi.json."""
+    assert CLIENT_FIELDS == ROOT / "clients/python/geosmooth_client/_report_fields.py"
+    assert CLIENT_FIELDS.read_text() == client_report_fields(json.loads(COMMITTED.read_text())), (
+        f"{CLIENT_FIELDS.relative_to(ROOT)} is stale: run `make openapi` and commit the result"
+    )
+
+
 def test_spec_does_not_depend_on_the_environment(tmp_path: Path) -> None:
     env = {**os.environ, "GEOSMOOTH_SYNC_MAX_POINTS": "7", "GEOSMOOTH_WORKERS": "9"}
-    out = tmp_path / "spec.json"
+    out, client = tmp_path / "spec.json", tmp_path / "fields.py"
     subprocess.run(
-        [sys.executable, "-m", "service.api.openapi_export", str(out)],
+        [sys.executable, "-m", "service.api.openapi_export", str(out), "--client", str(client)],
         cwd=ROOT,
         env=env,
         check=True,
         timeout=60,
     )
     assert out.read_text() == COMMITTED.read_text()
+    assert client.read_text() == CLIENT_FIELDS.read_text()
     assert create_app(Settings(sync_max_points=7)).openapi() == json.loads(COMMITTED.read_text())
 
 

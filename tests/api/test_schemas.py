@@ -7,6 +7,8 @@ import time
 
 import pytest
 
+from service.api import schemas
+from service.api.examples import REPORT_EXAMPLE
 from service.api.schemas import Job, Report
 from service.core import Geometry, SmoothingParams, smooth
 from service.jobs.queue import JobRecord, JobStatus
@@ -32,6 +34,14 @@ def test_report_schema_has_exactly_the_keys_of_a_report(geometry: Geometry, para
     assert set(report) <= documented, f"undocumented report keys: {set(report) - documented}"
     assert documented - set(report) <= {Report.model_fields[n].alias or n for n in optional}
     Report.model_validate(report)
+
+
+def test_the_api_documents_the_core_model() -> None:
+    """One model: the API's ``Report`` and its example are service.core.report's."""
+    from service.core import report
+
+    assert Report is report.Report and schemas.HistoryEntry is report.HistoryEntry
+    assert report.report_example() == REPORT_EXAMPLE
 
 
 def _record(status: JobStatus, **extra: object) -> JobRecord:

@@ -58,8 +58,8 @@ def test_smooth_a_file_with_progress(live: LiveServer, tmp_path: Path) -> None:
         after = parse_points(result.download(), "ply")
         converted = parse_points(result.download("obj"), "obj")
         saved = result.save(tmp_path / "out.json")
-        with pytest.raises(InvalidInput, match="cannot write xyz: XYZ holds a point cloud"):
-            result.download("xyz")  # a mesh as XYZ: refused (422 naming format), not scrambled
+        with pytest.raises(InvalidInput, match="cannot write gpx: GPX holds lines, not faces"):
+            result.download("gpx")  # a mesh as GPX: refused (422 naming format), not scrambled
     assert seen[0].status == "queued" and seen[-1].status == "succeeded"
     assert result.job.filename == "sphere.ply" and result.job.format == "ply"
     assert report.converged and abs(report.phi - 0.05) / 0.05 <= 1e-3

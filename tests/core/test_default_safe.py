@@ -16,7 +16,7 @@ import pytest
 
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.errors import ShapeLost
-from service.core.search.noise import NOISE_RATIO, estimate_noise
+from service.core.noise.estimate import NOISE_RATIO, estimate_noise
 from tests.core.core_fixtures import grid_mesh, noisy_icosphere, polyline_edges
 
 DATA = Path(os.environ.get("GEOSMOOTH_SHARED_DATA", Path(__file__).parents[3] / "shared" / "data"))

@@ -10,7 +10,7 @@ import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
 from service.core import Geometry, ParameterError, SmoothingParams, TauOutOfRange, smooth
-from service.core.pipeline import build_laplacian
+from service.core.operator.build import build_laplacian
 from tests.core.core_fixtures import grid_mesh, noisy_icosphere, polyline_edges, random_rotation
 
 

@@ -1,21 +1,20 @@
 """Every (input kind x output format) pair: round-trips through the output format's reference
-reader, or is refused before smoothing with a one-line error naming the formats that can hold it.
+readers, or is refused before smoothing with a one-line error naming the formats that can hold it.
 
 The pairs come from the registry (:data:`service.io.FORMATS`), so a new format is covered as
-soon as it is registered: it is read back with its reference reader from :data:`READERS` (the
-library people use for it), or with geosmooth's own reader when it has none listed there.
+soon as it is registered: it is read back with its reference reader from
+:data:`tests.io.cross_readers.READERS` (the library people use for it), or with geosmooth's own
+reader when it has none listed there, and with Open3D wherever Open3D reads the format
+(:data:`tests.io.cross_readers.OPEN3D`); coordinates are compared, not only counts. A mesh or
+polyline written to a format holding points only is checked as its vertices, with a note.
 Inputs are small (<= 50 points) and their coordinates have 6 decimals, so text writers (which keep
 the input's digits) are exact to 5e-7; float32-only formats are checked to half a float32 step.
 """
 
 from __future__ import annotations
 
-import io
 import itertools
-import json
-import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -24,6 +23,8 @@ from numpy.typing import NDArray
 
 from service.io import FORMATS, GeometryDocument, read_geometry, write_geometry
 from service.io.dispatch import OutputRefused, check_output, input_kinds, is_geographic
+from service.io.holds import dropped_kinds, output_notes
+from tests.io.cross_readers import OPEN3D, READERS, Back, _ours
 
 # ----------------------------------------------------------------------------- inputs
 
@@ -91,205 +92,6 @@ INPUTS: dict[str, Callable[[], GeometryDocument]] = {
 WRITABLE = [name for name, f in FORMATS.items() if f.write is not None]
 
 
-# ----------------------------------------------------------------------------- reference readers
-
-
-@dataclass
-class Back:
-    """What a reference reader saw: positions, faces, lines (index lists) and colours."""
-
-    points: NDArray[np.float64]
-    faces: NDArray[np.int64] | None = None
-    lines: list[list[int]] = field(default_factory=list)
-    colours: NDArray[np.float64] | None = None
-    lonlat: bool = False
-
-
-def _ours(name: str) -> Callable[[bytes], Back]:
-    def read(data: bytes) -> Back:
-        doc = read_geometry(data, name)
-        g = doc.geometry
-        lines = [pl.indices.tolist() for pl in doc.polylines]
-        if doc.standalone_edges is not None:
-            lines += [list(e) for e in doc.standalone_edges.tolist()]
-        cols = None
-        if all(c in doc.attributes for c in ("red", "green", "blue")):
-            cols = np.column_stack([doc.attributes[c] for c in ("red", "green", "blue")])
-        return Back(g.points, g.faces, lines, cols)
-
-    return read
-
-
-def _trimesh(kind: str) -> Callable[[bytes], Back]:
-    def read(data: bytes) -> Back:
-        import trimesh
-
-        loaded = trimesh.load(io.BytesIO(data), file_type=kind, process=False, force="scene")
-        geoms = [g for g in loaded.dump(concatenate=False)] if loaded.geometry else []
-        assert len(geoms) == 1, f"{kind}: expected one geometry, got {len(geoms)}"
-        g = geoms[0]
-        faces = np.asarray(g.faces) if hasattr(g, "faces") and len(g.faces) else None
-        cols = None
-        if kind == "glb":
-            vc = getattr(g, "colors", None)
-            if vc is None or not len(vc):
-                vc = g.visual.vertex_colors if hasattr(g, "visual") else None
-            if vc is not None and len(vc) == len(g.vertices):
-                cols = np.asarray(vc)[:, :3].astype(np.float64)
-        return Back(np.asarray(g.vertices, dtype=np.float64), faces, [], cols)
-
-    return read
-
-
-def _xyz(data: bytes) -> Back:
-    text = data.decode()
-    first = text.split(None, 1)[0]
-    header = not first.lstrip("+-").replace(".", "", 1).isdigit()  # a header line of names
-    table = np.loadtxt(io.StringIO(text), ndmin=2, skiprows=int(header))
-    return Back(table[:, :3], colours=table[:, 3:6] if table.shape[1] >= 6 else None)
-
-
-def _las(data: bytes) -> Back:
-    import laspy
-
-    las = laspy.read(io.BytesIO(data))
-    pts = np.column_stack([las.x, las.y, las.z]).astype(np.float64)
-    names = set(las.point_format.dimension_names)
-    cols = None
-    if {"red", "green", "blue"} <= names:
-        cols = np.column_stack([las.red, las.green, las.blue]).astype(np.float64)
-    return Back(pts, colours=cols)
-
-
-def _pcd(data: bytes) -> Back:
-    import pypcd4
-
-    with tempfile.NamedTemporaryFile(suffix=".pcd") as fh:
-        fh.write(data)
-        fh.flush()
-        pc = pypcd4.PointCloud.from_path(fh.name)
-    pts = pc.numpy(("x", "y", "z")).astype(np.float64)
-    cols = None
-    if "rgb" in pc.fields:
-        cols = pypcd4.PointCloud.decode_rgb(pc.numpy(("rgb",))[:, 0]).astype(np.float64)
-    return Back(pts, colours=cols)
-
-
-def _e57(data: bytes) -> Back:
-    import pye57
-
-    with tempfile.NamedTemporaryFile(suffix=".e57") as fh:
-        fh.write(data)
-        fh.flush()
-        e57 = pye57.E57(fh.name)
-        raw = e57.read_scan(0, ignore_missing_fields=True, colors=True, transform=True)
-        e57.close()
-    pts = np.column_stack([raw[c] for c in ("cartesianX", "cartesianY", "cartesianZ")])
-    cols = None
-    if "colorRed" in raw:
-        cols = np.column_stack([raw[c] for c in ("colorRed", "colorGreen", "colorBlue")])
-    return Back(pts.astype(np.float64), colours=None if cols is None else cols.astype(float))
-
-
-def _gpx(data: bytes) -> Back:
-    import gpxpy
-
-    gpx = gpxpy.parse(data.decode())
-    rows, lines = [], []
-    for trk in gpx.tracks:
-        for seg in trk.segments:
-            lines.append(list(range(len(rows), len(rows) + len(seg.points))))
-            rows += [(p.longitude, p.latitude, p.elevation) for p in seg.points]
-    return Back(np.asarray(rows, dtype=np.float64), lines=lines, lonlat=True)
-
-
-def _geojson(data: bytes) -> Back:
-    obj = json.loads(data)
-    rows: list[list[float]] = []
-    lines = []
-    for feature in obj["features"]:
-        coords = feature["geometry"]["coordinates"]
-        assert feature["geometry"]["type"] == "LineString"
-        lines.append(list(range(len(rows), len(rows) + len(coords))))
-        rows += coords
-    return Back(np.asarray(rows, dtype=np.float64), lines=lines, lonlat=True)
-
-
-def _dxf(data: bytes) -> Back:
-    import ezdxf
-
-    doc = ezdxf.read(io.StringIO(data.decode()))
-    rows: list[Any] = []
-    faces = None
-    lines = []
-    for e in doc.modelspace():
-        kind = e.dxftype()
-        if kind == "MESH":
-            faces = np.asarray([list(f) for f in e.faces], dtype=np.int64) + len(rows)
-            rows += [tuple(v) for v in e.vertices]
-        elif kind == "POINT":
-            rows.append(tuple(e.dxf.location))
-        elif kind in ("LWPOLYLINE", "POLYLINE"):
-            pts = (
-                [(x, y, e.dxf.elevation) for x, y in e.get_points("xy")]
-                if kind == "LWPOLYLINE"
-                else [tuple(v.dxf.location) for v in e.vertices]
-            )
-            lines.append(list(range(len(rows), len(rows) + len(pts))))
-            rows += pts
-        else:
-            raise AssertionError(f"unexpected DXF entity {kind}")
-    return Back(np.asarray(rows, dtype=np.float64), faces, lines)
-
-
-def _ply(data: bytes) -> Back:
-    try:
-        import plyfile
-    except ImportError:
-        return _ours("ply")(data)
-    ply = plyfile.PlyData.read(io.BytesIO(data))
-    v = ply["vertex"]
-    pts = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
-    faces = None
-    if "face" in ply and len(ply["face"].data):
-        faces = np.vstack(ply["face"].data["vertex_indices"]).astype(np.int64)
-    names = set(v.data.dtype.names or ())
-    cols = None
-    if {"red", "green", "blue"} <= names:
-        cols = np.column_stack([v["red"], v["green"], v["blue"]]).astype(np.float64)
-    lines = []
-    if "edge" in ply:
-        ends = zip(ply["edge"]["vertex1"], ply["edge"]["vertex2"], strict=True)
-        lines = [[int(a), int(b)] for a, b in ends]
-    return Back(pts, faces, lines, cols)
-
-
-def _obj(data: bytes) -> Back:
-    ours = _ours("obj")(data)
-    if ours.faces is None:  # trimesh drops OBJ 'l' lines and keeps no lone vertices
-        return ours
-    ref = _trimesh("obj")(data)
-    return Back(ref.points, ref.faces, ours.lines)
-
-
-#: The library people use to read each format (geosmooth's reader where none is listed).
-READERS: dict[str, Callable[[bytes], Back]] = {
-    "ply": _ply,
-    "obj": _obj,
-    "xyz": _xyz,
-    "stl": _trimesh("stl"),
-    "off": _trimesh("off"),
-    "glb": _trimesh("glb"),
-    "las": _las,
-    "laz": _las,
-    "pcd": _pcd,
-    "e57": _e57,
-    "gpx": _gpx,
-    "geojson": _geojson,
-    "dxf": _dxf,
-}
-
-
 # ----------------------------------------------------------------------------- checks
 
 
@@ -300,13 +102,14 @@ def _moved(doc: GeometryDocument) -> NDArray[np.float64]:
     return pts + rng.normal(0.0, 1e-3 * extent, pts.shape)
 
 
-def _tolerance(fmt: str, expected: NDArray[np.float64]) -> float:
+def _tolerance(fmt: str, expected: NDArray[np.float64], back: Back) -> float:
     spec = FORMATS[fmt]
-    if spec.coordinates == "float64":
-        return 5.1e-7  # inputs have 6 decimals: text writers keep them, binary ones are exact
+    if spec.coordinates == "float64":  # inputs have 6 decimals: text writers keep them,
+        return max(5.1e-7, 1.01 * back.resolution)  # binary ones are exact (LAS: its scale)
     centre = (expected.min(axis=0) + expected.max(axis=0)) / 2
     stored = expected - centre if spec.coordinates == "float32-offset" else expected
-    return float(np.spacing(np.float32(np.max(np.abs(stored))))) * 1.01 + 1e-12
+    step = float(np.spacing(np.float32(np.max(np.abs(stored)))))
+    return max(step * 1.01 + 1e-12, 1.01 * back.resolution)
 
 
 def _corners(points: NDArray[np.float64], faces: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -336,7 +139,11 @@ def _check_round_trip(doc: GeometryDocument, fmt: str, back: Back, moved: NDArra
         np.testing.assert_allclose(back.points[:, 2], expected[:, 2], rtol=0, atol=0.051)
         assert [len(ln) for ln in back.lines] == [len(p) for p in doc.polylines]
         return
-    tol = _tolerance(fmt, expected)
+    tol = _tolerance(fmt, expected, back)
+    if dropped_kinds(doc, FORMATS[fmt]):  # the vertices as points, in file order
+        assert back.points.shape == expected.shape, fmt
+        np.testing.assert_allclose(back.points, expected, rtol=0, atol=tol, err_msg=fmt)
+        return
     if "mesh" in kinds:
         assert back.faces is not None and len(back.faces) == len(doc.geometry.faces), fmt
         got = _corners(back.points, back.faces)
@@ -345,9 +152,9 @@ def _check_round_trip(doc: GeometryDocument, fmt: str, back: Back, moved: NDArra
         return
     assert back.points.shape == expected.shape, fmt
     np.testing.assert_allclose(back.points, expected, rtol=0, atol=tol, err_msg=fmt)
-    if "polyline" in kinds:  # the same edges (PLY stores lines as an edge element)
+    if "polyline" in kinds and back.reads_lines:  # the same edges (PLY: an edge element)
         assert _edge_set(back.lines) == _edge_set([p.indices.tolist() for p in doc.polylines]), fmt
-    if "red" in doc.attributes and FORMATS[fmt].keeps("red"):
+    if "red" in doc.attributes and FORMATS[fmt].keeps("red") and back.reads_colours:
         colours = np.column_stack([doc.attributes[c] for c in ("red", "green", "blue")])
         assert back.colours is not None, f"{fmt} lost the colours"
         got = back.colours * (255.0 if back.colours.max() <= 1.0 else 1.0)  # OBJ: fractions
@@ -370,14 +177,48 @@ def test_pair_round_trips_or_is_refused(kind: str, fmt: str) -> None:
         for other in named:  # every format named can hold it
             check_output(doc, other)
         spec = FORMATS[fmt]
-        assert not input_kinds(doc) <= spec.kinds or (
-            spec.geographic_only and not is_geographic(doc)
-        ), f"{fmt} refused {kind} for no registered reason: {text}"
+        held = input_kinds(doc) <= spec.kinds or "cloud" in spec.kinds
+        assert not held or (spec.geographic_only and not is_geographic(doc)), (
+            f"{fmt} refused {kind} for no registered reason: {text}"
+        )
         with pytest.raises(OutputRefused):  # every write checks too
             write_geometry(doc, fmt, moved)
         return
     data = write_geometry(doc, fmt, moved)
     back = READERS.get(fmt, _ours(fmt))(data)
+    _check_round_trip(doc, fmt, back, moved)
+    if dropped_kinds(doc, FORMATS[fmt]):
+        assert any("as points" in n for n in output_notes(doc, fmt)), fmt
+
+
+def _open3d_reader(doc: GeometryDocument, fmt: str) -> Callable[[bytes], Back] | None:
+    readers = OPEN3D.get(fmt, {})
+    whole = "mesh" in input_kinds(doc) and not dropped_kinds(doc, FORMATS[fmt])
+    return readers.get("mesh") if whole else readers.get("points")
+
+
+#: Where Open3D's coordinates are float32, not the file's: its OBJ reader (tinyobjloader)
+#: parses floats; its glTF reader adds the node translation in float32.
+_OPEN3D_FLOAT32 = {"obj", "glb"}
+
+
+@pytest.mark.parametrize("fmt", sorted(OPEN3D))
+@pytest.mark.parametrize("kind", list(INPUTS))
+def test_open3d_reads_every_output_it_opens(kind: str, fmt: str) -> None:
+    """Open3D 0.20 reads each output of a format it opens with the coordinates written."""
+    pytest.importorskip("open3d")
+    doc = INPUTS[kind]()
+    reader = _open3d_reader(doc, fmt)
+    try:
+        check_output(doc, fmt)
+    except OutputRefused:
+        return
+    if reader is None:  # e.g. a polyline OBJ: Open3D reads OBJ meshes only
+        return
+    moved = _moved(doc)
+    back = reader(write_geometry(doc, fmt, moved))
+    if fmt in _OPEN3D_FLOAT32:
+        back.resolution = float(np.spacing(np.float32(np.max(np.abs(moved)))))  # 2 roundings
     _check_round_trip(doc, fmt, back, moved)
 
 

@@ -63,7 +63,7 @@ def test_las_from_another_format_gets_a_header(data_dir) -> None:  # type: ignor
     out = laspy.read(io.BytesIO(write_geometry(doc, "laz")))
     assert out.header.point_format.id == 2  # red green blue
     assert np.allclose(out.x, doc.geometry.points[:, 0], atol=5e-7)  # 6 decimals kept
-    assert np.array_equal(out.red, doc.attributes["red"].astype(np.uint16))
+    assert np.array_equal(out.red, doc.attributes["red"].astype(np.uint16) * 257)  # 16-bit
 
 
 @pytest.mark.parametrize("ascii_stl", [False, True])

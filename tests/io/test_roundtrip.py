@@ -13,7 +13,7 @@ from service.io import (
     read_geometry,
     write_geometry,
 )
-from service.io.dispatch import OutputRefused, input_kinds
+from service.io.dispatch import input_kinds, output_notes
 
 # formats that store any float64 exactly (precision="float64"); the others are tested per
 # format in test_io_formats.py with their own precision (float32, LAS scales, degrees, ...)
@@ -98,9 +98,14 @@ def test_ply_encodings(ascii_ply: bool) -> None:
     assert np.array_equal(back.geometry.faces, doc.geometry.faces)
 
 
-def test_xyz_refuses_connectivity() -> None:
-    with pytest.raises(OutputRefused, match="XYZ holds a point cloud, not faces; write ply, obj"):
-        write_geometry(_mesh_doc(), "xyz", precision="float64")
+def test_xyz_writes_the_vertices_of_a_mesh_with_a_note() -> None:
+    """Issue 32: a mesh to a point format writes its vertices (as PDAL does), and says so."""
+    doc = _mesh_doc()
+    back = read_geometry(write_geometry(doc, "xyz", precision="float64"), "xyz")
+    assert np.array_equal(back.geometry.points, doc.geometry.points)
+    assert back.geometry.faces is None
+    note = f"XYZ keeps no faces or lines: wrote the {doc.n_output} vertices as points"
+    assert note in output_notes(doc, "xyz")
 
 
 @pytest.mark.parametrize("s", [1, 2, 5])
@@ -174,14 +179,13 @@ def test_weld_round_trip_keeps_vertex_count_and_order(fmt: str) -> None:
     assert doc.geometry.n == 4
     assert doc.weld is not None and doc.weld.index.tolist() == [0, 1, 2, 1, 3, 2]
     smoothed = doc.geometry.points + np.array([0.25, 0.5, 0.125])
-    if "mesh" not in FORMATS[fmt].kinds:  # XYZ, PCD: faces refused
-        with pytest.raises(OutputRefused, match="not faces"):
-            write_geometry(doc, fmt, smoothed)
-        return
     data = write_geometry(doc, fmt, smoothed)
     back = read_geometry(data, fmt)
     assert back.geometry.n == 6
     assert np.array_equal(back.geometry.points, smoothed[doc.weld.index])
+    if "mesh" not in FORMATS[fmt].kinds:  # XYZ, PCD: the vertices, without the faces
+        assert back.geometry.faces is None
+        return
     assert back.geometry.faces.tolist() == [[0, 1, 2], [3, 4, 5]]
 
 

@@ -8,7 +8,8 @@ from typing import Any
 
 import pytest
 
-from service.jobs import LocalQueue
+from service.jobs.config import LocalConfig
+from service.jobs.embedded.queue import LocalQueue
 from tests.jobs.jobs_helpers import FAKE
 
 
@@ -30,7 +31,7 @@ def make_queue(tmp_path: Path) -> Iterator[Callable[..., LocalQueue]]:
             "retry_backoff": 0.2,
         }
         kw.update(options)
-        queue = LocalQueue(kw.pop("data_dir", tmp_path / "data"), **kw)
+        queue = LocalQueue(LocalConfig(kw.pop("data_dir", tmp_path / "data"), **kw))
         made.append(queue)
         if start:
             queue.start()

@@ -13,7 +13,8 @@ from pathlib import Path
 
 def main() -> None:
     """Parse the options, start the queue, wait forever."""
-    from service.jobs import LocalQueue
+    from service.jobs.config import LocalConfig
+    from service.jobs.embedded.queue import LocalQueue
 
     ap = argparse.ArgumentParser()
     ap.add_argument("data_dir", type=Path)
@@ -25,7 +26,7 @@ def main() -> None:
     ns = ap.parse_args()
     ns.data_dir.mkdir(parents=True, exist_ok=True)
     (ns.data_dir / "server.pid").write_text(str(os.getpid()))
-    queue = LocalQueue(
+    queue = LocalQueue(LocalConfig(
         ns.data_dir,
         workers=ns.workers,
         job_timeout=60.0,
@@ -35,7 +36,7 @@ def main() -> None:
         poll_interval=ns.poll_interval,
         progress_interval=0.05,
         retry_backoff=ns.retry_backoff,
-    )
+    ))
     queue.start()
     (ns.data_dir / "server.ready").write_text(str(os.getpid()))
     while True:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable
 
@@ -12,6 +13,7 @@ from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 from service.io import GeometryDocument, read_geometry, write_geometry
 from service.jobs import JobStatus, LocalQueue
+from service.jobs.config import LocalConfig
 from service.jobs.queue import NewJob
 from service.jobs.runner import DEFAULT_RUNNER
 from tests.jobs.jobs_helpers import wait_finished
@@ -46,7 +48,8 @@ def real_queue(make_queue: MakeQueue) -> LocalQueue:
 
 
 def test_default_runner_is_the_real_one(make_queue: MakeQueue) -> None:
-    assert LocalQueue.__init__.__kwdefaults__["runner"] == DEFAULT_RUNNER  # type: ignore[index]
+    defaults = {f.name: f.default for f in dataclasses.fields(LocalConfig)}
+    assert defaults["runner"] == DEFAULT_RUNNER
     assert make_queue(start=False, runner=DEFAULT_RUNNER).pool.runner == DEFAULT_RUNNER
 
 

@@ -19,6 +19,7 @@ import pytest
 import uvicorn
 
 from service.api.app import create_app
+from service.jobs.config import LocalConfig
 from service.jobs.embedded.queue import LocalQueue
 from service.settings import Settings
 from tests.web.web_helpers import WebServer, free_port, grid_mesh, ply_ascii
@@ -148,7 +149,7 @@ def test_pings_and_stop_on_disconnect(tmp_path: Path) -> None:
     settings = Settings(
         data_dir=tmp_path / "data", workers=1, events_poll_seconds=0.05, events_ping_seconds=0.1
     )
-    queue = CountingQueue(LocalQueue(settings.data_dir, workers=1))
+    queue = CountingQueue(LocalQueue(LocalConfig(settings.data_dir, workers=1)))
     app = create_app(settings, queue=queue)  # type: ignore[arg-type]
     port = free_port()
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))

@@ -1,7 +1,7 @@
 """What the sync and the async client share: requests, retries and job watching, without I/O.
 
-:class:`Client` and :class:`AsyncClient` only send what this module builds and feed it what
-they receive, so the two stay alike by construction:
+:class:`~geosmooth_client.Client` and :class:`~geosmooth_client.AsyncClient` only send what
+this module builds and feed it what they receive, so the two stay alike by construction:
 
 * :class:`~geosmooth_client._upload.Upload` builds ``POST /v1/jobs`` (see that module).
 * :class:`RetryPolicy` says whether and when to send a request again.
@@ -49,7 +49,10 @@ def job_path(job_id: str, tail: str = "") -> str:
 
 
 def check(response: httpx.Response) -> httpx.Response:
-    """``response`` if it is a success, else its typed :class:`ApiError` (body already read)."""
+    """``response`` if a success, else its typed :class:`~geosmooth_client.errors.ApiError`.
+
+    The body is already read.
+    """
     if response.is_success:
         return response
     raise error_from_response(response)
@@ -65,7 +68,9 @@ def transport_error(url: str, exc: httpx.TransportError) -> ConnectionFailed:
 
 
 class ClientBase(Generic[H]):
-    """What :class:`Client` and :class:`AsyncClient` hold alike (parameters: see Client).
+    """What :class:`~geosmooth_client.Client` and :class:`~geosmooth_client.AsyncClient` hold alike.
+
+    Parameters: see :class:`~geosmooth_client.Client`.
 
     A subclass opens its ``httpx`` client (sync or async) in :meth:`_connect`.
     """
@@ -161,7 +166,7 @@ class RetryPolicy:
 
 
 class Watch:
-    """The state of one :meth:`Client.wait`: the job as last seen and the deadlines.
+    """The state of one :meth:`~geosmooth_client.Client.wait`: the job last seen, the deadlines.
 
     Parameters
     ----------

@@ -1,9 +1,10 @@
-"""The asyncio client: :class:`AsyncClient`, the methods of :class:`Client` as coroutines.
+"""The asyncio client: :class:`AsyncClient`, the methods of the sync client as coroutines.
 
-Requests, retries and job watching are the shared code of :mod:`geosmooth_client._protocol`;
-this module only awaits them. Cancelling the task that runs :meth:`AsyncClient.smooth` (as
-``asyncio.run`` does on Ctrl-C) cancels the job on the service before the cancellation
-propagates; cancelling an upload before its end leaves no job at all.
+The sync client is :class:`~geosmooth_client.Client`. Requests, retries and job watching are the
+shared code of :mod:`geosmooth_client._protocol`; this module only awaits them. Cancelling the
+task that runs :meth:`AsyncClient.smooth` (as ``asyncio.run`` does on Ctrl-C) cancels the job on
+the service before the cancellation propagates; cancelling an upload before its end leaves no
+job at all.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ __all__ = ["AsyncClient"]
 class AsyncClient(ClientBase[httpx.AsyncClient]):
     """A connection to one geosmooth service, for asyncio code.
 
-    The parameters are those of :class:`Client` (``transport``: an
+    The parameters are those of :class:`~geosmooth_client.Client` (``transport``: an
     :class:`httpx.AsyncBaseTransport`).
     """
 
@@ -89,7 +90,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         idempotency_key: str | None = None,
         **param_values: Any,
     ) -> Job:
-        """See :meth:`Client.submit`."""
+        """See :meth:`~geosmooth_client.Client.submit`."""
         upload = Upload.build(
             source,
             params_dict(params, param_values),
@@ -126,13 +127,13 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
             await self._cancel_quietly(str(response.json()["id"]))
 
     async def get(self, job_id: str) -> Job:
-        """See :meth:`Client.get`."""
+        """See :meth:`~geosmooth_client.Client.get`."""
         return Job.from_dict((await self._send("GET", job_path(job_id))).json())
 
     async def list(
         self, *, status: str | None = None, offset: int = 0, limit: int = 50
     ) -> JobList:
-        """See :meth:`Client.list`."""
+        """See :meth:`~geosmooth_client.Client.list`."""
         query: dict[str, Any] = {"offset": offset, "limit": limit}
         if status:
             query["status"] = status
@@ -152,16 +153,16 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
                 return
 
     async def report(self, job_id: str) -> Report:
-        """See :meth:`Client.report`."""
+        """See :meth:`~geosmooth_client.Client.report`."""
         return Report((await self._send("GET", job_path(job_id, "/report"))).json())
 
     async def download(self, job_id: str, fmt: str | None = None) -> bytes:
-        """See :meth:`Client.download`."""
+        """See :meth:`~geosmooth_client.Client.download`."""
         query = {"output_format": fmt} if fmt else None
         return (await self._send("GET", job_path(job_id, "/result"), params=query)).content
 
     async def cancel(self, job_id: str) -> Job:
-        """See :meth:`Client.cancel`."""
+        """See :meth:`~geosmooth_client.Client.cancel`."""
         job = await self.get(job_id)
         if job.finished:
             return job
@@ -169,7 +170,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         return job if response.status_code == 204 else Job.from_dict(response.json())
 
     async def delete(self, job_id: str) -> None:
-        """See :meth:`Client.delete`."""
+        """See :meth:`~geosmooth_client.Client.delete`."""
         if (await self._send("DELETE", job_path(job_id))).status_code == 200:
             await self._send("DELETE", job_path(job_id))
 
@@ -190,7 +191,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         poll_interval: float = 0.5,
         job: Job | None = None,
     ) -> Job:
-        """See :meth:`Client.wait`."""
+        """See :meth:`~geosmooth_client.Client.wait`."""
         watch = Watch(job_id, progress, timeout, self.reconnect_seconds, job)
         while True:
             watch.remaining()
@@ -252,7 +253,7 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
         timeout: float | None = None,
         **submit_options: Any,
     ) -> AsyncResult:
-        """See :meth:`Client.smooth`; cancelling the task cancels the job."""
+        """See :meth:`~geosmooth_client.Client.smooth`; cancelling the task cancels the job."""
         job = await self.submit(source, params, **submit_options)
         try:
             if progress is not None:

@@ -270,7 +270,8 @@ class Client(ClientBase[httpx.Client]):
         progress : callable, optional
             ``progress(job)`` on every change of status or progress.
         timeout : float, optional
-            Raise :class:`WaitTimeout` after this many seconds (the job keeps running).
+            Raise :class:`~geosmooth_client.errors.WaitTimeout` after this many seconds (the job
+            keeps running).
         poll_interval : float
             Seconds between polls (services without events).
         job : Job, optional

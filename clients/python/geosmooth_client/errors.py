@@ -6,8 +6,9 @@ Every HTTP error the service answers is ``application/problem+json`` (``type``, 
 class attribute ``status`` matches (a new status class is one subclass here, no table), keeping
 every member. Failures that are not HTTP answers have their own classes: the server cannot be
 reached (:class:`ConnectionFailed`), a job ended failed or cancelled (:class:`JobFailed`,
-:class:`JobCancelled`), :meth:`Client.wait` ran out of time (:class:`WaitTimeout`), and a
-Ctrl-C / task cancellation interrupted a call that owned a job (:class:`JobInterrupted`).
+:class:`JobCancelled`), :meth:`~geosmooth_client.Client.wait` ran out of time
+(:class:`WaitTimeout`), and a Ctrl-C / task cancellation interrupted a call that owned a job
+(:class:`JobInterrupted`).
 """
 
 from __future__ import annotations
@@ -217,7 +218,7 @@ class JobFailed(GeosmoothClientError):
 
 
 class JobCancelled(GeosmoothClientError):
-    """The job ended ``cancelled`` (by :meth:`Client.cancel` or someone else)."""
+    """The job ended ``cancelled`` (by :meth:`~geosmooth_client.Client.cancel` or someone else)."""
 
     def __init__(self, job: Job) -> None:
         self.job = job
@@ -234,7 +235,10 @@ def raise_for_status(job: Job) -> Job:
 
 
 class WaitTimeout(GeosmoothClientError, TimeoutError):
-    """:meth:`Client.wait` gave up; ``job`` is the last state seen (it may still run)."""
+    """:meth:`~geosmooth_client.Client.wait` gave up; ``job`` is the last state seen.
+
+    The job may still run.
+    """
 
     def __init__(self, job_id: str, seconds: float, job: Job | None = None) -> None:
         self.job_id = job_id

@@ -1,7 +1,9 @@
-"""The service's JSON objects as typed, immutable Python objects (hand-written).
+"""The service's JSON objects as typed, immutable Python objects.
 
 Each class mirrors one schema of the service's OpenAPI document (``openapi/openapi.json``);
-a test compares every field's wire name and type with the committed spec. A field whose JSON
+a test compares every field's wire name and type with the committed spec. The classes are
+hand-written; the report's members (``Report.ATTRIBUTES``) are generated from the spec by
+``make openapi`` (:mod:`geosmooth_client._report_fields`). A field whose JSON
 name is not a Python identifier (``lambda``) says so in its ``wire`` metadata. Members the
 service adds later are kept in ``extra`` instead of being dropped, so an older client still
 round-trips newer answers.
@@ -13,6 +15,8 @@ import dataclasses
 from collections.abc import Iterator, Mapping
 from datetime import datetime
 from typing import Any, Literal, get_args
+
+from geosmooth_client._report_fields import REPORT_ATTRIBUTES
 
 __all__ = [
     "FINISHED",
@@ -151,32 +155,9 @@ class Report(Mapping[str, Any]):
     whose common members are also attributes. Members a newer engine adds are in the mapping.
     """
 
-    #: attribute -> JSON member (the typed view the tests check against the spec).
-    ATTRIBUTES: Mapping[str, str] = {
-        "lam": "lambda",
-        "phi": "phi",
-        "tau": "tau",
-        "relative_error": "relative_error",
-        "converged": "converged",
-        "iterations": "iterations",
-        "factorizations": "factorizations",
-        "history": "history",
-        "n_points": "n_points",
-        "dimension": "dimension",
-        "kind": "kind",
-        "rms_displacement": "rms_displacement",
-        "max_displacement": "max_displacement",
-        "warnings": "warnings",
-        "sigma_estimate": "sigma_estimate",
-        "noise_found": "noise_found",
-        "tau_rule": "tau_rule",
-        "tau_how": "tau_how",
-        "shape_warnings": "shape_warnings",
-        "outlier_count": "outlier_count",
-        "outliers": "outliers",
-        "data_weights": "data_weights",
-        "tangential": "tangential",
-    }
+    #: attribute -> JSON member: every member of the spec's ``Report`` (generated, ``lam`` for
+    #: ``lambda``).
+    ATTRIBUTES: Mapping[str, str] = REPORT_ATTRIBUTES
     #: JSON member -> the name a service before 2026-11 sent (read when the new one is absent).
     FORMERLY: Mapping[str, str] = {
         "rms_displacement": "rms_deviation",

@@ -1,4 +1,4 @@
-"""The outcome of :meth:`Client.smooth`: the succeeded job, its report, its geometry.
+"""The outcome of :meth:`~geosmooth_client.Client.smooth`: the job, its report, its geometry.
 
 :class:`Result` (sync) and :class:`AsyncResult` (async) fetch the result lazily: ``download``
 returns the file in any format the service writes, ``save`` writes it, ``geometry`` gives the
@@ -83,7 +83,7 @@ class _AsyncFetcher(Protocol):
 
 
 class Result:
-    """A succeeded job of a :class:`Client`.
+    """A succeeded job of a :class:`~geosmooth_client.Client`.
 
     Attributes
     ----------
@@ -131,9 +131,10 @@ class Result:
 
 
 class AsyncResult:
-    """A succeeded job of an :class:`AsyncClient`: the attributes of :class:`Result` (``job``,
-    ``id``, ``report``) as they are, its methods (``download``, ``save``, ``geometry``,
-    ``arrays``) awaited.
+    """A succeeded job of an :class:`~geosmooth_client.AsyncClient`.
+
+    The attributes of :class:`Result` (``job``, ``id``, ``report``) as they are, its methods
+    (``download``, ``save``, ``geometry``, ``arrays``) awaited.
 
     ``await client.smooth(...)`` builds it with :meth:`create`, which fetches the report if the
     job did not carry it, so ``result.report.phi`` works as with the sync client.

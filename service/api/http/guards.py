@@ -13,14 +13,14 @@
    ``auth_failure_burst`` wrong keys (refilled at ``auth_failure_rate``/s) gets 429 +
    ``Retry-After`` for every ``/v1`` request until its allowance is back; the
    :class:`~service.api.http.auth.Principal` is left in ``scope["state"]["principal"]`` for the
-   routes and the body limit.
+   routes and the body limit. Both buckets live in a :class:`~service.api.http.ratelimit.Buckets`
+   store: per process in the embedded deployment, in Redis (shared by every API replica) in the
+   distributed one (:func:`~service.api.http.ratelimit.buckets_for`).
 """
 
 from __future__ import annotations
 
 import math
-import time
-from collections import OrderedDict
 from collections.abc import Iterable
 from urllib.parse import urlsplit
 
@@ -29,6 +29,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.api.errors import ApiProblem
 from service.api.http.auth import KeyRing, Principal, presented_key
+from service.api.http.ratelimit import Buckets, MemoryBuckets
 from service.api.problems import problem_response
 
 __all__ = [
@@ -36,7 +37,6 @@ __all__ = [
     "HostGuard",
     "InFlightLimit",
     "OriginGuard",
-    "TokenBuckets",
     "allowed_hosts",
 ]
 
@@ -188,35 +188,6 @@ class OriginGuard:
         await self.app(scope, receive, send)
 
 
-class TokenBuckets:
-    """Token buckets per key (at most ``max_keys`` remembered, least recently used dropped)."""
-
-    def __init__(self, max_keys: int = 10_000) -> None:
-        self.max_keys = max_keys
-        self._buckets: OrderedDict[str, tuple[float, float]] = OrderedDict()
-
-    def peek(self, key: str, rate: float, burst: int, now: float | None = None) -> float:
-        """The tokens ``key`` has now (``burst`` for an unknown key); takes none."""
-        now = time.monotonic() if now is None else now
-        tokens, last = self._buckets.get(key, (float(burst), now))
-        return min(float(burst), tokens + (now - last) * rate)
-
-    def take(self, key: str, rate: float, burst: int, now: float | None = None) -> float:
-        """Take one token; 0 if granted, else the seconds until one is available."""
-        now = time.monotonic() if now is None else now
-        tokens, last = self._buckets.pop(key, (float(burst), now))
-        tokens = min(float(burst), tokens + (now - last) * rate)
-        wait = 0.0
-        if tokens >= 1.0:
-            tokens -= 1.0
-        else:
-            wait = (1.0 - tokens) / rate
-        self._buckets[key] = (tokens, now)
-        while len(self._buckets) > self.max_keys:
-            self._buckets.popitem(last=False)
-        return wait
-
-
 class AuthGate:
     """Authenticate ``/v1/*`` requests (401) and apply the key's rate limit (429)."""
 
@@ -224,22 +195,24 @@ class AuthGate:
         self,
         app: ASGIApp,
         keys: KeyRing,
-        buckets: TokenBuckets | None = None,
+        buckets: Buckets | None = None,
         failure_burst: int = 20,
         failure_rate: float = 0.2,
+        failures: Buckets | None = None,
     ) -> None:
         self.app = app
         self.keys = keys
-        self.buckets = buckets or TokenBuckets()
-        self.failures = TokenBuckets()
+        self.buckets = buckets or MemoryBuckets()
+        self.failures = failures or MemoryBuckets()
         self.failure_burst = failure_burst
         self.failure_rate = failure_rate
 
-    def _guessing(self, client: str | None) -> ApiProblem | None:
+    async def _guessing(self, client: str | None) -> ApiProblem | None:
         """429 for a client address whose wrong keys used up its allowance (its next wrong key
         would take a token it does not have): every ``/v1`` request of it waits, a valid key's
         too, so the answers tell a guesser nothing."""
-        tokens = self.failures.peek(f"addr:{client}", self.failure_rate, self.failure_burst)
+        key = f"addr:{client}"
+        tokens = await self.failures.peek(key, self.failure_rate, self.failure_burst)
         if tokens >= 1.0:
             return None
         wait = math.ceil((1.0 - tokens) / self.failure_rate)
@@ -280,7 +253,7 @@ class AuthGate:
         gated = scope["path"].startswith("/v1/") or scope["path"] == "/v1"
         client = (scope.get("client") or (None,))[0]
         if gated and self.keys.enabled:
-            blocked = self._guessing(client)
+            blocked = await self._guessing(client)
             if blocked is not None:
                 await _refuse(blocked, scope, receive, send)
                 return
@@ -288,14 +261,16 @@ class AuthGate:
         if isinstance(principal, ApiProblem):
             if gated:
                 if principal.code == "invalid-api-key":
-                    self.failures.take(f"addr:{client}", self.failure_rate, self.failure_burst)
+                    await self.failures.take(
+                        f"addr:{client}", self.failure_rate, self.failure_burst
+                    )
                 await _refuse(principal, scope, receive, send)
                 return
             principal = self.keys.anonymous((scope.get("client") or (None,))[0])
         scope.setdefault("state", {})["principal"] = principal
         if gated:
             limits = principal.limits
-            wait = self.buckets.take(principal.bucket, limits.rate_limit, limits.rate_burst)
+            wait = await self.buckets.take(principal.bucket, limits.rate_limit, limits.rate_burst)
             if wait > 0:
                 problem = ApiProblem(
                     429,

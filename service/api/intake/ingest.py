@@ -8,8 +8,10 @@ replaced by the uploaded file name (no server path ever reaches a client).
 
 Checks, cheapest first: parameters (422) and the key's bounds on them (``k``,
 ``max_iterations``: 422), the format (415), the file (400 malformed, 422 invalid geometry), the
-key's size bounds (points, faces: 413; ``spectrum``: 422), and for a job the smoothing factor
-against ``(0, phi(0))`` (422, as ``POST /v1/smooth`` answers it).
+key's size bounds (points, faces: 413; ``spectrum``: 422). What a job or a synchronous answer
+checks and runs next is the use cases' (:mod:`service.api.intake.smoothing`: the submit check of
+:mod:`service.workflows.admission`, the read -> smooth -> write of
+:mod:`service.workflows.smooth_file`).
 """
 
 from __future__ import annotations
@@ -24,20 +26,11 @@ from pydantic import ValidationError
 from service.api.errors import ApiProblem, finite
 from service.api.http.bounds import Limits
 from service.core.params import SmoothingParams
-from service.core.search.tau_range import check_tau
 from service.io import FORMATS, GeometryDocument, geometry_from_json_obj, read_geometry
 from service.io.dispatch import detect_format, sniff_format
 from service.io.errors import FormatError, UnsupportedFormat
-from service.jobs.queue import JobSize, NewJob
 
-__all__ = [
-    "IngestRequest",
-    "ParsedRequest",
-    "check_job",
-    "describe_input",
-    "parse_request",
-    "smooth_input",
-]
+__all__ = ["IngestRequest", "ParsedRequest", "describe_input", "parse_request"]
 
 _TRUE, _FALSE = frozenset({"true", "1", "yes", "on"}), frozenset({"false", "0", "no", "off", ""})
 _JSON_MEMBERS = frozenset({"geometry", "params", "weld", "webhook_url"})
@@ -67,7 +60,7 @@ class IngestRequest:
         ``POST /v1/smooth``: the answer's format (default: the input's).
     exact_tau_max_points : int
         Largest point cloud whose ``tau`` is checked exactly at submit (see
-        :mod:`service.core.search.tau_range`).
+        :mod:`service.core.tau_range`).
     options : dict
         Endpoint-specific options of the worker function (e.g. ``preview`` of ``/v1/info``).
     """
@@ -334,50 +327,6 @@ def parse_request(req: IngestRequest, max_points: int | None = None) -> ParsedRe
     return parsed
 
 
-def check_job(req: IngestRequest) -> NewJob:
-    """``POST /v1/jobs``: the parsed, checked job (format, parameters, file, the key's bounds,
-    ``tau``), typed; the router adds tenant and idempotency key. An inline geometry becomes a
-    JSON file next to the spooled body, written once every check passed."""
-    parsed = parse_request(req, req.limits.max_points)
-    from service.api.intake.dryrun import check_time, dry_run  # 422: too slow, or refused
-
-    check_time(parsed.document.geometry, parsed.params, req.options.get("job_timeout"))
-    check_tau(parsed.document.geometry, parsed.params, req.exact_tau_max_points)
-
-    dry_run(parsed.document.geometry, parsed.params, int(req.options.get("dry_run_points", 0)))
-    if "geometry" in parsed.extra:
-        inline = Path(req.work_dir) / (Path(req.path).stem + ".geometry.json")
-        inline.write_text(json.dumps(parsed.extra["geometry"], separators=(",", ":")))
-        parsed.input_path = str(inline)
-    return NewJob(
-        Path(parsed.input_path), parsed.fmt, parsed.params,
-        size=JobSize.of(parsed.document.geometry), filename=req.filename, weld=parsed.weld,
-        webhook_url=parsed.webhook_url,
-    )  # fmt: skip
-
-
-def smooth_input(req: IngestRequest) -> dict[str, Any]:
-    """``POST /v1/smooth``: smooth and write the answer to a file next to the spool file."""
-    from service.core import smooth
-    from service.io import write_geometry
-    from service.io.dispatch import check_output
-
-    parsed = parse_request(req, min(req.limits.sync_max_points, req.limits.max_points))
-    fmt = req.out_format or parsed.fmt
-    check_output(parsed.document, fmt)  # 422 naming ``format``, before smoothing
-    check_tau(parsed.document.geometry, parsed.params, 0, analyse=False)
-    result = smooth(parsed.document.geometry, parsed.params)
-    report = finite(result.report())
-    out = Path(req.work_dir) / (Path(req.path).stem + f".result.{fmt}")
-    if fmt == "json":
-        geometry = write_geometry(parsed.document, "json", result.points).strip()
-        text = json.dumps(report, separators=(",", ":"), allow_nan=False)
-        out.write_bytes(b'{"geometry":' + geometry + b',"report":' + text.encode() + b"}")
-    else:
-        out.write_bytes(write_geometry(parsed.document, fmt, result.points))
-    return {"path": str(out), "fmt": fmt, "report": report, "input_fmt": parsed.fmt}
-
-
 def _bound_only(geometry: Any, params: SmoothingParams, exact_max_points: int) -> bool:
     """Whether ``POST /v1/jobs`` checks this input against the closed-form bound of phi(0)
     only (a cloud above ``exact_max_points`` without fixed points): ``POST /v1/info`` then
@@ -393,7 +342,7 @@ def _outline(geometry: Any) -> dict[str, Any]:
     import numpy as np
 
     from service.core.info import mean_spacing
-    from service.core.search.tau_range import centroid_bound
+    from service.core.tau_range import centroid_bound
 
     phi0, weight = centroid_bound(geometry)
     pts = geometry.points

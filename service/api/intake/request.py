@@ -1,9 +1,9 @@
 """The one path every geometry request takes: spool the body, then check it in a process.
 
-``POST /v1/jobs``, ``POST /v1/smooth`` and ``POST /v1/info`` call :func:`intake` with the
-function of :mod:`service.api.intake.ingest` they need. The body is streamed to the spool directory
-(:mod:`service.api.intake.uploads`), then parsed and checked in a worker process
-(:mod:`service.api.intake.isolation`) with
+``POST /v1/jobs``, ``POST /v1/smooth`` and ``POST /v1/info`` call :meth:`Intake.run` with the
+function of :mod:`service.api.intake.smoothing` or :mod:`service.api.intake.ingest` they need.
+The body is streamed to the spool directory (:mod:`service.api.intake.uploads`), then parsed
+and checked in a worker process (:mod:`service.api.intake.isolation`) with
 
 * a time limit (``parse_timeout``, at most ``ingest_timeout``; ``sync_timeout`` for
   ``POST /v1/smooth``); the process is killed at its deadline and when the client disconnects,
@@ -60,10 +60,10 @@ def clean_spool(settings: Settings, max_age: float | None = None) -> int:
     """Remove spool files older than ``max_age`` seconds (left by a crash); how many.
 
     Default: every one when no other live server uses the spool (a crash left them: see
-    :func:`service.jobs.embedded.maintenance.sole_user`; this process registers as a user),
+    :func:`service.jobs.files.sole_user`; this process registers as a user),
     else those older than an hour (another server may be receiving them).
     """
-    from service.jobs.embedded.maintenance import sole_user
+    from service.jobs.files import sole_user
 
     removed = 0
     now = time.time()

@@ -1,7 +1,8 @@
 """The entry point of a request process (see :mod:`service.api.intake.isolation`).
 
 Kept light (no web framework, no logging setup): the process imports this module, the function
-it runs (:mod:`service.api.intake.ingest`) and nothing else beyond what the forkserver preloaded.
+it runs (:mod:`service.api.intake.ingest`, :mod:`service.api.intake.smoothing`) and nothing else
+beyond what the forkserver preloaded.
 """
 
 from __future__ import annotations

@@ -36,11 +36,12 @@ from service.api.docs import (
 from service.api.docs import output_format as output_format_of
 from service.api.errors import ApiProblem
 from service.api.http.logs import get_logger
-from service.api.intake.ingest import check_job
 from service.api.intake.request import spool_dir
+from service.api.intake.smoothing import check_job
 from service.api.problems import FiniteJSONResponse
 from service.api.results import pin_file, render_geometry, result_name
 from service.api.schemas import Job, JobList, JobStatusName, OutputFormat, PageLinks, Report
+from service.jobs.limits import tile_workers
 from service.jobs.queue import JobQueue, JobRecord, JobStatus, NewJob, job_location
 from service.jobs.webhooks import check_webhook_url
 
@@ -114,7 +115,9 @@ async def submit_job(
     upload = await intake.receive(request)
     job: NewJob | None = None
     try:
-        checked = await intake.run(request, upload, principal, check_job)
+        own = {"memory_limit": getattr(queue, "memory_limit", None),
+               "tile_workers": tile_workers()}  # the queue's limits: admission at intake
+        checked = await intake.run(request, upload, principal, check_job, options=own)
         assert checked is not None
         job = replace(checked, tenant=principal.tenant, idempotency_key=idempotency_key)
         if job.webhook_url:

@@ -20,7 +20,7 @@ from service.api.docs import (
     problem_responses,
 )
 from service.api.docs import output_format as output_format_of
-from service.api.intake.ingest import smooth_input
+from service.api.intake.smoothing import smooth_input
 from service.api.results import REPORT_HEADER, report_header, result_name
 from service.api.schemas import OutputFormat
 

@@ -1,6 +1,6 @@
-"""The :class:`~service.core.result.SmoothResult` of a run: input-frame numbers, the shape
-checks and warnings of :mod:`.guards`, timings, work counters and the optional spectrum
-(eq. 12)."""
+"""The report stage's numbers: input-frame values, the shape checks and warnings of
+:mod:`.guards`, timings, work counters and the optional spectrum (eq. 12), as the fields of a
+:class:`~service.core.result.SmoothResult` (the pipeline builds it, with the plan)."""
 
 from __future__ import annotations
 
@@ -10,19 +10,29 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.checks.guards import fold_note, guard_warnings, noise_ratio, shape_checks
-from service.core.checks.spectrum import SPECTRUM_MAX_POINTS, filter_factors, singular_values
+from service.core.checks.guards import (
+    ShapeChecks,
+    fold_note,
+    guard_warnings,
+    noise_ratio,
+    shape_checks,
+)
+from service.core.checks.spectrum import (
+    SPECTRUM_MAX_POINTS,
+    Spectrum,
+    filter_factors,
+    singular_values,
+)
 from service.core.errors import ShapeLost, SolverError
+from service.core.finish.finished import Finished
 from service.core.frame import Frame
 from service.core.geometry import Geometry
+from service.core.noise.estimate import codimension, estimate_noise
+from service.core.noise.robust import DataWeights
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.result import SmoothResult, Spectrum
 from service.core.run import Run
-from service.core.search.noise import codimension, estimate_noise
-from service.core.search.roots import LambdaSearch
-from service.core.system.deviation import Deviation
-from service.core.system.tangential import TangentialStep
+from service.core.search.target import Solution, Target
 
 __all__ = ["diagnostics"]
 
@@ -33,53 +43,42 @@ def diagnostics(
     geometry: Geometry,
     params: SmoothingParams,
     op: SmoothingOperator,
+    frame: Frame,
     run: Run,
-    X: Array,
-    dev: Deviation | None,
-    search: LambdaSearch,
+    sol: Solution,
+    fin: Finished,
     n_fixed: int,
-    volume_scale: float | None = None,
-    tangential: TangentialStep | None = None,
-) -> SmoothResult:
-    """The :class:`SmoothResult` of a run: input-frame numbers, timings and work counters."""
-    frame = run.frame if run.frame is not None else op.frame
+    weights: DataWeights | None = None,
+) -> dict[str, Any]:
+    """The fields of the run's :class:`~service.core.result.SmoothResult`: input-frame numbers
+    (eq. 15's ``phi``, lambda of eq. 4), timings and work counters.
+
+    Raises
+    ------
+    SolverError
+        A non-finite lambda, phi or point.
+    ShapeLost
+        ``params.strict`` and a shape warning.
+    """
+    X, dev, search, target = fin.X, sol.dev, sol.search, sol.target
     moved = X - geometry.points
     dev_pt = np.linalg.norm(moved, axis=1)
     # phi of the solution (before any volume rescaling), as recorded in the history
-    phi = search.phi * frame.phi_factor if dev is not None else 0.0
+    phi = frame.phi_out(search.phi) if dev is not None else 0.0
     if not (np.isfinite(phi) and np.isfinite(search.lam) and np.isfinite(X).all()):
         raise SolverError(  # never report a non-finite number (issue 15)
             "the solution is not finite at this scale (lambda, phi or the points overflowed)",
             field="params",
         )
     stats = dev.stats if dev is not None else None
-    timings = dict(op.timings)
-    if stats is not None:
-        timings.update(
-            analysis=stats.analysis,
-            factorization=stats.factorization,
-            solve=stats.solve,
-            matvec=stats.matvec,
-        )
-    checks = shape_checks(geometry, X)
     rms = float(np.sqrt(np.mean(dev_pt**2)))
-    sigma = _noise_for_checks(geometry, params, run, rms)
-    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
-    moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
-    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
-    if shape_warnings and params.strict:
-        raise ShapeLost(shape_warnings, checks.to_dict())
-    run.notes.extend(shape_warnings)
-    note = fold_note(checks, params.displacement)
-    if note:
-        run.notes.append(note)
-    timings["search"] = run.search_seconds
-    timings["total"] = time.perf_counter() - run.t0
-    tau = run.tau
+    checks, shape_warnings, sigma = _shape(geometry, params, target, X, rms, run.notes)
+    timings = _timings(op, sol, run)
+    tau = target.tau
     spectrum = None
     if params.spectrum:
         spectrum = _spectrum(op, geometry, frame, search.lam, n_fixed, run.notes)
-    return SmoothResult(
+    return dict(
         points=X,
         lam=params.lam if params.lam is not None else frame.lam_out(search.lam),
         phi=phi,
@@ -90,7 +89,7 @@ def diagnostics(
         factorizations=stats.factorizations if stats else 0,
         solves=stats.solves if stats else 0,
         matvecs=stats.matvecs if stats else 0,
-        history=[(frame.lam_out(lam), p * frame.phi_factor) for lam, p in search.history],
+        history=[(frame.lam_out(lam), frame.phi_out(p)) for lam, p in search.history],
         deviation=dev_pt,
         rms_displacement=rms,
         max_displacement=float(dev_pt.max()),
@@ -103,25 +102,70 @@ def diagnostics(
         weights=op.scheme,
         kind=geometry.kind,
         n_fixed=n_fixed,
-        volume_scale=volume_scale,
+        volume_scale=fin.volume_scale,
         warnings=[*run.notes, *(stats.warnings if stats else [])],
         spectrum=spectrum,
         displacement=params.displacement,
         tau_rule=params.tau_rule,
-        sigma_estimate=run.sigma if run.sigma is not None else sigma,
-        tau_how=run.tau_how,
+        sigma_estimate=target.sigma if target.sigma is not None else sigma,
+        tau_how=target.how,
         checks=checks.to_dict(),
-        bound=run.bound,
+        bound=sol.bound,
         shape_warnings=shape_warnings,
-        noise_found=None if params.tau_rule != "auto" else bool(run.sigma),
-        **_data_weights(run),
-        tangential=None if tangential is None else tangential.to_dict(frame.phi_factor),
+        noise_found=None if params.tau_rule != "auto" else bool(target.sigma),
+        **_data_weights(weights),
+        tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
     )
 
 
-def _data_weights(run: Run) -> dict[str, Any]:
+def _shape(
+    geometry: Geometry,
+    params: SmoothingParams,
+    target: Target,
+    X: Array,
+    rms: float,
+    notes: list[str],
+) -> tuple[ShapeChecks, list[str], float | None]:
+    """The shape checks of :mod:`.guards`, their warnings (added to ``notes``) and the noise
+    level they compared with.
+
+    Raises
+    ------
+    ShapeLost
+        ``params.strict`` and a shape warning.
+    """
+    checks = shape_checks(geometry, X)
+    sigma = _noise_for_checks(geometry, params, target, rms)
+    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
+    moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
+    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
+    if shape_warnings and params.strict:
+        raise ShapeLost(shape_warnings, checks.to_dict())
+    notes.extend(shape_warnings)
+    note = fold_note(checks, params.displacement)
+    if note:
+        notes.append(note)
+    return checks, shape_warnings, sigma
+
+
+def _timings(op: SmoothingOperator, sol: Solution, run: Run) -> dict[str, float]:
+    """Seconds per stage: build, analysis, factorization, solve, products, search, total."""
+    timings = dict(op.timings)
+    stats = sol.dev.stats if sol.dev is not None else None
+    if stats is not None:
+        timings.update(
+            analysis=stats.analysis,
+            factorization=stats.factorization,
+            solve=stats.solve,
+            matvec=stats.matvec,
+        )
+    timings["search"] = sol.seconds
+    timings["total"] = time.perf_counter() - run.t0
+    return timings
+
+
+def _data_weights(dw: DataWeights | None) -> dict[str, Any]:
     """The outliers and data weights of the run (issue 21), as :class:`SmoothResult` fields."""
-    dw = run.data_weights
     if dw is None:
         return {}
     kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
@@ -135,12 +179,12 @@ def _data_weights(run: Run) -> dict[str, Any]:
 
 
 def _noise_for_checks(
-    geometry: Geometry, params: SmoothingParams, run: Run, rms: float
+    geometry: Geometry, params: SmoothingParams, target: Target, rms: float
 ) -> float | None:
     """The noise level the shape checks compare with: the automatic tau's estimate, else one
     made here (sampled, bounded cost) when anything moved; ``None`` when no noise is found."""
     if params.tau_rule == "auto":
-        return run.sigma or None
+        return target.sigma or None
     if rms == 0 or geometry.dim - 1 < 1:
         return None
     est = estimate_noise(geometry)

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from service.core.checks.shrinkage import enclosed_measure, is_closed_curve_set, is_closed_mesh
+from service.core.finish.folds import face_normals, folded_faces
+from service.core.finish.volume import enclosed_measure, is_closed_curve_set, is_closed_mesh
 from service.core.geometry import Geometry
 
 __all__ = [
@@ -42,9 +43,7 @@ __all__ = [
     "NOISE_AREA",
     "NOISE_MOVES",
     "ShapeChecks",
-    "fold_mask",
     "fold_note",
-    "folded_faces",
     "guard_warnings",
     "noise_ratio",
     "shape_checks",
@@ -110,28 +109,6 @@ class ShapeChecks:
         }
 
 
-def _face_normals(P: NDArray[np.float64], F: NDArray[np.int64]) -> NDArray[np.float64]:
-    a, b, c = (P[F[:, i]] for i in range(3))
-    return np.cross(b - a, c - a)
-
-
-def folded_faces(
-    normals: NDArray[np.float64], F: NDArray[np.int64], n: int
-) -> NDArray[np.bool_]:
-    """Faces whose normal points against the sum of the (area-weighted) normals of the other
-    faces around their three corners: a fold of the surface, whichever way it is oriented."""
-    vertex = np.zeros((n, 3))
-    for i in range(3):
-        np.add.at(vertex, F[:, i], normals)
-    around = vertex[F[:, 0]] + vertex[F[:, 1]] + vertex[F[:, 2]] - 3.0 * normals
-    return np.einsum("ij,ij->i", normals, around) < 0
-
-
-def fold_mask(points: NDArray[np.float64], F: NDArray[np.int64], n: int) -> NDArray[np.bool_]:
-    """:func:`folded_faces` of the mesh ``(points, F)``."""
-    return folded_faces(_face_normals(points, F), F, n)
-
-
 def _new_folds(
     before: NDArray[np.bool_], after: NDArray[np.bool_], F: NDArray[np.int64], n: int
 ) -> int:
@@ -167,10 +144,10 @@ def shape_checks(geometry: Geometry, X: NDArray[np.float64]) -> ShapeChecks:
     volume = area = None
     F, E = geometry.faces, geometry.edges
     if F is not None and geometry.dim == 3:
-        n0 = _face_normals(P, F)
+        n0 = face_normals(P, F)
         ok = np.linalg.norm(n0, axis=1) > 0
         n_faces = int(ok.sum())
-        n1 = _face_normals(X, F)
+        n1 = face_normals(X, F)
         flipped = int(np.sum(np.einsum("ij,ij->i", n0[ok], n1[ok]) < 0))
         fold0, fold1 = folded_faces(n0, F, geometry.n), folded_faces(n1, F, geometry.n)
         folds = (int(fold1.sum()), int(fold0.sum()), _new_folds(fold0, fold1, F, geometry.n))
@@ -255,8 +232,11 @@ def fold_note(checks: ShapeChecks, displacement: str) -> str | None:
     kept = checks.folded_faces or 0
     if kept <= FLIP_FRACTION * max(checks.n_faces, 1) or kept < (checks.folded_input or 0) // 2:
         return None
-    hint = "; displacement 'free' can move points along the surface" if (
-        displacement == "normal") else ""
+    hint = (
+        "; displacement 'free' can move points along the surface"
+        if (displacement == "normal")
+        else ""
+    )
     return (
         f"{kept} faces of the result are folded (the input had {checks.folded_input}): "
         f"smoothing did not unfold them{hint}"
@@ -269,7 +249,7 @@ def noise_ratio(geometry: Geometry, sigma: float | None = None) -> float | None:
     if geometry.faces is None and geometry.edges is None:
         return None
     if sigma is None:
-        from service.core.search.noise import estimate_noise
+        from service.core.noise.estimate import estimate_noise
 
         est = estimate_noise(geometry)
         if est is None:

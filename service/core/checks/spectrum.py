@@ -9,13 +9,15 @@ values of ``(L, D)``; then ``X = D^-1 sum_i v_i gamma_i v_i^T D P``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core.params import SPECTRUM_MAX_POINTS
 
-__all__ = ["SPECTRUM_MAX_POINTS", "filter_factors", "singular_values"]
+__all__ = ["SPECTRUM_MAX_POINTS", "Spectrum", "filter_factors", "singular_values"]
 
 
 
@@ -51,3 +53,23 @@ def singular_values(
 def filter_factors(sigma: NDArray[np.float64], lam: float) -> NDArray[np.float64]:
     """``gamma_i = lambda / (sigma_i^2 + lambda)`` (eq. 12)."""
     return lam / (sigma**2 + lam)
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """Spectral view of report section 5 (eq. 12).
+
+    Attributes
+    ----------
+    sigma : ndarray
+        Singular values of ``L`` (``D = I``) or generalized singular values of ``(L, D)``,
+        in decreasing order.
+    gamma : ndarray
+        Filter factors ``gamma_i = lambda / (sigma_i^2 + lambda)`` at the chosen lambda.
+    """
+
+    sigma: NDArray[np.float64]
+    gamma: NDArray[np.float64]
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"sigma": self.sigma.tolist(), "gamma": self.gamma.tolist()}

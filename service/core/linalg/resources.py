@@ -22,6 +22,7 @@ import scipy.sparse as sp
 
 from service.core.linalg.solver import Gram, cholmod_available
 from service.core.params import SmoothingParams
+from service.core.params.rules import auto_displacement
 
 __all__ = [
     "MATRIX_FREE_FROM",
@@ -63,12 +64,10 @@ def _normal_unknowns(n: int, dim: int, kind: str, params: SmoothingParams | None
     As :func:`service.core.system.displacement.resolve_displacement` decides: ``auto`` is
     normal for meshes and clouds (not with ``tau="gcv"`` or windowed-sinc), free for curves.
     """
-    mode = params.displacement if params is not None else "auto"
+    mode: str = params.displacement if params is not None else "auto"
     if mode == "auto":
-        free_only = params is not None and (
-            params.method == "windowed-sinc" or params.tau_rule == "gcv"
-        )
-        mode = "free" if free_only or kind == "curve" else "normal"
+        run = (params.method, params.tau_rule) if params is not None else ("tikhonov", "auto")
+        mode = auto_displacement(kind, *run)
     if mode != "normal":
         return 1
     manifold = {"mesh": 2, "curve": 1}.get(kind, min(2, dim - 1))

@@ -31,6 +31,7 @@ from service.core._arrays import unique_keys
 from service.core.geometry import Geometry
 from service.core.operator.neighborhoods import Neighborhoods, pair_adjacency
 from service.core.params import SmoothingParams
+from service.core.params.rules import auto_displacement
 
 __all__ = [
     "boundary_edges",
@@ -60,9 +61,9 @@ def boundary_rule(params: SmoothingParams, geometry: Geometry) -> BoundaryRule:
         return "ring"  # no mesh boundary: the rule does not apply
     if params.boundary != "auto":
         return params.boundary
+    auto = auto_displacement("mesh", params.method, params.tau_rule)
     free = params.displacement == "free" or (
-        params.displacement == "auto"
-        and (params.method == "windowed-sinc" or params.tau == "gcv" or geometry.dim != 3)
+        params.displacement == "auto" and (auto == "free" or geometry.dim != 3)
     )
     return "curve" if free else "ring"
 

@@ -7,6 +7,7 @@ geometry and build parameters in the process (:mod:`service.core.linalg.cache`).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -36,30 +37,21 @@ from service.core.operator.neighborhoods import (
     unique_faces,
 )
 from service.core.operator.weights import ResolvedScheme, neighbor_weights
-from service.core.params import SmoothingParams
+from service.core.params import OperatorParams, SmoothingParams
+from service.core.params.groups import field_names
 
 __all__ = [
     "BUILD_FIELDS",
     "SmoothingOperator",
     "build_laplacian",
     "build_operator",
+    "operator_group",
     "operator_key",
     "resolve_weights",
 ]
 
-#: The parameters an operator depends on.
-BUILD_FIELDS = (
-    "laplacian",
-    "weights",
-    "neighborhood",
-    "k",
-    "sigma_h",
-    "sigma_f",
-    "presmooth",
-    "junctions",
-    "ends",
-    "boundary",
-)
+#: The parameters an operator depends on: the fields of the operator group.
+BUILD_FIELDS = field_names(OperatorParams)
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,14 +120,25 @@ def _neighborhoods(geometry: Geometry, P: np.ndarray, params: SmoothingParams) -
     return cloud_knn_neighborhoods(P, params.k)
 
 
+def operator_group(params: SmoothingParams, geometry: Geometry) -> OperatorParams:
+    """The operator group of ``params`` with its ``"auto"`` choices resolved (weights, ends,
+    boundary): the same for the caller's parameters and for the plan's."""
+    return dataclasses.replace(
+        params.operator,
+        weights=resolve_weights(params, geometry),
+        ends=ends_rule(params),
+        boundary=boundary_rule(params, geometry),
+    )
+
+
 def operator_key(geometry: Geometry, params: SmoothingParams) -> str:
-    """Digest of what an operator depends on: points, connectivity, :data:`BUILD_FIELDS`."""
+    """Digest of what an operator depends on: points, connectivity and the resolved operator
+    group (:func:`operator_group`)."""
     return cache.digest(
         geometry.points,
         geometry.faces if geometry.faces is not None else 0,
         geometry.edges if geometry.edges is not None else 0,
-        *(getattr(params, name) for name in BUILD_FIELDS),
-        boundary_rule(params, geometry),
+        *dataclasses.astuple(operator_group(params, geometry)),
     )
 
 

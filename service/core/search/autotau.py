@@ -1,15 +1,15 @@
 """Choosing tau without being told: the automatic rule and generalized cross-validation.
 
 * ``tau="auto"`` (also when none of lam, tau, rms is given): estimate the noise level sigma
-  (:func:`service.core.search.noise.estimate_noise`) and take the discrepancy-principle budget
+  (:func:`service.core.noise.estimate.estimate_noise`) and take the discrepancy-principle budget
   ``tau = c r sigma^2 sum omega_i^2`` over the points that can move
-  (:func:`service.core.search.noise.discrepancy_tau`); the usual lambda search then meets it.
+  (:func:`discrepancy_tau`); the usual lambda search then meets it.
 * ``tau="gcv"``: the lambda minimizing the generalized cross-validation score
   ``V(lambda) = (phi(lambda) / (m c)) / (tr(I - H(lambda)) / m)^2`` of the smoothing system
   (Wahba 1977; Golub, Heath and Wahba 1979), where ``I - H`` maps the data ``U0`` to the
   residual, ``(K^-1 M)^k`` for iterated Tikhonov of order ``k``; its trace comes from
   Hutchinson probes solved with the factorization already made for ``phi(lambda)``
-  (:func:`service.core.search.noise.hutchinson_trace`). ``tau`` is then ``phi`` at that lambda.
+  (:func:`service.core.noise.estimate.hutchinson_trace`). ``tau`` is then ``phi`` at that lambda.
 """
 
 from __future__ import annotations
@@ -26,16 +26,52 @@ from scipy.optimize import minimize_scalar
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.linalg.krylov import Quadrature, _models, log_bisect
+from service.core.noise.estimate import (
+    codimension,
+    estimate_noise,
+    hutchinson_trace,
+)
 from service.core.params import SmoothingParams
-from service.core.search.noise import codimension, discrepancy_tau, estimate_noise, hutchinson_trace
 from service.core.system.deviation import Deviation
 from service.core.system.displacement import tangential_ratio
 
-__all__ = ["GCV_PROBES", "AutoTau", "auto_tau", "gcv_lambda"]
+__all__ = [
+    "GCV_PROBES",
+    "TANGENTIAL_SHARE",
+    "TAU_FACTOR",
+    "AutoTau",
+    "auto_tau",
+    "discrepancy_tau",
+    "gcv_lambda",
+]
 
 GCV_PROBES = 8
 Array = NDArray[np.float64]
 EXACT_TRACE = 400
+
+
+#: ``c`` of the discrepancy rule ``tau = c * r * sigma^2 * sum omega_i^2 * (1 + alpha rho)``
+#: (``r`` normal directions per point), per displacement mode, and ``alpha`` (free
+#: displacement only); calibrated on the quality benchmark (``benchmarks/quality/README.md``).
+TAU_FACTOR: dict[str, float] = {"free": 0.9, "normal": 1.0}
+TANGENTIAL_SHARE = 1.0
+
+
+def discrepancy_tau(
+    sigma: float, weight_sum: float, codim: int, displacement: str, rho: float = 0.0
+) -> float:
+    """``tau = c r sigma^2 sum omega_i^2 (1 + alpha rho)``: the noise energy smoothing removes.
+
+    With noise of standard deviation ``sigma`` across the shape, a smoothing that removes the
+    noise and nothing else moves each point by about ``sigma`` per normal direction; part of
+    the noise stays in the smooth result (the degrees of freedom the filter keeps), which the
+    calibrated factor ``c`` (:data:`TAU_FACTOR`) accounts for. Free displacement also moves
+    points along the shape, in proportion to the roughness along it: ``rho`` is its ratio to
+    the roughness across (:func:`service.core.system.displacement.tangential_ratio`) and ``alpha``
+    (:data:`TANGENTIAL_SHARE`) the calibrated share of it worth spending.
+    """
+    extra = 1.0 + TANGENTIAL_SHARE * rho if displacement == "free" else 1.0
+    return TAU_FACTOR[displacement] * codim * sigma**2 * weight_sum * extra
 
 
 @dataclass(frozen=True)
@@ -59,11 +95,11 @@ def auto_tau(
     """``tau`` from the estimated noise (discrepancy principle, calibrated factor).
 
     ``tau = 0`` (the run returns its input unchanged, ``rule`` says why) when there is nothing
-    to remove: no noise found (:func:`~service.core.search.noise.estimate_noise`: exactly
+    to remove: no noise found (:func:`~service.core.noise.estimate.estimate_noise`: exactly
     smooth, or residuals that grow with the neighbourhood like the shape's own detail), no
     estimate possible (too few or degenerate points), or no point free to move. ``tau_scale``:
     ``sigma_i / sigma`` per point when the data weights follow the noise
-    (:mod:`~service.core.search.robust`): the budget sums ``(omega_i sigma_i / sigma)^2``.
+    (:mod:`~service.core.noise.robust`): the budget sums ``(omega_i sigma_i / sigma)^2``.
     """
     est = estimate_noise(geometry)
     if est is None:

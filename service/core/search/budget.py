@@ -8,7 +8,7 @@
 
 This module is the one place that conversion is written; the engine's target
 (:func:`~service.core.search.target.resolve_tau`), the range check at submit
-(:mod:`~service.core.search.tau_range`), :func:`~service.core.info.describe` and the CLI's
+(:mod:`~service.core.tau_range`), :func:`~service.core.info.describe` and the CLI's
 messages use it.
 """
 

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from service.core.params import TOLERANCE
 
-__all__ = ["BoundResult", "bound_deviation", "clip_points", "point_deviations"]
+__all__ = ["BoundResult", "bound_deviation", "point_deviations"]
 
 Array = NDArray[np.float64]
 MARGIN = 0.5
@@ -182,6 +182,7 @@ def bound_deviation(
         dev = deviation.reweighted(d2)
         rounds += 1
         if tau is not None and bracket is not None:
+
             def phi_of(x: float, dev: _Deviation = dev) -> float:
                 value = _phi(d2_0, dev.deviation(x))
                 history.append((x, value))
@@ -202,21 +203,3 @@ def bound_deviation(
             "reweighting rounds and were moved back onto it"
         )
     return BoundResult(E, lam, _phi(d2_0, E), rounds, clipped, history, warnings)
-
-
-def clip_points(P: Array, X: Array, delta: float) -> tuple[Array, int]:
-    """Move every ``x_i`` with ``||x_i - p_i|| > delta`` radially back within ``delta``.
-
-    Distances are those of the returned floating-point arrays: a point that rounding would
-    still leave beyond the bound (``delta`` below a few ulps of ``|p_i|``) stays at ``p_i``.
-    Returns the points and how many were moved.
-    """
-    X = X.copy()
-    norms = np.linalg.norm(X - P, axis=1)
-    over = np.flatnonzero(norms > delta)
-    if over.size:
-        shrink = delta / norms[over] * (1.0 - 1e-12)
-        X[over] = P[over] + (X[over] - P[over]) * shrink[:, None]
-        still = over[np.linalg.norm(X[over] - P[over], axis=1) > delta]
-        X[still] = P[still]
-    return X, int(over.size)

@@ -6,21 +6,22 @@ GCV), its valid range ``(0, phi(0))`` (eqs. 13-14) and the lambda search that me
 from __future__ import annotations
 
 import math
-import time
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core.errors import ParameterError, TauOutOfRange
+from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.linalg.resources import prefer_matrix_free
+from service.core.noise.robust import DataWeights
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.run import Run
 from service.core.search.autotau import auto_tau, gcv_lambda, knee_tau
 from service.core.search.budget import free_weight, rms_to_tau
-from service.core.search.robust import DataWeights
 from service.core.search.roots import (
     LambdaSearch,
     estimate_lambda,
@@ -31,35 +32,96 @@ from service.core.search.roots import (
 from service.core.system.deviation import Deviation
 from service.core.system.elimination import phi_at_zero
 
-__all__ = ["check_range", "find_lambda", "gcv_search", "knee", "phi_at_zero_of", "resolve_tau"]
+__all__ = [
+    "Solution",
+    "Target",
+    "check_range",
+    "find_lambda",
+    "gcv_search",
+    "knee",
+    "phi_at_zero_of",
+    "resolve_tau",
+]
+
+
+@dataclass(frozen=True)
+class Target:
+    """The target of a run (input frame), resolved once; the knee and GCV return new ones.
+
+    Attributes
+    ----------
+    tau : float or None
+        ``tau`` of eq. (3): the budget ``phi(lambda) = ||D (X - P)||_F^2`` (eq. 15) must meet;
+        ``None`` for a given lambda (and for ``tau="gcv"`` until lambda is known).
+    how : str or None
+        How the automatic tau (or GCV) chose it, in words (the report's ``tau_how``).
+    sigma : float or None
+        The automatic tau's noise estimate (0 when no noise was found).
+    knee : float or None
+        The factor the knee of ``phi(lambda)`` moved the discrepancy estimate by.
+    """
+
+    tau: float | None
+    how: str | None = None
+    sigma: float | None = None
+    knee: float | None = None
+
+    def noted(self, text: str) -> Target:
+        """This target with ``text`` appended to :attr:`how`."""
+        return replace(self, how=(self.how or "") + text)
+
+
+@dataclass(frozen=True)
+class Solution:
+    """What the solve stage returns (:func:`service.core.pipeline.solve`).
+
+    Attributes
+    ----------
+    target : Target
+        The target the run met (moved by the knee, or set by GCV).
+    search : LambdaSearch
+        lambda, phi (internal frame), convergence and every ``(lambda, phi)`` tried.
+    U : ndarray or None
+        The system's solution at ``search.lam`` (``None``: nothing was solved).
+    dev : Deviation or None
+        ``phi(lambda)`` with its solver and work counters.
+    bound : dict or None
+        The max-norm bound's record (section 9): ``max_deviation``, ``rounds``, ``clipped``.
+    seconds : float
+        Time spent in the lambda search.
+    """
+
+    target: Target
+    search: LambdaSearch
+    U: NDArray[np.float64] | None = None
+    dev: Deviation | None = None
+    bound: dict[str, Any] | None = None
+    seconds: float = 0.0
 
 
 def resolve_tau(
     params: SmoothingParams,
     geometry: Geometry,
     fixed: NDArray[np.bool_],
-    run: Run,
     op: SmoothingOperator | None = None,
     weights: DataWeights | None = None,
-) -> float | None:
-    """The target ``tau`` in the input's frame: given, ``rms^2 sum omega_i^2`` (free points),
-    or from the estimated noise (:func:`~service.core.search.autotau.auto_tau`); ``None`` for a
-    given
-    lambda and for ``tau="gcv"`` (known once lambda is).
+) -> Target:
+    """The target in the input's frame: given ``tau``, ``rms^2 sum omega_i^2`` (free points,
+    eq. 3), or from the estimated noise (:func:`~service.core.search.autotau.auto_tau`);
+    ``tau=None`` for a given lambda and for ``tau="gcv"`` (known once lambda is).
     """
     rule = params.tau_rule
     if rule in ("lam", "gcv"):
-        return None
+        return Target(None)
     if rule == "auto":
         adjacency = op.neighborhoods.adjacency if op is not None else None
         scale = None if weights is None else weights.tau_scale
         auto = auto_tau(geometry, params, fixed, adjacency, scale)
-        run.sigma, run.tau_how = auto.sigma, auto.rule
-        return auto.tau
+        return Target(auto.tau, auto.rule, auto.sigma)
     if rule == "tau":
-        return float(params.tau)  # type: ignore[arg-type]
+        return Target(float(params.tau))  # type: ignore[arg-type]
     assert params.rms is not None
-    return rms_to_tau(params.rms, free_weight(geometry, fixed))
+    return Target(rms_to_tau(params.rms, free_weight(geometry, fixed)))
 
 
 def _out_of_range(params: SmoothingParams, tau: float, phi0: float) -> TauOutOfRange:
@@ -77,36 +139,28 @@ def find_lambda(
     op: SmoothingOperator,
     fixed: NDArray[np.bool_],
     params: SmoothingParams,
-    run: Run,
+    target: Target,
+    frame: Frame,
+    notes: list[str],
 ) -> LambdaSearch:
-    """lambda (internal frame): given, or the root of ``phi(lambda) = tau`` (section 6)."""
-    t0 = time.perf_counter()
-    try:
-        return _find_lambda(dev, op, fixed, params, run)
-    finally:
-        run.search_seconds = time.perf_counter() - t0
+    """lambda (internal frame): given, or the root of ``phi(lambda) = tau`` (section 6.3).
 
-
-def _find_lambda(
-    dev: Deviation,
-    op: SmoothingOperator,
-    fixed: NDArray[np.bool_],
-    params: SmoothingParams,
-    run: Run,
-) -> LambdaSearch:
-    assert run.frame is not None
-    frame = run.frame
+    Raises
+    ------
+    TauOutOfRange
+        ``tau`` not in ``(0, phi(0))`` (eqs. 13-14).
+    """
     if params.lam is not None:
         lam = frame.lam_in(params.lam)
         return LambdaSearch(lam, dev(lam), True, list(dev.history))
-    assert run.tau is not None
-    tau, system = run.tau / frame.phi_factor, dev.system
+    assert target.tau is not None
+    tau, system = frame.tau_in(target.tau), dev.system
     phi0 = system.phi0
     bound = system.phi0_bound if system.phi0_bound is not None else np.inf
     if params.search == "rational" or (phi0 is None and tau >= bound):
         phi0 = phi_at_zero_of(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
-        raise _out_of_range(params, run.tau, phi0 * frame.phi_factor)
+        raise _out_of_range(params, target.tau, frame.phi_out(phi0))
     if params.search == "rational":
         assert phi0 is not None
         lam0 = initial_lambda(_fro(system.explicit()), float(np.linalg.norm(system.d2)))
@@ -115,9 +169,8 @@ def _find_lambda(
     lam0 = lanczos_lambda(dev, tau, lo, hi)
     if params.solver == "auto" and prefer_matrix_free(system.size, lam0, system.mu_bound()):
         dev.use_matrix_free()
-        run.notes.append(
-            "matrix-free path: conjugate gradients are cheaper at this size and lambda"
-        )
+        notes.append("matrix-free path: conjugate gradients are cheaper at this size and lambda")
+    in_range = lambda: check_range(dev, op, fixed, params, target, frame)  # noqa: E731
     search = newton_search(
         dev,
         dev.derivative,
@@ -129,10 +182,10 @@ def _find_lambda(
         tolerance=params.tolerance,
         max_iterations=params.max_iterations,
         propose=dev.local_root if params.search == "auto" else None,
-        below=lambda: check_range(dev, op, fixed, params, run),
+        below=in_range,
     )
     if not search.converged and search.phi < tau:
-        check_range(dev, op, fixed, params, run)
+        in_range()
     return search
 
 
@@ -153,13 +206,14 @@ def check_range(
     op: SmoothingOperator,
     fixed: NDArray[np.bool_],
     params: SmoothingParams,
-    run: Run,
+    target: Target,
+    frame: Frame,
 ) -> None:
-    """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``)."""
-    assert run.frame is not None and run.tau is not None
+    """Raise :class:`TauOutOfRange` unless ``tau < phi(0)`` (exact ``phi(0)``, eqs. 13-14)."""
+    assert target.tau is not None
     phi0 = phi_at_zero_of(dev, op, fixed, params)
-    if run.tau / run.frame.phi_factor >= phi0:
-        raise _out_of_range(params, run.tau, phi0 * run.frame.phi_factor)
+    if frame.tau_in(target.tau) >= phi0:
+        raise _out_of_range(params, target.tau, frame.phi_out(phi0))
 
 
 def phi_at_zero_of(
@@ -170,16 +224,19 @@ def phi_at_zero_of(
 
 
 def gcv_search(
-    dev: Deviation, geometry: Geometry, params: SmoothingParams, fixed: NDArray[np.bool_], run: Run
-) -> LambdaSearch:
+    dev: Deviation,
+    geometry: Geometry,
+    params: SmoothingParams,
+    fixed: NDArray[np.bool_],
+    frame: Frame,
+) -> tuple[LambdaSearch, Target]:
     """``tau="gcv"``: lambda by generalized cross-validation (started at the Lanczos estimate
-    of the automatic tau's lambda, no factorization); tau is phi there."""
-    assert run.frame is not None
+    of the automatic tau's lambda, no factorization); the target is phi there."""
     system = dev.system
     lo = dev.floor
     start = None
     try:
-        tau0 = auto_tau(geometry, params, fixed).rough_tau / run.frame.phi_factor
+        tau0 = frame.tau_in(auto_tau(geometry, params, fixed).rough_tau)
         if tau0 > 0:
             start = lanczos_lambda(dev, tau0, lo, max(system.lambda_ceiling(tau0), lo))
     except ParameterError:  # no noise estimate: start from the middle of the range
@@ -188,23 +245,22 @@ def gcv_search(
     hi = max(system.lambda_ceiling(1e-12 * scale), lo) if scale > 0 else lo
     lam = gcv_lambda(dev, lo, hi, start if start else math.sqrt(lo * hi))
     phi = dev(lam)
-    run.tau = phi * run.frame.phi_factor
-    run.tau_how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
-    return LambdaSearch(lam, phi, True, list(dev.history))
+    how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
+    return LambdaSearch(lam, phi, True, list(dev.history)), Target(frame.phi_out(phi), how)
 
 
-def knee(dev: Deviation, run: Run) -> None:
-    """Automatic tau: move the discrepancy estimate to the knee of ``phi(lambda)`` near it."""
-    assert run.frame is not None and run.tau is not None
-    tau = knee_tau(dev, run.tau / run.frame.phi_factor)
+def knee(dev: Deviation, target: Target, frame: Frame) -> Target:
+    """Automatic tau: the target moved from the discrepancy estimate to the knee of
+    ``phi(lambda)`` near it (:func:`~service.core.search.autotau.knee_tau`)."""
+    assert target.tau is not None
+    tau = knee_tau(dev, frame.tau_in(target.tau))
     if tau is None:
-        run.tau_how = (run.tau_how or "") + "; no knee of phi(lambda) near it: used as is"
-        return
-    run.tau_how = (run.tau_how or "") + (
-        f"; moved to the knee of phi(lambda) at tau = {tau * run.frame.phi_factor:.6g} "
-        f"({tau * run.frame.phi_factor / run.tau:.3g} x)"
+        return target.noted("; no knee of phi(lambda) near it: used as is")
+    moved = frame.phi_out(tau) / target.tau
+    noted = target.noted(
+        f"; moved to the knee of phi(lambda) at tau = {frame.phi_out(tau):.6g} ({moved:.3g} x)"
     )
-    run.tau = tau * run.frame.phi_factor
+    return replace(noted, tau=frame.phi_out(tau), knee=moved)
 
 
 def _fro(M: sp.spmatrix) -> float:

@@ -39,10 +39,11 @@ from scipy.spatial import cKDTree
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.linalg.cache import digest, frames
+from service.core.noise.estimate import codimension
 from service.core.operator.laplacian import presmooth
 from service.core.operator.neighborhoods import Neighborhoods
 from service.core.params import SmoothingParams
-from service.core.search.noise import codimension
+from service.core.params.rules import DEFAULT_DISPLACEMENT, auto_displacement
 from service.core.system.deviation import SmoothingSystem
 
 __all__ = [
@@ -57,8 +58,6 @@ __all__ = [
     "tangential_ratio",
 ]
 
-#: ``displacement="auto"`` per kind of input (chosen on the quality benchmark).
-DEFAULT_DISPLACEMENT = {"mesh": "normal", "curve": "free", "cloud": "normal"}
 FRAME_NEIGHBOURS = 12
 #: ``displacement="auto"`` takes normal displacement only up to this codimension: its system has
 #: ``r x r`` blocks per Laplacian entry (assembly ``O(nnz r^2)``, factor ``O(r^3)`` times the free
@@ -279,7 +278,7 @@ def tangential_ratio(points: NDArray[np.float64], adjacency: sp.csr_matrix, codi
     How much of the roughness of the input lies along the shape rather than across it: near 0
     for noise along the normals on a regular sampling, about 2 for isotropic noise on a
     surface (two tangent directions against one normal direction). The automatic tau of free
-    displacement spends budget on it (:func:`service.core.search.noise.discrepancy_tau`).
+    displacement spends budget on it (:func:`service.core.search.autotau.discrepancy_tau`).
     """
     deg = np.asarray(adjacency.sum(axis=1)).ravel()
     inv = np.divide(1.0, deg, out=np.zeros_like(deg), where=deg > 0)
@@ -307,7 +306,6 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
         ``tau="gcv"`` with ``displacement="normal"``; ``displacement="normal"`` whose system
         would exceed :data:`NORMAL_MAX_ENTRIES`.
     """
-    free_only = params.method == "windowed-sinc" or params.tau_rule == "gcv"
     if params.displacement == "normal" and params.tau_rule == "gcv":
         raise ParameterError(
             "tau 'gcv' needs displacement 'free' (or 'auto')", field="params.displacement"
@@ -325,7 +323,7 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
         if params.displacement == "normal" and "tangential" not in params.model_fields_set:
             return params.model_copy(update={"tangential": "off"})
         return params
-    mode = "free" if free_only else DEFAULT_DISPLACEMENT[geometry.kind]
+    mode = auto_displacement(geometry.kind, params.method, params.tau_rule)
     if mode == "normal" and not 1 <= r <= AUTO_NORMAL_MAX_CODIM:  # e.g. a mesh given in 2-D
         mode = "free"
     return params.model_copy(update={"displacement": mode})

@@ -1,6 +1,6 @@
 """The work of one tile: a probe (round 0) and a solve at a given lambda (later rounds).
 
-Both run :func:`service.core.pipeline.smooth` on the tile's geometry (core + halo) with the
+Both run :func:`service.core.pipeline.smooth_one` on the tile's geometry (core + halo) with the
 operator built on the tile, so fixed points, weights, the Laplacian variant, the displacement
 mode and the solver paths are those of an untiled run; only the core's points are returned.
 What travels back to the coordinator besides the core's points is a handful of scalars
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator, build_operator, operator_key
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth
+from service.core.pipeline import smooth_one as smooth
 from service.core.tiles.halo import spectral_norm
 from service.core.tiles.partition import hop_radius
 

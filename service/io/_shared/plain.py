@@ -77,6 +77,7 @@ class PlainDocument:
     source: GeometryDocument
     options: WriteOptions = field(default_factory=WriteOptions)
     moved: bool = True
+    georef: Any = None  # service.io._shared.georef.Georef of geographic input written planar
 
     @property
     def n(self) -> int:
@@ -90,8 +91,10 @@ class PlainDocument:
 
     @property
     def comments(self) -> list[str]:
-        """Header comments of the input."""
-        return self.source.comments
+        """Header comments of the input (and the frame of georeferenced coordinates)."""
+        if self.georef is None:
+            return self.source.comments
+        return [*self.source.comments, *self.georef.lines()]
 
     @property
     def layout(self) -> object | None:

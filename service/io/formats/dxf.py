@@ -249,6 +249,8 @@ def write_dxf(plain: PlainDocument, out: BinaryIO) -> None:
             _replace(doc, msp, handles, pts[idx], closed, keep)
     else:
         doc = _fresh(plain, pts)
+        if plain.georef is not None:
+            _georef(doc, plain.georef)
     text = io.StringIO()
     doc.write(text)
     out.write(text.getvalue().encode(doc.output_encoding, errors="replace"))
@@ -285,6 +287,15 @@ def _replace(
         e = doc.entitydb.get(h)
         if e is not None:
             msp.delete_entity(e)
+
+
+def _georef(doc: Any, georef: Any) -> None:
+    """The frame of the coordinates: origin in ``$LATITUDE``/``$LONGITUDE``, the CRS and the
+    frame's description in the custom properties ``CRS`` and ``CRS_FRAME``."""
+    doc.header["$LONGITUDE"] = float(georef.origin[0])
+    doc.header["$LATITUDE"] = float(georef.origin[1])
+    doc.header.custom_vars.append("CRS", georef.crs)
+    doc.header.custom_vars.append("CRS_FRAME", "; ".join(georef.lines()))
 
 
 def _fresh(plain: PlainDocument, pts: NDArray[np.float64]) -> Any:

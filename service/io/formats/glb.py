@@ -14,10 +14,12 @@ Writing
 A document read from GLB is written as its scene with new vertex positions (mapped back through
 each node's inverse transform; other instances of a shared geometry move with it); trimesh
 recomputes the normals it exports. Other documents become one mesh (or point cloud) with
-``red green blue [alpha]`` attributes as vertex colours. glTF positions are float32, so that
-mesh is stored about the centre of its bounding box, which becomes its node's translation
-(a double in the glTF JSON): georeferenced coordinates (5.6e6 m) keep float32's resolution
-of the extent (~6e-8 of it) instead of moving by up to 0.25 m.
+``red green blue [alpha]`` attributes as vertex colours; an OBJ mesh's texture coordinates
+(``f v/vt``) become ``TEXCOORD_0``, its vertices split where a vertex has several UVs
+(:mod:`service.io._shared.texture`; spot.obj: 2930 vertices, 3225 in the glTF). glTF positions
+are float32, so that mesh is stored about the centre of its bounding box, which becomes its
+node's translation (a double in the glTF JSON): georeferenced coordinates (5.6e6 m) keep
+float32's resolution of the extent (~6e-8 of it) instead of moving by up to 0.25 m.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from numpy.typing import NDArray
 from service.io._shared.assemble import assemble
 from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
+from service.io._shared.texture import corner_uvs, split_at_seams
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
 from service.io.source import Source
@@ -145,8 +148,13 @@ def write_glb(plain: PlainDocument, out: BinaryIO) -> None:
         colors = _bytes(np.column_stack(channels))
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2 if plain.n else np.zeros(3)
     local = pts - centre
-    if plain.faces is not None and len(plain.faces):
-        geom: Any = trimesh.Trimesh(local, plain.faces, vertex_colors=colors, process=False)
+    uvs = corner_uvs(plain, "glb")
+    if uvs is not None:  # OBJ texture coordinates: one vertex per (vertex, vt) pair
+        vertex_of, vt_of, faces = split_at_seams(np.asarray(plain.faces), uvs[0])
+        visual = trimesh.visual.TextureVisuals(uv=uvs[1][vt_of])
+        geom: Any = trimesh.Trimesh(local[vertex_of], faces, visual=visual, process=False)
+    elif plain.faces is not None and len(plain.faces):
+        geom = trimesh.Trimesh(local, plain.faces, vertex_colors=colors, process=False)
     else:
         geom = trimesh.PointCloud(local, colors=colors)
     placed = np.eye(4)

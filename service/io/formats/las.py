@@ -18,7 +18,8 @@ fits the 32-bit integers of that scale and offset is a :class:`FormatError` sayi
 bounds are recomputed. Other documents get a new header: point format 0-3 (by whether they carry
 ``gps_time`` and ``red green blue``), a scale of ``10^k`` with ``k`` from the input's precision
 (at most ``1e-7`` of the extent), intensity/classification/... taken from attributes of those
-names and the other numeric attributes as extra bytes.
+names (8-bit colours scaled to LAS's 16 bits, x 257) and the other numeric attributes as extra
+bytes.
 """
 
 from __future__ import annotations
@@ -211,6 +212,12 @@ def _new_header(plain: PlainDocument) -> Any:
     rgb = all(c in attrs for c in ("red", "green", "blue"))
     fmt_id = (2 if rgb else 0) + (1 if "gps_time" in attrs else 0)
     header = laspy.LasHeader(point_format=fmt_id, version="1.2")
+    if plain.georef is not None:  # a WKT VLR needs LAS 1.4 and point format 6 or 7
+        from laspy.vlrs.known import WktCoordinateSystemVlr
+
+        header = laspy.LasHeader(point_format=7 if rgb else 6, version="1.4")
+        header.vlrs.append(WktCoordinateSystemVlr(plain.georef.wkt()))
+        header.global_encoding.wkt = True
     pts = as_xyz(plain.points, "las")
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     extent = float(np.max(hi - lo)) or max(float(np.max(np.abs(pts))), 1.0)
@@ -246,10 +253,24 @@ def _fresh(plain: PlainDocument, out: BinaryIO, compress: bool) -> None:
                     float(header.offsets[j]),
                     "xyz"[j],
                 )
-            for name, values in plain.attributes.items():
+            for name, values in _colours16(plain.attributes).items():
                 if name in names and name not in _COORDS and values.ndim == 1:
                     rec[name] = values[s : s + len(rec)]
             writer.write_points(rec)
+
+
+def _colours16(attrs: dict[str, NDArray[Any]]) -> dict[str, NDArray[Any]]:
+    """The attributes, with 8-bit ``red green blue`` scaled to LAS's 16 bits (x 257: 255 ->
+    65535; the LAS 1.4 specification: RGB "should always be normalized to 16 bit values")."""
+    names = ("red", "green", "blue")
+    if not all(c in attrs and attrs[c].dtype.kind in "iuf" and attrs[c].size for c in names):
+        return attrs
+    values = np.concatenate([np.asarray(attrs[c], dtype=np.float64).ravel() for c in names])
+    top = float(values.max())
+    if not (1.0 < top <= 255.0 and values.min() >= 0 and np.all(values == np.round(values))):
+        return attrs
+    scaled = {c: (np.asarray(attrs[c]) * 257).astype(np.uint16) for c in names}
+    return {**attrs, **scaled}
 
 
 def _write(plain: PlainDocument, out: BinaryIO, compress: bool) -> None:

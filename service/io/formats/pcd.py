@@ -18,13 +18,12 @@ Reading
 Writing
 -------
 The input's header and encoding, every record as read except new coordinates and normals; ASCII
-values with the input's digits. Other documents: ``x y z`` (float32 or float64 by
-``precision``: float64 input such as georeferenced text stays float64), normals, numeric
-attributes as fields, ``DATA binary``. Colours ``red green blue [alpha]`` (PLY, XYZ, E57, LAS)
-become PCL's packed field: ``rgb`` (``F 4``: the bits of ``0x00RRGGBB`` read as a float32) or,
-with alpha, ``rgba`` (``U 4``: ``0xAARRGGBB``), which PCL, Open3D and pypcd4 read as colours.
-Channels are 8-bit: values above 255 (16-bit LAS colours) are scaled by 255/65535, float
-channels in [0, 1] by 255.
+values with the input's digits. Other documents (:mod:`.pcd_export`): ``x y z``, normals,
+numeric attributes as fields; ``DATA binary`` with float32 coordinates when float32 keeps the
+input's precision, else ``DATA ascii`` with doubles (Open3D reads binary ``F 8`` as zeros).
+Colours ``red green blue [alpha]`` (PLY, XYZ, E57, LAS) become PCL's packed field ``rgb`` (or
+``rgba`` with alpha), which PCL, Open3D and pypcd4 read as colours. Channels are 8-bit: values
+above 255 (16-bit LAS colours) are scaled by 255/65535, float channels in [0, 1] by 255.
 """
 
 from __future__ import annotations
@@ -38,7 +37,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.io._shared.assemble import assemble
-from service.io._shared.coords import as_xyz
 from service.io._shared.numfmt import Digits, default_spec, write_rows
 from service.io._shared.plain import PlainDocument
 from service.io._shared.text import LineBlock, line_blocks, table_rows
@@ -270,8 +268,9 @@ def write_pcd(plain: PlainDocument, out: BinaryIO) -> None:
         for j, c in enumerate(("x", "y", "z")[: plain.dim]):
             specs[c] = plain.coordinate_specs()[j]
     else:
-        rec, lines = _fresh(plain)
-        encoding, specs = "binary", {}
+        from service.io.formats.pcd_export import fresh_pcd
+
+        rec, lines, encoding, specs = fresh_pcd(plain)
     if encoding == "binary_compressed":
         import lzf
 
@@ -293,66 +292,3 @@ def write_pcd(plain: PlainDocument, out: BinaryIO) -> None:
         for j in range(values.shape[1]):
             cols.append((values[:, j], specs.get(nm, default_spec(values.dtype))))
     write_rows(out, cols, n=len(rec))
-
-
-_RGB = ("red", "green", "blue")
-
-
-def _channel(values: NDArray[Any]) -> NDArray[np.uint32]:
-    """One colour channel as 8-bit values (see the module docstring)."""
-    v = np.asarray(values, dtype=np.float64)
-    top = float(np.max(v)) if v.size else 0.0
-    if top > 255:
-        v = v * (255.0 / 65535.0)
-    elif v.dtype.kind == "f" and np.asarray(values).dtype.kind == "f" and top <= 1.0:
-        v = v * 255.0
-    return np.clip(np.rint(v), 0, 255).astype(np.uint32)
-
-
-def _packed(attrs: dict[str, NDArray[Any]]) -> tuple[str, NDArray[Any]] | None:
-    """PCL's packed colour field (``rgb`` float32 bits, or ``rgba`` uint32), if coloured."""
-    if not all(c in attrs and attrs[c].ndim == 1 for c in _RGB):
-        return None
-    r, g, b = (_channel(attrs[c]) for c in _RGB)
-    word = (r << 16) | (g << 8) | b
-    if "alpha" in attrs and attrs["alpha"].ndim == 1:
-        return "rgba", word | (_channel(attrs["alpha"]) << 24)
-    return "rgb", word.view(np.float32)
-
-
-def _fresh(plain: PlainDocument) -> tuple[NDArray[Any], list[str]]:
-    pts = as_xyz(plain.points, "pcd")
-    cdt = plain.coordinate_dtype()
-    fields: list[Any] = [(c, cdt) for c in ("x", "y", "z")]
-    if plain.normals is not None:
-        fields += [(c, np.float32) for c in _NORMALS]
-    attrs = {k: v for k, v in plain.attributes.items() if v.dtype.kind in "iuf" and v.ndim <= 2}
-    colour = _packed(attrs)
-    if colour is not None:
-        attrs = {k: v for k, v in attrs.items() if k not in (*_RGB, "alpha")}
-        attrs = {colour[0]: colour[1], **attrs}
-    fields += [(k, v.dtype, v.shape[1:]) if v.ndim == 2 else (k, v.dtype) for k, v in attrs.items()]
-    rec = np.empty(plain.n, dtype=fields)
-    for j, c in enumerate(("x", "y", "z")):
-        rec[c] = pts[:, j]
-    if plain.normals is not None:
-        for j, c in enumerate(_NORMALS):
-            rec[c] = np.asarray(plain.normals[:, j])
-    for k, v in attrs.items():
-        rec[k] = v
-    kinds = {"f": "F", "u": "U", "i": "I"}
-    names = rec.dtype.names or ()
-    lines = [
-        "# .PCD v0.7 - Point Cloud Data file format (written by geosmooth)",
-        "VERSION 0.7",
-        "FIELDS " + " ".join(names),
-        "SIZE " + " ".join(str(rec.dtype[nm].base.itemsize) for nm in names),
-        "TYPE " + " ".join(kinds[rec.dtype[nm].base.kind] for nm in names),
-        "COUNT " + " ".join(str(int(np.prod(rec.dtype[nm].shape or (1,)))) for nm in names),
-        f"WIDTH {plain.n}",
-        "HEIGHT 1",
-        "VIEWPOINT 0 0 0 1 0 0 0",
-        f"POINTS {plain.n}",
-        "DATA binary",
-    ]
-    return rec, lines

@@ -18,8 +18,6 @@ and crash recovery do:
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import logging
 import socket
 import time
@@ -28,6 +26,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from service.jobs import problems
+from service.jobs.base import webhook_payload, with_report
 from service.jobs.distributed.blobs import BlobStore, blob_store
 from service.jobs.distributed.store import RedisJobStore
 from service.jobs.progress import queued_progress
@@ -38,12 +37,23 @@ if TYPE_CHECKING:
 
     from service.settings import Settings
 
-__all__ = ["RUN_TASK", "Backend", "WorkerConfig", "backoff"]
+__all__ = [
+    "LEGACY_TASK_MODULES",
+    "RUN_TASK",
+    "Backend",
+    "WorkerConfig",
+    "backoff",
+    "configure_worker",
+    "worker_config",
+]
 
 log = logging.getLogger("geosmooth.jobs")
 
-# The path RQ stores with every enqueued job: kept stable across moves (service/jobs/rq_tasks.py).
-RUN_TASK = "service.jobs.rq_tasks.run_job"
+#: The path RQ stores with every enqueued job.
+RUN_TASK = "service.jobs.distributed.tasks.run_job"
+#: Modules that held the task in earlier releases: jobs queued before an upgrade name them, and
+#: the worker resolves them to :mod:`service.jobs.distributed.tasks` (``worker.make_worker``).
+LEGACY_TASK_MODULES = ("service.jobs.rq_tasks",)
 HOST = socket.gethostname()
 _ORPHAN_AGE = 600.0
 _MAX_BACKOFF = 300.0
@@ -81,20 +91,15 @@ class Backend:
     def get(self, job_id: str) -> JobRecord | None:
         """A job's record, with its report (from the blob store) once succeeded."""
         rec = self.store.get(job_id)
-        if rec is None or rec.status is not JobStatus.SUCCEEDED:
-            return rec
-        try:
-            report = json.loads(self.blobs.read(job_id, "report.json"))
-        except FileNotFoundError:  # deleted or expired meanwhile
-            return rec
-        return dataclasses.replace(rec, report=report)
+        return None if rec is None else with_report(rec, self.read_report)
+
+    def read_report(self, job_id: str) -> bytes:
+        """The job's stored ``report.json``."""
+        return self.blobs.read(job_id, "report.json")
 
     def webhook_payload(self, job_id: str) -> tuple[str, dict[str, Any]] | None:
-        """``(url, JSON of the job)`` of a job with a webhook."""
-        rec = self.get(job_id)
-        if rec is None or not rec.webhook_url:
-            return None
-        return rec.webhook_url, rec.public_dict()
+        """``(url, JSON of the job)`` of a job with a webhook (the worker delivers it)."""
+        return webhook_payload(self.get(job_id))
 
     # -- RQ jobs -------------------------------------------------------------------------
     @staticmethod
@@ -198,10 +203,26 @@ class Backend:
                 self.blobs.remove(job_id)
 
 
+@dataclass(frozen=True)
 class WorkerConfig:
-    """What the work horses of this worker use, set by ``tasks.configure`` in the worker before
-    it forks (read by the job task and the tile task)."""
+    """What the work horses of this worker use: set once by :func:`configure_worker` in the
+    worker before it forks (``worker.make_worker``), read by the job task and the tile task."""
 
-    backend: Backend | None = None
-    runner: str | None = None  # None: the default runner
-    memory_limit: int | None = None
+    backend: Backend
+    runner: str
+    memory_limit: int | None
+
+
+_WORKER: dict[str, WorkerConfig] = {}
+
+
+def configure_worker(config: WorkerConfig) -> None:
+    """Make ``config`` this process's worker configuration (inherited by its work horses)."""
+    _WORKER["config"] = config
+
+
+def worker_config() -> WorkerConfig:
+    """This worker's configuration (only inside a ``geosmooth worker`` and its horses)."""
+    config = _WORKER.get("config")
+    assert config is not None, "runs in a geosmooth worker (service.jobs.distributed.worker)"
+    return config

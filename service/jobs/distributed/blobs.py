@@ -26,8 +26,7 @@ from typing import Any, Protocol
 from urllib.parse import urlsplit
 
 from service.jobs.errors import StorageUnavailable
-from service.jobs.files import JobFiles, is_job_id
-from service.jobs.storage_health import probe_directory
+from service.jobs.files import JobFiles, is_job_id, probe_directory
 
 __all__ = ["BlobStore", "DirectoryBlobs", "S3Blobs", "blob_store"]
 

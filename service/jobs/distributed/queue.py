@@ -10,25 +10,25 @@ idempotency, tenants, webhooks); see ``service/jobs/README.md`` for the guarante
 
 from __future__ import annotations
 
-import builtins
 import contextlib
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from service.jobs import admit
+from service.jobs.base import QueueBase
+from service.jobs.config import RQConfig
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.blobs import DirectoryBlobs
 from service.jobs.distributed.epoch import Epoch
-from service.jobs.files import is_job_id
-from service.jobs.limits import default_job_memory
+from service.jobs.distributed.store import RedisJobStore
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobQueue, JobRecord, JobStatus, NewJob, QueueHealth
 
 if TYPE_CHECKING:
-    from service.io import GeometryDocument
     from service.settings import Settings
 
 __all__ = ["RQQueue"]
@@ -40,36 +40,25 @@ _CANCEL_WAIT = 15.0
 _PRUNE_INTERVAL = 600.0
 
 
-class RQQueue:
+class RQQueue(QueueBase[RedisJobStore]):
     """The API side of the Redis/RQ backend.
 
     Parameters
     ----------
-    backend : Backend
-        Connections (Redis, blob store, RQ queue) and settings.
-    memory_limit : int or None
-        Per-job memory limit for admission (bytes); ``None``: none.
-    sweep_interval : float
-        Seconds between sweeps (lost runs, due retries, TTL, webhooks).
-    reconcile_interval : float
-        Seconds between checks for queued jobs whose RQ job was lost.
+    config : RQConfig
+        Settings, memory limit for admission, sweep intervals
+        (:class:`service.jobs.config.RQConfig`).
+    backend : Backend, optional
+        Connections (Redis, blob store, RQ queue); default: ``Backend.connect(config.settings)``.
     """
 
-    def __init__(
-        self,
-        backend: Backend,
-        *,
-        memory_limit: int | None = None,
-        sweep_interval: float = 1.0,
-        reconcile_interval: float = 60.0,
-    ) -> None:
+    def __init__(self, config: RQConfig, backend: Backend | None = None) -> None:
+        backend = backend or Backend.connect(config.settings)
+        self.config = config
         self.backend = backend
         self.settings = backend.settings
         self.store = backend.store
         self.blobs = backend.blobs
-        self.memory_limit = memory_limit
-        self.sweep_interval = sweep_interval
-        self.reconcile_interval = reconcile_interval
         self.notifier = Notifier(self.settings, backend.webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._stop = threading.Event()
@@ -82,10 +71,7 @@ class RQQueue:
     @classmethod
     def from_settings(cls, settings: Settings) -> RQQueue:
         """The queue the API runs with these settings."""
-        limit = settings.job_memory_limit
-        if limit is None:
-            limit = default_job_memory(settings.workers)
-        return cls(Backend.connect(settings), memory_limit=limit or None)
+        return cls(RQConfig.from_settings(settings))
 
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
@@ -114,17 +100,10 @@ class RQQueue:
         self.notifier.stop()
         self._started = False
 
-    def __enter__(self) -> RQQueue:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
     # -- the JobQueue protocol -----------------------------------------------------------
     def submit(self, job: NewJob) -> JobRecord:
         """See :meth:`service.jobs.queue.JobQueue.submit`."""
-        row = admit.admit(job, memory_limit=self.memory_limit,
+        row = admit.admit(job, memory_limit=self.config.memory_limit,
                           max_attempts=self.settings.max_attempts)  # fmt: skip
         with self._errors():
             if isinstance(self.blobs, DirectoryBlobs):
@@ -142,28 +121,6 @@ class RQQueue:
             self.blobs.remove(row.job_id)
             return self.get(rec.id) or rec
         return rec
-
-    def get(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
-        """The job's record (with its report once succeeded), ``None`` if unknown."""
-        if not is_job_id(job_id):
-            return None
-        with self._errors():
-            rec = self.backend.get(job_id)
-        if rec is None or (tenant is not None and rec.tenant != tenant):
-            return None
-        return rec
-
-    def list(
-        self,
-        offset: int = 0,
-        limit: int = 50,
-        status: JobStatus | str | None = None,
-        *,
-        tenant: str | None = None,
-    ) -> tuple[builtins.list[JobRecord], int]:
-        """A page of jobs, newest first (without reports), and the total count."""
-        with self._errors():
-            return self.store.list(offset, limit, JobStatus(status) if status else None, tenant)
 
     def cancel(self, job_id: str, *, tenant: str | None = None) -> JobRecord | None:
         """Cancel a queued or running job; a running job's work horse is gone on return."""
@@ -207,38 +164,6 @@ class RQQueue:
             time.sleep(0.05)
         log.warning("job run %s did not stop within %.0f s", rq_id, _CANCEL_WAIT)
 
-    def delete(self, job_id: str, *, tenant: str | None = None) -> bool:
-        """Delete a finished job's record and files; ``False`` if unknown or not finished."""
-        if self.get(job_id, tenant=tenant) is None:
-            return False
-        with self._errors():
-            if not self.store.delete_finished(job_id):
-                return False
-            self.blobs.remove(job_id)
-        return True
-
-    def result(self, job_id: str) -> GeometryDocument | None:
-        """The input document with the smoothed points (``None`` unless succeeded)."""
-        rec = self.get(job_id)
-        if rec is None or rec.status is not JobStatus.SUCCEEDED:
-            return None
-        from service.jobs.results import load_result
-
-        with self._errors():
-            points = self.blobs.local_file(job_id, "result.npy")
-            source = self.blobs.local_file(job_id, f"input.{rec.fmt}")
-        if points is None or source is None:
-            return None
-        return load_result(source, points, rec.fmt, rec.weld)
-
-    def result_file(self, job_id: str, fmt: str) -> Path | None:
-        """A local copy of the stored result in the input's format (``None`` otherwise)."""
-        rec = self.get(job_id)
-        if rec is None or rec.status is not JobStatus.SUCCEEDED or fmt != rec.fmt:
-            return None
-        with self._errors():
-            return self.blobs.local_file(job_id, f"result.{fmt}")
-
     def result_url(self, job_id: str, fmt: str) -> str | None:
         """A presigned URL of the stored result (S3 with ``presign_seconds`` > 0)."""
         seconds = self.settings.presign_seconds
@@ -254,15 +179,13 @@ class RQQueue:
         """Counts, queue depth and workers from Redis; the run-time histogram of every worker."""
         from rq import Worker
 
+        counts = self._store_counts()
         with self._errors():
-            counts = self.store.counts()
             workers = Worker.all(queue=self.backend.queue)
             busy = sum(1 for w in workers if w.get_state() == "busy")
             shared = self.store.histogram()
         return {
-            "counts": counts,
-            "queue_depth": counts[JobStatus.QUEUED.value],
-            "running": counts[JobStatus.RUNNING.value],
+            **counts,
             "workers": len(workers),
             "busy_workers": busy,
             **shared,
@@ -292,9 +215,9 @@ class RQQueue:
         self.epoch.check()  # a Redis that came back empty is logged at once
         backend.recover()
         backend.enqueue_due()
-        if time.monotonic() - self._last_reconcile >= self.reconcile_interval:
+        if time.monotonic() - self._last_reconcile >= self.config.reconcile_interval:
             self._last_reconcile = time.monotonic()
-            backend.reconcile(min_age=self.reconcile_interval)
+            backend.reconcile(min_age=self.config.reconcile_interval)
         backend.expire()
         for job_id in self.store.webhooks_due():
             self.notifier.enqueue(job_id)
@@ -303,15 +226,15 @@ class RQQueue:
             self.blobs.prune_cache(_CACHE_AGE)
 
     def _sweep_loop(self) -> None:
-        while not self._stop.wait(self.sweep_interval):
+        while not self._stop.wait(self.config.sweep_interval):
             try:
                 self.sweep()
             except Exception as exc:
                 log.warning("RQ queue sweep failed: %s", exc)
 
-    @staticmethod
+    # -- hooks of QueueBase ----------------------------------------------------------------
     @contextlib.contextmanager
-    def _errors() -> Any:
+    def _errors(self) -> Iterator[None]:
         """Redis or blob-store failures -> ``StorageUnavailable``/``StorageFull`` (503/507)."""
         from redis.exceptions import RedisError
 
@@ -322,6 +245,18 @@ class RQQueue:
                 yield
         except RedisError as exc:
             raise StorageUnavailable("the job broker (Redis) cannot be reached") from exc
+
+
+    def _read_report(self, job_id: str) -> bytes:
+        with self._errors():
+            return self.backend.read_report(job_id)
+
+    def _local_file(self, job_id: str, name: str) -> Path | None:
+        return self.blobs.local_file(job_id, name)
+
+    def _remove_files(self, job_id: str) -> None:
+        with self._errors():
+            self.blobs.remove(job_id)
 
 
 _: type[JobQueue] = RQQueue

@@ -9,39 +9,33 @@
    code (a CHOLMOD factorization holding the GIL) is killed on time; the worker records the
    timeout when it reaps the horse;
 4. caps its address space (``RLIMIT_AS``) and BLAS threads, runs the job function in a
-   workspace of the blob store, stores the outputs, and records the outcome. Input errors fail
+   workspace of the blob store (:func:`service.jobs.execute.run_function`, its tiles as RQ
+   tasks: :func:`service.jobs.distributed.tiles.rq_tiles`), stores the outputs, and records
+   the outcome. Input errors fail
    the job (never retried); an unreachable Redis or object store puts it back in the queue.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import time
 from typing import TYPE_CHECKING, Any
 
 from service.jobs import problems
-from service.jobs.child import load_runner
-from service.jobs.distributed.backend import HOST
-from service.jobs.distributed.backend import WorkerConfig as _Config
+from service.jobs.distributed.backend import HOST, WorkerConfig, worker_config
+from service.jobs.distributed.tiles import rq_tiles
 from service.jobs.errors import StorageUnavailable
+from service.jobs.execute import RunOptions, run_function, write_report
 from service.jobs.limits import limit_memory, set_parent_death_signal
 from service.jobs.progress import final_progress
 from service.jobs.queue import JobStatus
-from service.jobs.runner import DEFAULT_RUNNER, JobContext, RunLost
+from service.jobs.runner import RunLost
 
 if TYPE_CHECKING:
     from service.jobs.distributed.backend import Backend
 
-__all__ = ["configure", "run_job"]
-
-
-def configure(backend: Backend, runner: str, memory_limit: int | None) -> None:
-    """Set what the work horses of this worker use (called in the worker before it forks)."""
-    _Config.backend = backend
-    _Config.runner = runner
-    _Config.memory_limit = memory_limit
+__all__ = ["run_job"]
 
 
 def _infrastructure(exc: BaseException) -> bool:
@@ -60,10 +54,8 @@ def run_job(job_id: str) -> None:
     worker_pid = int(os.environ.get("GEOSMOOTH_WORKER_PID", "0"))
     if worker_pid and os.getppid() != worker_pid:  # the worker died before the signal was armed
         os._exit(0)
-    backend = _Config.backend
-    assert backend is not None, (
-        "run_job runs in a geosmooth worker (service.jobs.distributed.worker)"
-    )
+    config = worker_config()
+    backend = config.backend
     rq_job = get_current_job()
     assert rq_job is not None
     owner = str(rq_job.worker_name)
@@ -74,37 +66,30 @@ def run_job(job_id: str) -> None:
     signal.signal(signal.SIGALRM, signal.SIG_DFL)  # the kernel kills the horse at the limit
     signal.setitimer(signal.ITIMER_REAL, float(backend.settings.job_timeout))
     try:
-        _run(backend, job_id, owner, attempt)
+        _run(config, job_id, owner, attempt)
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
 
 
-def _run(backend: Backend, job_id: str, owner: str, attempt: int) -> None:
+def _run(config: WorkerConfig, job_id: str, owner: str, attempt: int) -> None:
+    backend = config.backend
     store, blobs = backend.store, backend.blobs
     when = {"owner": owner, "attempts": attempt}
     started = time.perf_counter()
-    try:
-        from service.core.params import SmoothingParams
+    options = RunOptions(config.runner, config.memory_limit, 0.2, rq_tiles)
 
+    def report_progress(progress: dict[str, Any]) -> bool:
+        return store.run_update(job_id, owner, attempt, progress=progress)
+
+    try:
         rec = store.get(job_id)
         if rec is None or rec.status is not JobStatus.RUNNING:
             return
-        limit_memory(_Config.memory_limit)  # threads: limited in the worker, inherited
+        limit_memory(config.memory_limit)  # threads: limited in the worker, inherited
         with blobs.workspace(job_id, rec.fmt) as workdir:
-            ctx = JobContext(
-                job_id=job_id,
-                job_dir=workdir,
-                input_path=workdir / f"input.{rec.fmt}",
-                fmt=rec.fmt,
-                params=SmoothingParams.model_validate(rec.params),
-                report_progress=lambda p: store.run_update(job_id, owner, attempt, progress=p),
-                progress_interval=0.2,
-                weld=rec.weld,
-                memory_limit=_Config.memory_limit,
-            )
-            report = load_runner(_Config.runner or DEFAULT_RUNNER)(ctx)
-            ctx.flush_progress()
-            ctx.write("report.json", json.dumps(report, indent=1, allow_nan=False).encode())
+            ctx, report = run_function(rec, workdir, workdir / f"input.{rec.fmt}",
+                                       report_progress, options)  # fmt: skip
+            write_report(ctx, report)
             blobs.commit(job_id, workdir, ctx.written)
         _succeed(backend, job_id, owner, attempt, report, time.perf_counter() - started)
     except RunLost:

@@ -36,12 +36,17 @@ from rq import Worker
 
 from service.core.linalg.threads import limit_threads, threads_per_worker
 from service.jobs import problems
-from service.jobs.distributed.backend import Backend
-from service.jobs.limits import default_job_memory
+from service.jobs.config import job_memory_limit
+from service.jobs.distributed.backend import (
+    LEGACY_TASK_MODULES,
+    Backend,
+    WorkerConfig,
+    configure_worker,
+)
+from service.jobs.distributed.tiles import TILE_TASK
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
 from service.jobs.runner import DEFAULT_RUNNER
-from service.jobs.tiles.rq import TILE_TASK
 
 if TYPE_CHECKING:
     from rq.job import Job
@@ -55,7 +60,7 @@ log = logging.getLogger("geosmooth.jobs")
 
 _CRASH_SIGNALS = frozenset({signal.SIGSEGV, signal.SIGBUS, signal.SIGFPE, signal.SIGILL,
                             signal.SIGABRT, signal.SIGSYS, signal.SIGTRAP})  # fmt: skip
-_PRELOAD = ("service.jobs.distributed.tasks", "service.jobs.tiles.rq",
+_PRELOAD = ("service.jobs.distributed.tasks", "service.jobs.distributed.tiles",
             "service.jobs.preload")
 
 
@@ -146,11 +151,9 @@ def make_worker(
     """A configured worker for ``backend`` (its work horses run ``runner``)."""
     from service.jobs.distributed import tasks as rq_tasks
 
-    settings = backend.settings
-    memory = settings.job_memory_limit
-    if memory is None:
-        memory = default_job_memory(settings.workers)
-    rq_tasks.configure(backend, runner, memory or None)
+    for legacy in LEGACY_TASK_MODULES:  # the task path of jobs queued by an earlier release
+        sys.modules.setdefault(legacy, rq_tasks)
+    configure_worker(WorkerConfig(backend, runner, job_memory_limit(backend.settings)))
     return GeosmoothWorker(backend, name)
 
 

@@ -20,8 +20,10 @@ from typing import TYPE_CHECKING
 from service.jobs import problems
 from service.jobs.embedded.store import RunningRow
 from service.jobs.errors import storage_error
+from service.jobs.files import sole_user
 
 if TYPE_CHECKING:
+    from service.jobs.config import LocalConfig
     from service.jobs.embedded.pool import WorkerPool
     from service.jobs.embedded.store import JobStore
     from service.jobs.files import JobFiles
@@ -34,42 +36,13 @@ __all__ = [
     "Maintenance",
     "owner_dead",
     "pid_alive",
-    "sole_user",
+    "sole_user",  # from service.jobs.files (the API's spool uses it too)
 ]
 
 log = logging.getLogger("geosmooth.jobs")
 HOST = socket.gethostname()
 LIVE_OWNERS: set[str] = set()  # owners of the queues started in this process
 ORPHAN_AGE = 600.0
-
-
-_HELD: list[int] = []  # lock files of the directories this process uses (kept open)
-
-
-def sole_user(directory: Path, name: str = ".live") -> bool:
-    """Register this process as a user of ``directory``; whether no other live process is one.
-
-    Every user holds a shared ``flock`` on ``directory/name`` for its whole life (the kernel
-    drops it when the process dies, SIGKILL included). Before taking it, an exclusive lock is
-    tried: granted means nobody else holds one, so whatever a crash left in the directory
-    (partial uploads, orphan job directories) belongs to no live process and can go at once;
-    refused means other servers share it, and their files in flight are left to the age rule.
-    """
-    import fcntl
-
-    directory.mkdir(parents=True, exist_ok=True)
-    path = directory / name
-    if not path.exists():
-        path.touch()
-    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)  # read-only: a remount ro stays possible
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        alone = True
-    except OSError:
-        alone = False
-    fcntl.flock(fd, fcntl.LOCK_SH)
-    _HELD.append(fd)
-    return alone
 
 
 def pid_alive(pid: int) -> bool:
@@ -112,9 +85,7 @@ class Maintenance:
     pool: WorkerPool
     notifier: Notifier
     owner: str
-    reserve_bytes: int
-    min_free_bytes: int
-    sweep_interval: float
+    config: LocalConfig
     _stop_sweeper: threading.Event
     _last_strays: float
 
@@ -194,11 +165,11 @@ class Maintenance:
                     log.warning("job store maintenance postponed: %s", exc)
 
     def _sweep_loop(self) -> None:
-        while not self._stop_sweeper.wait(self.sweep_interval):
+        while not self._stop_sweeper.wait(self.config.sweep_interval):
             self._maintain()
 
     def _keep_reserve(self) -> None:
-        self.store.keep_reserve(self.reserve_bytes, self.min_free_bytes)
+        self.store.keep_reserve(self.config.reserve_bytes, self.config.min_free_bytes)
 
     def _remove_orphans(self, min_age: float = ORPHAN_AGE) -> None:
         """Job directories without a record: at any age when no other live process uses the

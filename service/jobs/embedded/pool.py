@@ -1,8 +1,8 @@
 """Worker slots: threads in the server that each run one job at a time in a child process.
 
 Each slot thread claims the oldest queued job, starts a worker process for it
-(:func:`service.jobs.child.main`), then watches it until it exits: it renews the run's lease,
-enforces the time limit, and kills the process (SIGTERM to its process group, SIGKILL after a
+(:func:`service.jobs.embedded.child.main`), then watches it until it exits: it renews the run's
+lease, enforces the time limit, and kills the process (SIGTERM to its process group, SIGKILL after a
 grace period) on cancel, timeout, stop or when the run lost its job. Only the slot thread touches
 its process object; other threads ask for a kill and wait for the slot to settle.
 
@@ -29,16 +29,21 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from service.jobs import child, problems
+from service.jobs import problems
+from service.jobs.embedded import child
 from service.jobs.embedded.store import Claim, JobStore
+
+if TYPE_CHECKING:
+    from service.jobs.config import LocalConfig
 
 __all__ = ["WorkerPool", "default_start_method"]
 
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.child", "service.jobs.runner", "service.jobs.preload")
+_PRELOAD = ("service.jobs.embedded.child", "service.jobs.runner", "service.jobs.preload")
 #: Signals by which a job process kills itself (its own bug or bad input): the job fails. Any
 #: other signal came from outside (the OOM killer's SIGKILL, a stop of the whole service): the
 #: run was interrupted and is retried like a server death.
@@ -93,75 +98,33 @@ class WorkerPool:
 
     Parameters
     ----------
+    config : LocalConfig
+        Slots (``workers``), job function (``runner``), ``job_timeout``, ``lease``,
+        ``kill_grace``, ``poll_interval``, ``start_method``, ``progress_interval``,
+        ``retry_backoff``, ``memory_limit`` (``RLIMIT_AS`` of a job process) and ``threads``
+        (BLAS/OpenMP threads per job process, set in the environment they start with).
     store : JobStore
         Job metadata.
-    data_dir : Path
-        Job store root (passed to the worker processes).
-    workers : int
-        Number of slots (jobs running at once).
     owner : str
         Identity of this server instance in the store's ``owner`` column.
-    runner : str
-        Job function, ``"module:function"``.
-    job_timeout : float or None
-        Seconds a run may take; ``None``: no limit.
-    lease : float
-        Seconds a run's lease lasts; renewed every third of it while the process lives.
-    kill_grace : float
-        Seconds between SIGTERM and SIGKILL.
-    poll_interval : float
-        Seconds between looks at the store when idle (jobs submitted by other processes) and
-        between ownership checks of a running job (cancelled from another process).
-    start_method : str, optional
-        ``"forkserver"`` or ``"spawn"`` (default: :func:`default_start_method`).
-    progress_interval : float
-        Minimum seconds between progress writes of a job.
     on_settled : callable, optional
         Called with the job id after each run ends (for metrics and webhooks).
-    retry_backoff : float
-        Seconds before an interrupted job may run again (doubled per attempt, at most 300 s).
-    memory_limit : int or None
-        Address space (bytes) a job process may add once started (``RLIMIT_AS``).
-    threads : int
-        BLAS/OpenMP threads per job process (set in the environment the job processes start
-        with).
     """
 
     def __init__(
         self,
+        config: LocalConfig,
         store: JobStore,
-        data_dir: Path,
-        workers: int,
         owner: str,
-        runner: str,
-        job_timeout: float | None,
-        lease: float,
-        kill_grace: float,
-        poll_interval: float,
-        start_method: str | None = None,
-        progress_interval: float = 0.2,
         on_settled: Callable[[str], None] | None = None,
-        retry_backoff: float = 0.0,
-        memory_limit: int | None = None,
-        threads: int = 1,
     ) -> None:
-        if workers < 1:
+        if config.workers < 1:
             raise ValueError("workers must be >= 1")
+        self.config = config
         self.store = store
-        self.data_dir = Path(data_dir)
-        self.workers = workers
         self.owner = owner
-        self.runner = runner
-        self.job_timeout = job_timeout
-        self.lease = lease
-        self.kill_grace = kill_grace
-        self.poll_interval = poll_interval
-        self.start_method = start_method or default_start_method()
-        self.progress_interval = progress_interval
         self.on_settled = on_settled
-        self.retry_backoff = retry_backoff
-        self.memory_limit = memory_limit
-        self.threads = threads
+        self.start_method = config.start_method or default_start_method()
         self._ctx: multiprocessing.context.BaseContext | None = None
         self._threads: list[threading.Thread] = []
         self._runs: dict[str, _Run] = {}
@@ -170,15 +133,20 @@ class WorkerPool:
         self._generation = 0
         self._stopping = threading.Event()
 
+    @property
+    def runner(self) -> str:
+        """The job function, ``"module:function"``."""
+        return self.config.runner
+
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
         """Prepare the process context (start the forkserver) and start the slot threads."""
         self._ctx = multiprocessing.get_context(self.start_method)
         # read by service.jobs.preload in the forkserver: the limit every job process inherits
-        os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.threads)
+        os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.config.threads)
         if self.start_method == "forkserver":
             preload = []
-            names = (*_PRELOAD, self.runner.partition(":")[0], *main_module_imports())
+            names = (*_PRELOAD, self.config.runner.partition(":")[0], *main_module_imports())
             for name in dict.fromkeys(names):
                 try:  # only what imports cleanly here: a broken import must not kill the server
                     importlib.import_module(name)
@@ -191,7 +159,7 @@ class WorkerPool:
         self._stopping.clear()
         self._threads = [
             threading.Thread(target=self._slot, name=f"geosmooth-slot-{i}", daemon=True)
-            for i in range(self.workers)
+            for i in range(self.config.workers)
         ]
         for t in self._threads:
             t.start()
@@ -218,7 +186,7 @@ class WorkerPool:
 
     def backoff(self, attempts: int) -> float:
         """Seconds an interrupted job waits before its next run, after ``attempts`` runs."""
-        return min(_MAX_BACKOFF, self.retry_backoff * 2 ** max(0, attempts - 1))
+        return min(_MAX_BACKOFF, self.config.retry_backoff * 2 ** max(0, attempts - 1))
 
     def kill(self, job_id: str, reason: str = "cancelled", wait: float | None = None) -> bool:
         """Ask the slot running ``job_id`` to kill its process; wait until it has settled.
@@ -231,7 +199,7 @@ class WorkerPool:
                 return False
             if run.reason is None:
                 run.reason = reason
-        run.done.wait(self.kill_grace + 5.0 if wait is None else wait)
+        run.done.wait(self.config.kill_grace + 5.0 if wait is None else wait)
         return True
 
     # -- slots ---------------------------------------------------------------------------
@@ -240,14 +208,14 @@ class WorkerPool:
             with self._cond:
                 generation = self._generation
             try:
-                claim = self.store.claim(self.owner, self.lease)
+                claim = self.store.claim(self.owner, self.config.lease)
             except Exception:
                 log.exception("could not claim a job")
                 claim = None
             if claim is None:
                 with self._cond:
                     if self._generation == generation and not self._stopping.is_set():
-                        self._cond.wait(self.poll_interval)
+                        self._cond.wait(self.config.poll_interval)
                 continue
             try:
                 self._execute(claim)
@@ -261,17 +229,18 @@ class WorkerPool:
             fmt=claim.fmt,
             attempt=claim.attempt,
             owner=self.owner,
-            data_dir=str(self.data_dir),
+            data_dir=str(self.config.data_dir),
             db_path=str(self.store.path),
-            runner=self.runner,
+            runner=self.config.runner,
             server_pid=os.getpid(),
-            progress_interval=self.progress_interval,
-            memory_limit=self.memory_limit,
+            progress_interval=self.config.progress_interval,
+            memory_limit=self.config.memory_limit,
         )
         process = self._ctx.Process(  # type: ignore[attr-defined]
             target=child.main, args=(spec,), name=f"geosmooth-job-{claim.job_id[:8]}", daemon=True
         )
-        deadline = None if not self.job_timeout else time.monotonic() + self.job_timeout
+        timeout = self.config.job_timeout
+        deadline = None if not timeout else time.monotonic() + timeout
         run = _Run(claim, process, deadline)
         try:
             process.start()
@@ -309,8 +278,8 @@ class WorkerPool:
         claim, process = run.claim, run.process
         run_of = (claim.job_id, self.owner, claim.attempt)
         now = time.monotonic()
-        next_check = now + self.poll_interval
-        next_renew = now + self.lease / 3
+        next_check = now + self.config.poll_interval
+        next_renew = now + self.config.lease / 3
         while True:
             process.join(_TICK)
             if process.exitcode is not None:
@@ -322,11 +291,11 @@ class WorkerPool:
             if reason is None and run.deadline is not None and now >= run.deadline:
                 reason = "timeout"
             if reason is None and now >= next_renew:
-                next_renew = now + self.lease / 3
-                if self._lost(lambda: self.store.renew(*run_of, self.lease), claim.job_id):
+                next_renew = now + self.config.lease / 3
+                if self._lost(lambda: self.store.renew(*run_of, self.config.lease), claim.job_id):
                     reason = "lost"
             elif reason is None and now >= next_check:
-                next_check = now + self.poll_interval
+                next_check = now + self.config.poll_interval
                 if self._lost(lambda: self.store.owns(*run_of), claim.job_id):
                     reason = "lost"
             if reason is not None:
@@ -348,7 +317,7 @@ class WorkerPool:
     def _terminate(self, process: multiprocessing.process.BaseProcess) -> None:
         pid = process.pid
         assert pid is not None
-        for sig, wait in ((signal.SIGTERM, self.kill_grace), (signal.SIGKILL, None)):
+        for sig, wait in ((signal.SIGTERM, self.config.kill_grace), (signal.SIGKILL, None)):
             try:  # the worker leads its own process group: take any children of the job too
                 os.killpg(pid, sig)
             except (ProcessLookupError, PermissionError):
@@ -362,8 +331,8 @@ class WorkerPool:
         claim, store = run.claim, self.store
         job_id, attempt, owner = claim.job_id, claim.attempt, self.owner
         if run.reason == "timeout":
-            assert self.job_timeout is not None
-            store.fail(job_id, owner, attempt, problems.timed_out(self.job_timeout))
+            assert self.config.job_timeout is not None
+            store.fail(job_id, owner, attempt, problems.timed_out(self.config.job_timeout))
         elif run.reason == "stop":
             store.requeue(job_id, owner, attempt, count_attempt=False)
         elif run.reason is None and store.owns(job_id, owner, attempt):

@@ -4,7 +4,7 @@
   tile size (``n / 2^m``) whose tiles fit: the job process keeps the input and the stitched
   output (:data:`PARENT_BYTES_PER_POINT`), and each of its tile processes one tile with its halo
   (:data:`HALO_FACTOR` times the core, measured 1.3-2.0 on the tests' terrains).
-* :func:`local_tiles`: a ``run_map`` for :func:`service.core.tiles.entry.smooth` on a process
+* :func:`local_tiles`: a ``run_map`` for :func:`service.core.entry.smooth` on a process
   pool of the job's worker share (one BLAS thread each). A tile whose process dies is re-run on
   its own in a new pool (the finished tiles are kept); every finished tile reports progress
   with the tile counts, so a cancel (``RunLost`` from the progress callback) stops the pool.
@@ -22,14 +22,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from service.jobs.progress import TileCounter
 
 if TYPE_CHECKING:
-    pass
+    from service.jobs.tiles import RunMap
 
-__all__ = [
-    "local_tiles",
-]
+__all__ = ["local_tile_map", "local_tiles"]
 
 T = TypeVar("T")
-RunMap = Callable[[Callable[..., Any], list[tuple[Any, ...]]], list[Any]]
 #: Tile re-runs after a worker died, per tile.
 MAX_RETRIES = 2
 
@@ -124,6 +121,16 @@ def local_tiles(
         last = state["pool"]
         if last is not None:
             last.shutdown(wait=True)
+
+
+def local_tile_map(
+    job_id: str, on_tile: Callable[[], None] | None, counter: TileCounter
+) -> contextlib.AbstractContextManager[RunMap]:
+    """The :data:`~service.jobs.tiles.TileMap` of a job process: :func:`local_tiles` on its
+    worker share (:func:`service.jobs.limits.tile_workers`)."""
+    from service.jobs.limits import tile_workers
+
+    return local_tiles(tile_workers(), on_tile, counter)
 
 
 def _kill(pool: ProcessPoolExecutor | None) -> None:

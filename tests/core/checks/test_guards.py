@@ -38,8 +38,12 @@ def test_checks_against_closed_forms() -> None:
 def test_warnings_name_the_parameter() -> None:
     P, F = noisy_icosphere(3, 0.0)
     c = shape_checks(Geometry(P, faces=F), 0.5 * P)
-    for target, word in (("tau", "lower tau"), ("rms", "lower rms"), ("lam", "increase lam"),
-                         ("auto", "give a smaller tau or rms")):
+    for target, word in (
+        ("tau", "lower tau"),
+        ("rms", "lower rms"),
+        ("lam", "increase lam"),
+        ("auto", "give a smaller tau or rms"),
+    ):
         ws = guard_warnings(c, target)
         assert ws and all(word in w for w in ws)
 
@@ -62,7 +66,8 @@ def test_melted_bunny_warns_and_sensible_tau_is_silent() -> None:
 def test_folds_against_the_neighbours_not_against_the_noisy_input() -> None:
     """A noisy grid whose noise folded faces, smoothed back to the plane: faces flip against
     the input (the former rule warned) but no fold is new; a crumpled result warns."""
-    from service.core.checks.guards import FOLD_FRACTION, folded_faces
+    from service.core.checks.guards import FOLD_FRACTION
+    from service.core.finish.folds import folded_faces
 
     P, F = grid_mesh(20, 20)
     rng = np.random.default_rng(4)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from service.core import Geometry, SmoothingParams, smooth
-from service.core.pipeline import build_laplacian
+from service.core.operator.build import build_laplacian
 from tests.core.core_fixtures import noisy_icosphere
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from service.core import Geometry, SmoothingParams, smooth
-from service.core.search.maxnorm import clip_points
+from service.core.finish.clip import clip_points
 from tests.core.core_fixtures import noisy_icosphere, polyline_edges
 
 
@@ -23,9 +23,7 @@ def _curve() -> Geometry:
 
 
 @pytest.mark.parametrize("make", [_mesh, _curve], ids=["mesh", "curve"])
-@pytest.mark.parametrize(
-    "target", [{"tau": None}, {}, {"lam": 0.01}], ids=["tau", "auto", "lam"]
-)
+@pytest.mark.parametrize("target", [{"tau": None}, {}, {"lam": 0.01}], ids=["tau", "auto", "lam"])
 @pytest.mark.parametrize("displacement", ["free", "normal"])
 def test_bound_holds_for_every_point(make, target: dict, displacement: str) -> None:
     g = make()

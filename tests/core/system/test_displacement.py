@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from service.core import Geometry, SmoothingParams
-from service.core.pipeline import build_laplacian
+from service.core.operator.build import build_laplacian
 from service.core.system.displacement import normal_frames, normal_system, projected_normal_system
 from tests.core.core_fixtures import noisy_icosphere, polyline_edges
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from service.jobs import JobStatus
-from service.jobs.distributed.backend import Backend
+from service.jobs.config import RQConfig
 from service.jobs.distributed.queue import RQQueue
 from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
@@ -39,7 +39,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]
     redis = RedisServer(root / "redis").start()
     settings = rq_settings(redis.url, root / "data", job_timeout=4.0, rq_queue_name="failover")
     workers = [WorkerProcess(settings, f"f{i}", root / f"f{i}.log").start() for i in (1, 2)]
-    queue = RQQueue(Backend.connect(settings), sweep_interval=0.2, reconcile_interval=2.0)
+    queue = RQQueue(RQConfig(settings, sweep_interval=0.2, reconcile_interval=2.0))
     queue.start()
     state = {"queue": queue, "workers": workers, "settings": settings, "root": root,
              "redis": redis}  # fmt: skip

@@ -16,6 +16,7 @@ from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
 from service.io import GeometryDocument, write_geometry
 from service.jobs import JobQueue, JobStatus, LocalQueue
+from service.jobs.config import RQConfig
 from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.queue import RQQueue
 from service.jobs.queue import NewJob
@@ -35,7 +36,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]
     redis = RedisServer(root / "redis").start()
     settings = rq_settings(redis.url, root / "data")
     workers = [WorkerProcess(settings, f"w{i}", root / f"w{i}.log").start() for i in (1, 2)]
-    queue = RQQueue(Backend.connect(settings), sweep_interval=0.2)
+    queue = RQQueue(RQConfig(settings, sweep_interval=0.2))
     queue.start()
     try:
         for w in workers:

@@ -11,10 +11,10 @@ import pytest
 
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth
+from service.core.pipeline import smooth_one as smooth
 from service.io import GeometryDocument, read_geometry, write_geometry
 from service.jobs import JobStatus
-from service.jobs.distributed.backend import Backend
+from service.jobs.config import RQConfig
 from service.jobs.distributed.blobs import S3Blobs
 from service.jobs.distributed.queue import RQQueue
 from service.jobs.queue import NewJob
@@ -41,7 +41,7 @@ def s3_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, A
                            storage_url=f"s3://{BUCKET}/deploy", presign_seconds=60)  # fmt: skip
     worker_settings = settings.model_copy(update={"data_dir": root / "worker-scratch"})
     worker = WorkerProcess(worker_settings, "s3w", root / "s3w.log", extra_env=aws).start()
-    queue = RQQueue(Backend.connect(settings), sweep_interval=0.2)
+    queue = RQQueue(RQConfig(settings, sweep_interval=0.2))
     queue.start()
     try:
         worker.wait_registered(queue.backend.redis)

@@ -152,7 +152,7 @@ def test_orphan_directories_are_removed_on_start(make_queue: MakeQueue) -> None:
     holder = subprocess.Popen(  # a live user of the store (holds its shared lock)
         [sys.executable, "-c", "import sys, time\n"
          "from pathlib import Path\n"
-         "from service.jobs.embedded.maintenance import sole_user\n"
+         "from service.jobs.files import sole_user\n"
          f"sole_user(Path({str(queue.files.root)!r})); print('held', flush=True)\n"
          "time.sleep(600)\n"],
         stdout=subprocess.PIPE, text=True,

@@ -1,4 +1,4 @@
-"""Wavefront OBJ reading (``v``, ``vt``, ``vn``, ``f``, ``l``); writing is in :mod:`.obj_write`.
+"""Wavefront OBJ reading (``v``, ``vt``, ``vn``, ``f``, ``l``); writing is in :mod:`.obj.write`.
 
 Reading
 -------
@@ -10,7 +10,7 @@ Reading
 * ``l i j k ...``: a polyline; one whose last index repeats its first is closed.
 * Every other line (``vt``, ``g``, ``o``, ``s``, ``usemtl``, ``mtllib``, comments, ...) is kept:
   the file is written back line for line with new ``v`` lines (the input's digits) and
-  recomputed (or dropped) ``vn`` lines (see :mod:`.obj_write`). Unknown statements are counted
+  recomputed (or dropped) ``vn`` lines (see :mod:`.obj.write`). Unknown statements are counted
   in the notes; leading ``#`` lines are the document's comments.
 
 The file is read in bounded blocks of lines; errors name the line.
@@ -19,7 +19,6 @@ The file is read in bounded blocks of lines; errors name the line.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +28,7 @@ from service.io._shared.numfmt import Digits
 from service.io._shared.text import NUMBER, line_blocks, shown, tokens_per_line
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.formats.obj.faces import Faces
 from service.io.source import Source
 
 __all__ = ["ObjLayout", "read_obj"]
@@ -56,6 +56,10 @@ class ObjLayout:
         Corners per face.
     extra : tuple of str
         Attribute names of the extra ``v`` columns.
+    uv : (corner_vt, face_counts, vt_spans) or None
+        When every face corner has a ``vt``: each corner's 0-based ``vt`` index in file order,
+        the corners of each face, and the byte span of every ``vt`` line (other formats' writers
+        that hold texture coordinates read them from there, e.g. glTF).
     """
 
     data: bytes
@@ -64,6 +68,7 @@ class ObjLayout:
     corners: NDArray[np.int64] | None
     counts: NDArray[np.int64] | None
     extra: tuple[str, ...]
+    uv: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]] | None = None
 
 
 @dataclass
@@ -73,6 +78,7 @@ class _Acc:
     v_rows: list[NDArray[np.float64]] = field(default_factory=list)
     v_spans: list[NDArray[np.int64]] = field(default_factory=list)
     vn_spans: list[NDArray[np.int64]] = field(default_factory=list)
+    vt_spans: list[NDArray[np.int64]] = field(default_factory=list)
     faces: list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]] = field(
         default_factory=list
     )
@@ -180,99 +186,6 @@ def _slow_corners(texts: list[bytes], numbers: list[int], what: str) -> NDArray[
     return np.asarray(out, dtype=np.int64)
 
 
-def _resolve(
-    raw: NDArray[np.int64],
-    before: NDArray[np.int64],
-    total: int | None,
-    numbers: NDArray[np.int64],
-    counts: NDArray[np.int64],
-    what: str,
-    absent_ok: bool,
-    thing: str = "vertex",
-) -> NDArray[np.int64]:
-    """0-based indices from OBJ's 1-based / negative ones; ``-1`` for absent (0) when allowed."""
-    flat = np.where(raw > 0, raw - 1, before + raw)
-    absent = raw == 0
-    bad = ((flat < 0) | absent) & ~(absent & absent_ok)
-    if total is not None:
-        bad |= flat >= total
-    if absent_ok:
-        flat = np.where(absent, -1, flat)
-    if bad.any():
-        pos = int(np.flatnonzero(bad)[0])
-        row = int(np.searchsorted(np.cumsum(counts), pos, side="right"))
-        line = int(numbers[row])
-        if raw[pos] == 0:
-            raise _fail(line, "index 0 is not valid (OBJ indices start at 1)")
-        if raw[pos] < 0:
-            raise _fail(
-                line,
-                f"{what} refers to relative {thing} {int(raw[pos])} but only {int(before[pos])}"
-                " precede it",
-            )
-        raise _fail(line, f"{what} refers to {thing} {int(raw[pos])} but the file has {total}")
-    return flat
-
-
-@dataclass
-class _Faces:
-    """Face or polyline statements of the whole file (resolved where the block allows)."""
-
-    v: list[NDArray[np.int64]] = field(default_factory=list)
-    vt: list[NDArray[np.int64]] = field(default_factory=list)
-    vn: list[NDArray[np.int64]] = field(default_factory=list)
-    counts: list[NDArray[np.int64]] = field(default_factory=list)
-    numbers: list[NDArray[np.int64]] = field(default_factory=list)
-
-    def add(
-        self, acc: _Acc, texts: list[bytes], numbers: list[int], before: Any, what: str
-    ) -> None:
-        cols, counts, m = _corner_columns(texts, numbers, what)
-        nums = np.asarray(numbers, dtype=np.int64)
-        rep = [np.repeat(b, counts) for b in before]
-        self.v.append(_resolve(cols[:, 0], rep[0], None, nums, counts, what, False))
-        if m >= 2:
-            self.vt.append(_resolve(cols[:, 1], rep[1], None, nums, counts, what, True, "vt"))
-        if m == 3:
-            self.vn.append(_resolve(cols[:, 2], rep[2], None, nums, counts, what, True, "vn"))
-        self.counts.append(counts)
-        self.numbers.append(nums)
-
-    def finish(
-        self, totals: tuple[int, int, int], what: str, notes: list[str]
-    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64] | None]:
-        counts = np.concatenate(self.counts)
-        nums = np.concatenate(self.numbers)
-        flat = np.concatenate(self.v)
-        _check_upper(flat, totals[0], nums, counts, what)
-        vn = None
-        if self.vn and len(self.vn) == len(self.v):
-            vn = np.concatenate(self.vn)
-            if vn.max(initial=-1) >= totals[2]:
-                notes.append(f"{what} normal indices beyond the {totals[2]} 'vn' lines: ignored")
-                vn = None
-        if self.vt and np.concatenate(self.vt).max(initial=-1) >= totals[1]:
-            notes.append(f"{what} texture indices beyond the {totals[1]} 'vt' lines")
-        return flat, counts, vn
-
-
-def _check_upper(
-    flat: NDArray[np.int64],
-    total: int,
-    numbers: NDArray[np.int64],
-    counts: NDArray[np.int64],
-    what: str,
-) -> None:
-    bad = flat >= total
-    if bad.any():
-        pos = int(np.flatnonzero(bad)[0])
-        row = int(np.searchsorted(np.cumsum(counts), pos, side="right"))
-        raise _fail(
-            int(numbers[row]),
-            f"{what} refers to vertex {int(flat[pos]) + 1} but the file has {total} vertices",
-        )
-
-
 def _classify(
     block: bytes, lines: list[bytes]
 ) -> tuple[dict[bytes, list[int]], dict[int, bytes], NDArray[np.int64], NDArray[np.int64]]:
@@ -317,8 +230,8 @@ def _classify(
 
 def _block(
     acc: _Acc,
-    faces: _Faces,
-    polys: _Faces,
+    faces: Faces,
+    polys: Faces,
     block: bytes,
     lines: list[bytes],
     offset: int,
@@ -348,8 +261,9 @@ def _block(
         vr = rows[b"v"]
         _vertices(acc, text(vr, 2), [first + i for i in vr])
         acc.v_spans.append(np.column_stack([starts[vr], ends[vr]]))
-    if rows[b"vn"]:
-        acc.vn_spans.append(np.column_stack([starts[rows[b"vn"]], ends[rows[b"vn"]]]))
+    for statement, spans in ((b"vn", acc.vn_spans), (b"vt", acc.vt_spans)):
+        if rows[statement]:
+            spans.append(np.column_stack([starts[rows[statement]], ends[rows[statement]]]))
     for kind, sink, what in ((b"f", faces, "face"), (b"l", polys, "polyline")):
         r = rows[kind]
         if not r:
@@ -360,7 +274,8 @@ def _block(
             acc.nvt + np.searchsorted(np.asarray(rows[b"vt"], dtype=np.int64), at),
             acc.nvn + np.searchsorted(np.asarray(rows[b"vn"], dtype=np.int64), at),
         ]
-        sink.add(acc, text(r, 2), [first + i for i in r], before, what)
+        numbers = [first + i for i in r]
+        sink.add(_corner_columns(text(r, 2), numbers, what), numbers, before, what)
     acc.nv += len(rows[b"v"])
     acc.nvt += len(rows[b"vt"])
     acc.nvn += len(rows[b"vn"])
@@ -376,7 +291,7 @@ def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
         than 3 coordinates, no ``v`` lines.
     """
     data = source.data()
-    acc, faces, polys = _Acc(), _Faces(), _Faces()
+    acc, faces, polys = _Acc(), Faces(), Faces()
     line = 1
     for block in line_blocks(data, 0):
         lines = block.data.split(b"\n")
@@ -391,10 +306,13 @@ def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
         raise FormatError(f"the file holds no points: no 'v' lines{hint}", fmt="obj")
     table = np.concatenate(acc.v_rows)
     totals = (acc.nv, acc.nvt, acc.nvn)
-    polygons = corners = counts = None
+    polygons = corners = counts = uv = None
     if faces.v:
         flat, counts, vn = faces.finish(totals, "face", notes)
         polygons = (flat, counts)
+        corner_vt = faces.texture(acc.nvt)
+        if corner_vt is not None:
+            uv = (corner_vt, counts, np.concatenate(acc.vt_spans))
         if vn is not None and acc.nvn:
             corners = np.column_stack([flat, vn])
     polylines: list[tuple[NDArray[np.int64], bool]] = []
@@ -416,6 +334,7 @@ def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
         corners,
         counts if corners is not None else None,
         tuple(names) if extra else (),
+        uv,
     )
     precision = Precision("float64", specs[:3], dict(zip(names, specs[3:], strict=False)))
     doc = assemble(

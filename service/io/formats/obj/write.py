@@ -9,9 +9,10 @@ the
 faces (``normals="drop"``).
 
 Other documents are written as ``v`` lines (2D points get ``z = 0``; ``red green blue``
-attributes as the ``v x y z r g b`` colour extension, fractions in [0, 1]), ``vn`` (with ``f a//a``)
-when they carry normals, ``f`` triangles, one ``l`` per polyline (closed ones repeat their first
-index) and one ``l a b`` per standalone edge.
+attributes as the ``v x y z r g b`` colour extension, fractions in [0, 1]), ``vn`` (with
+``f a//a``) when they carry normals, one ``vt`` per vertex for glTF's ``uv`` (with ``f a/a``),
+``f`` triangles, one ``l`` per polyline (closed ones repeat their first index) and one ``l a b``
+per standalone edge.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from numpy.typing import NDArray
 
 from service.io._shared.coords import as_xyz
 from service.io._shared.normals import corner_normals
-from service.io._shared.numfmt import F32, format_column, write_rows
+from service.io._shared.numfmt import F32, default_spec, format_column, write_rows
 from service.io._shared.plain import PlainDocument
 from service.io._shared.text import WRITTEN_BY, header_comments
 from service.io.formats.obj.read import ObjLayout
@@ -144,12 +145,18 @@ def _generated(plain: PlainDocument, out: BinaryIO) -> None:
         spec = _normal_spec(plain)
         write_rows(out, [(np.asarray(normals[:, j]), spec) for j in range(3)], prefix="vn ")
     faces = plain.faces
+    uv = plain.attributes.get("uv")
+    uv = uv if uv is not None and uv.shape == (plain.n, 2) and faces is not None else None
+    if uv is not None:  # glTF's texture coordinates: one ``vt`` per vertex
+        write_rows(out, [(uv[:, j], default_spec(uv.dtype)) for j in range(2)], prefix="vt ")
     if faces is not None and len(faces):
         f = faces + 1
-        if normals is not None:
+        corner = {(False, False): "{t}", (True, False): "{t}//{t}", (False, True): "{t}/{t}",
+                  (True, True): "{t}/{t}/{t}"}[(normals is not None, uv is not None)]  # fmt: skip
+        if corner != "{t}":
             cols = [(f[:, j], "%d") for j in range(3)]
             lines = _rows("f ", cols)
-            lines = ["f " + " ".join(f"{t}//{t}" for t in line[2:].split()) for line in lines]
+            lines = ["f " + " ".join(corner.format(t=t) for t in ln[2:].split()) for ln in lines]
             out.write(("\n".join(lines) + "\n").encode("ascii"))
         else:
             write_rows(out, [(f[:, j], "%d") for j in range(3)], prefix="f ")

@@ -1,4 +1,4 @@
-"""PLY reading (ascii, binary_little_endian, binary_big_endian); writing is in :mod:`.ply_write`.
+"""PLY reading (ascii, binary_little_endian, binary_big_endian); writing is in :mod:`.ply.write`.
 
 Reading
 -------
@@ -12,8 +12,8 @@ Reading
 * ``edge``: ``vertex1``, ``vertex2`` become standalone edges.
 * Every element (faces with their other properties, ``range_grid``, ...) is kept in the
   :class:`PlyLayout`, so a PLY written back has the input's elements, properties and order.
-* Bodies are read by :mod:`.ply_binary` (numpy structured dtypes, views of the input) and
-  :mod:`.ply_ascii` (bounded blocks, one entry per line).
+* Bodies are read by :mod:`.ply.binary` (numpy structured dtypes, views of the input) and
+  :mod:`.ply.ascii` (bounded blocks, one entry per line).
 """
 
 from __future__ import annotations

@@ -7,8 +7,12 @@ dropped, and the input's encoding (``ply_ascii=None``; ``True``/``False`` force 
 little-endian). ASCII values are written with the input's digits (see :mod:`.numfmt`).
 
 Documents of other formats get ``x y z`` (2D points ``z = 0``), normals and attributes as vertex
-properties, ``face`` (``list uchar int vertex_indices``) and an ``edge`` element holding the
-standalone and polyline edges (PLY has no polylines).
+properties (8-bit colours ``red green blue [alpha]`` as ``uchar``, the PLY convention, whatever
+type the input stored them in, e.g. an XYZ file's 0..255 columns; glTF's ``uv`` as ``s t``, which
+trimesh reads as texture coordinates), ``face`` (``list uchar int
+vertex_indices``, plus an OBJ's texture coordinates as ``list uchar float texcoord``, the UVs of
+each face's corners as MeshLab writes them) and an ``edge`` element holding the standalone and
+polyline edges (PLY has no polylines).
 """
 
 from __future__ import annotations
@@ -21,9 +25,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.io._shared.coords import as_xyz
-from service.io._shared.numfmt import ROWS_PER_CHUNK, default_spec, format_column, write_rows
+from service.io._shared.numfmt import (
+    F32,
+    ROWS_PER_CHUNK,
+    default_spec,
+    format_column,
+    write_rows,
+)
 from service.io._shared.plain import PlainDocument
 from service.io._shared.text import header_comments
+from service.io._shared.texture import corner_uvs
 from service.io.errors import FormatError
 from service.io.formats.ply.read import PlyLayout
 
@@ -80,6 +91,19 @@ def _ply_type(values: NDArray[Any]) -> tuple[str, NDArray[Any]]:
     return code, values
 
 
+_COLOURS = ("red", "green", "blue", "alpha")
+
+
+def _bytes(values: NDArray[Any]) -> bool:
+    """Whether a colour column holds 8-bit values (integers 0..255, in any dtype)."""
+    if values.dtype.kind not in "iuf" or not values.size:
+        return False
+    if values.dtype.kind == "f" and float(np.max(values)) <= 1.0:  # fractions (OBJ), or unclear
+        return False
+    with np.errstate(invalid="ignore"):
+        return bool(np.all((values >= 0) & (values <= 255) & (values == np.round(values))))
+
+
 def _vertex_props(plain: PlainDocument, layout: PlyLayout | None) -> list[_Prop]:
     cdt = plain.coordinate_dtype()
     specs = plain.coordinate_specs()
@@ -108,9 +132,14 @@ def _vertex_props(plain: PlainDocument, layout: PlyLayout | None) -> list[_Prop]
     for name, values in plain.attributes.items():
         cols = [values] if values.ndim == 1 else [values[:, j] for j in range(values.shape[1])]
         names = [name] if values.ndim == 1 else [f"{name}_{j}" for j in range(values.shape[1])]
+        if vertex is None and name == "uv" and len(names) == 2:  # glTF's: PLY's ``s t``
+            names = ["s", "t"]
         for nm, col in zip(names, cols, strict=True):
             code, col = _ply_type(np.asarray(col))
-            attrs[nm] = _Prop(nm, code, col, spec=plain.attribute_spec(name))
+            spec = plain.attribute_spec(name)
+            if vertex is None and nm in _COLOURS and _bytes(col):  # the PLY convention: uchar
+                code, col, spec = "u1", col.astype(np.uint8), "%d"
+            attrs[nm] = _Prop(nm, code, col, spec=spec)
     if vertex is None:
         return out + list(attrs.values())
     ordered: list[_Prop] = []
@@ -153,9 +182,12 @@ def _elements(plain: PlainDocument, layout: PlyLayout | None) -> list[_Element]:
         f = plain.faces
         counts = np.full(len(f), 3, dtype=np.uint8)
         items = f.reshape(-1).astype(np.int32)
-        out.append(
-            _Element("face", len(f), [_Prop("vertex_indices", "i4", items, counts, "u1", "%d")])
-        )
+        props = [_Prop("vertex_indices", "i4", items, counts, "u1", "%d")]
+        uvs = corner_uvs(plain, "ply")
+        if uvs is not None:  # OBJ texture coordinates, per face corner (MeshLab's texcoord)
+            flat = uvs[1][uvs[0]].reshape(-1).astype(np.float32)
+            props.append(_Prop("texcoord", "f4", flat, np.full(len(f), 6, np.uint8), "u1", F32))
+        out.append(_Element("face", len(f), props))
     edges = plain.edges()
     if edges is not None and len(edges):
         e = edges.astype(np.int32)

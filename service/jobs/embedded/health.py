@@ -1,4 +1,4 @@
-"""Readiness of a job store on a file system: free space, writability, database integrity.
+"""Readiness of the embedded job store: free space, writability, database integrity.
 
 The cheap checks (``statvfs``, creating and removing a probe file) run on every call; the
 database integrity check (SQLite ``quick_check``, O(database size)) at most every
@@ -7,36 +7,17 @@ database integrity check (SQLite ``quick_check``, O(database size)) at most ever
 
 from __future__ import annotations
 
-import errno
-import os
-import tempfile
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+from service.jobs.files import probe_directory
 from service.jobs.queue import QueueHealth
 
-__all__ = ["DB_CHECK_INTERVAL", "StorageProbe", "probe_directory"]
+__all__ = ["DB_CHECK_INTERVAL", "StorageProbe"]
 
 DB_CHECK_INTERVAL = 10.0
-
-
-def probe_directory(path: Path, min_free: int) -> str:
-    """``"ok"``, ``"full"`` (less than ``min_free`` bytes or ENOSPC), ``"read-only"`` or
-    ``"unavailable"``."""
-    try:
-        st = os.statvfs(path)
-        fd, name = tempfile.mkstemp(prefix=".probe-", dir=path)
-        os.close(fd)
-        os.unlink(name)
-    except OSError as exc:
-        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-            return "full"
-        if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
-            return "read-only"
-        return "unavailable"
-    return "full" if st.f_bavail * st.f_frsize < min_free else "ok"
 
 
 class StorageProbe:

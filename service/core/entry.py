@@ -1,9 +1,9 @@
-"""``smooth`` with ``params.tile_points``: the untiled pipeline, or tiles when asked.
+"""The public ``smooth()`` (exported as ``service.core.smooth``): untiled or tiled.
 
-The library, the CLI, the HTTP API and the jobs call this one function (exported as
-``service.core.smooth``): with ``tile_points`` unset, or an input of at most that many points, it
-is :func:`service.core.pipeline.smooth` unchanged; otherwise :func:`.driver.smooth_tiled`, whose
-tiles are listed in the result's ``tiles`` member.
+The library, the CLI, the HTTP API and the jobs call this one function: with ``tile_points``
+unset, or an input of at most that many points, it is :func:`service.core.pipeline.smooth_one`;
+otherwise :func:`service.core.tiles.driver.smooth_tiled`, whose tiles are listed in the result's
+``tiles`` member.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from typing import Any
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth as smooth_untiled
+from service.core.pipeline import smooth_one
+from service.core.plan import Choice, make_plan
 from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
 from service.core.tiles.driver import RunMap, TiledResult, smooth_tiled
@@ -43,7 +44,7 @@ def smooth(
     memory_limit: int | None = None,
     run_map: RunMap[Any] | None = None,
 ) -> SmoothResult:
-    """:func:`service.core.pipeline.smooth`, tiled when ``params.tile_points`` is below the
+    """:func:`service.core.pipeline.smooth_one`, tiled when ``params.tile_points`` is below the
     input's size (``run_map`` runs the tiles; default: one after the other in this process).
 
     Raises
@@ -52,7 +53,11 @@ def smooth(
     """
     n_tile = params.tile_points
     if n_tile is None or geometry.n <= n_tile:
-        return smooth_untiled(geometry, params, progress, operator=operator,
-                              memory_limit=memory_limit)  # fmt: skip
+        return smooth_one(geometry, params, progress, operator=operator,
+                          memory_limit=memory_limit)  # fmt: skip
     tiled = smooth_tiled(geometry, params, n_tile, progress, run_map, memory_limit)
-    return dataclasses.replace(tiled.result, tiles=tiles_report(tiled, n_tile))
+    per_tile = Choice(None, "decided per tile (tiles keep the user's weights)")
+    plan = dataclasses.replace(
+        make_plan(geometry, params), data_weights=per_tile, tangential=per_tile
+    )
+    return dataclasses.replace(tiled.result, tiles=tiles_report(tiled, n_tile), plan=plan)

@@ -40,9 +40,9 @@ from scipy.sparse.linalg import spsolve
 from scipy.stats import chi2, poisson
 
 from service.core.geometry import Geometry
+from service.core.noise.estimate import estimate_noise, manifold_dim
+from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
-from service.core.search.noise import estimate_noise, manifold_dim
-from service.core.search.pointfits import leave_one_out, point_neighbours
 
 __all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
            "isolated", "local_sigma", "pull_in", "robust_weights", "row_quantile"]

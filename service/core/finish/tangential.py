@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from service.core.checks.guards import fold_mask
+from service.core.finish.folds import fold_mask
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
@@ -305,7 +305,7 @@ def applies(geometry: Geometry, params: SmoothingParams) -> bool:
 
 def relax_tangential(
     geometry: Geometry,
-    params: SmoothingParams,
+    enabled: bool,
     op: SmoothingOperator,
     fixed: NDArray[np.bool_],
     frame: Frame,
@@ -316,8 +316,10 @@ def relax_tangential(
 
     Parameters
     ----------
-    geometry, params, op, fixed, frame
-        Of the run (:class:`~service.core.pipeline.Problem`).
+    geometry, op, fixed, frame
+        Of the run (:class:`~service.core.problem.Problem`).
+    enabled : bool
+        The plan's choice (:func:`applies`, :attr:`service.core.plan.Plan.tangential`).
     X : ndarray, shape (n, 3)
         The normal solve's points.
     normal : LambdaSearch
@@ -329,7 +331,7 @@ def relax_tangential(
     step : TangentialStep or None
         ``None`` when the step does not apply (:func:`applies`).
     """
-    if not applies(geometry, params) or not (~fixed).any():
+    if not enabled or not (~fixed).any():
         return X, None
     faces: NDArray[np.int64] = geometry.faces  # type: ignore[assignment]
     irregular = valence_irregularity(faces, geometry.n)

@@ -2,7 +2,7 @@
 
 For point ``i`` with neighbours ``N_i`` (``k`` nearest, ``i`` excluded) the local frame comes
 from principal component analysis of ``N_i`` alone and a quadratic height function ``z(u)`` is
-fitted to them by least squares (as in :func:`service.core.search.noise.patch_variances`). Two
+fitted to them by least squares (as in :func:`service.core.noise.estimate.patch_variances`). Two
 numbers per point follow, both free of point ``i`` itself:
 
 * ``v_i = RSS_i / (c (m - p))``: the residual variance of the neighbours' fit, unbiased for
@@ -15,7 +15,7 @@ numbers per point follow, both free of point ``i`` itself:
 
 A point far from its neighbours' fit while that fit is consistent with the noise is an outlier;
 far from a fit that is itself poor (a crease, a corner, another outlier among the neighbours) it
-is undecided (:mod:`service.core.search.robust`).
+is undecided (:mod:`service.core.noise.robust`).
 """
 
 from __future__ import annotations
@@ -44,14 +44,14 @@ def point_neighbours(
     geometry: Geometry, k: int, manifold_dim: int, known: NDArray[np.int64] | None = None
 ) -> NDArray[np.int64]:
     """Each point (column 0) and its ``k`` nearest neighbours: along the curves for polylines
-    (:func:`service.core.search.noise.curve_neighbours`), in space otherwise; the first
+    (:func:`service.core.noise.estimate.curve_neighbours`), in space otherwise; the first
     ``k + 1`` columns of ``known`` (the noise estimate's, same rule) when given."""
     n = geometry.n
     if known is not None and known.shape == (n, known.shape[1]) and known.shape[1] > k:
         return _self_first(known[:, : k + 1], np.arange(n))
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None and manifold_dim == 1:
-        from service.core.search.noise import curve_neighbours
+        from service.core.noise.estimate import curve_neighbours
 
         rows, nbr = curve_neighbours(geometry, k + 1, np.arange(n))
         if rows.size == n:

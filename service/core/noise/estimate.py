@@ -45,12 +45,9 @@ from service.core.geometry import Geometry
 
 __all__ = [
     "NOISE_RATIO",
-    "TANGENTIAL_SHARE",
-    "TAU_FACTOR",
     "NoiseEstimate",
     "codimension",
     "curve_neighbours",
-    "discrepancy_tau",
     "estimate_noise",
     "hutchinson_trace",
     "log_mode",
@@ -366,33 +363,9 @@ def _scale_ratio(
 
 # --- tau from the noise: discrepancy principle, generalized cross-validation --------------------
 
-#: ``c`` of the discrepancy rule ``tau = c * r * sigma^2 * sum omega_i^2 * (1 + alpha rho)``
-#: (``r`` normal directions per point), per displacement mode, and ``alpha`` (free
-#: displacement only); calibrated on the quality benchmark (``benchmarks/quality/README.md``).
-TAU_FACTOR: dict[str, float] = {"free": 0.9, "normal": 1.0}
-TANGENTIAL_SHARE = 1.0
-
-
 def codimension(geometry: Geometry) -> int:
     """Normal directions per point: ``s - 2`` for meshes, ``s - 1`` for curves and clouds."""
     return max(geometry.dim - manifold_dim(geometry), 0)
-
-
-def discrepancy_tau(
-    sigma: float, weight_sum: float, codim: int, displacement: str, rho: float = 0.0
-) -> float:
-    """``tau = c r sigma^2 sum omega_i^2 (1 + alpha rho)``: the noise energy smoothing removes.
-
-    With noise of standard deviation ``sigma`` across the shape, a smoothing that removes the
-    noise and nothing else moves each point by about ``sigma`` per normal direction; part of
-    the noise stays in the smooth result (the degrees of freedom the filter keeps), which the
-    calibrated factor ``c`` (:data:`TAU_FACTOR`) accounts for. Free displacement also moves
-    points along the shape, in proportion to the roughness along it: ``rho`` is its ratio to
-    the roughness across (:func:`service.core.system.displacement.tangential_ratio`) and ``alpha``
-    (:data:`TANGENTIAL_SHARE`) the calibrated share of it worth spending.
-    """
-    extra = 1.0 + TANGENTIAL_SHARE * rho if displacement == "free" else 1.0
-    return TAU_FACTOR[displacement] * codim * sigma**2 * weight_sum * extra
 
 
 def hutchinson_trace(apply: Callable[[Array], Array], m: int, probes: int, seed: int = 0) -> float:

@@ -1,4 +1,4 @@
-"""Entry point of a worker process: one process runs one job run, then exits.
+"""Entry point of the embedded queue's worker process: one process runs one job run, then exits.
 
 The process
 
@@ -14,7 +14,8 @@ The process
 3. checks that its run still holds the job (``owner`` + ``attempt``); every progress write and the
    final write are conditional on that too, so a stale run (an orphan on a system without
    ``PDEATHSIG``, a run whose server was presumed dead) can never overwrite a newer run;
-4. runs the job function and records ``succeeded`` (report) or ``failed`` (problem).
+4. runs the job function (:func:`service.jobs.execute.run_function`, with its tiles on local
+   processes) and records ``succeeded`` (report) or ``failed`` (problem).
 
 If it dies without recording (segfault, ``os._exit``, SIGKILL), the server records the crash.
 """
@@ -22,32 +23,30 @@ If it dies without recording (segfault, ``os._exit``, SIGKILL), the server recor
 from __future__ import annotations
 
 import contextlib
-import importlib
-import json
 import multiprocessing
 import multiprocessing.connection
 import os
 import signal
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from service.jobs import problems
 from service.jobs.embedded.store import JobStore
+from service.jobs.execute import RunOptions, run_function, write_report
 from service.jobs.files import JobFiles
 from service.jobs.limits import limit_memory, set_parent_death_signal
 from service.jobs.progress import final_progress
-from service.jobs.runner import JobContext, RunLost
+from service.jobs.runner import RunLost
+from service.jobs.tiles.local import local_tile_map
 
 #: A run that failed for want of space goes back to the queue (not counted as a try) and is
 #: tried again after this many seconds, until space comes back (the job is not failed).
 STORAGE_RETRY_SECONDS = float(os.environ.get("GEOSMOOTH_STORAGE_RETRY_SECONDS") or 30.0)
 
-__all__ = ["RunSpec", "load_runner", "main", "set_parent_death_signal"]
-
+__all__ = ["RunSpec", "main"]
 
 
 @dataclass(frozen=True)
@@ -64,17 +63,6 @@ class RunSpec:
     server_pid: int
     progress_interval: float = 0.2
     memory_limit: int | None = None
-
-
-def load_runner(path: str) -> Callable[[JobContext], dict[str, Any]]:
-    """Import a job function from ``"package.module:function"``."""
-    module_name, _, attr = path.partition(":")
-    if not attr:
-        raise ValueError(f"runner must look like 'module:function', got {path!r}")
-    fn = getattr(importlib.import_module(module_name), attr)
-    if not callable(fn):
-        raise TypeError(f"runner {path!r} is not callable")
-    return fn  # type: ignore[no-any-return]
 
 
 def _alive(pid: int) -> bool:
@@ -148,30 +136,18 @@ def _run(spec: RunSpec, store: JobStore) -> None:
         return store.progress(spec.job_id, spec.owner, spec.attempt, progress)
 
     started = time.perf_counter()
+    options = RunOptions(spec.runner, spec.memory_limit, spec.progress_interval, local_tile_map)
     try:
-        from service.core.params import SmoothingParams
-
         rec = store.get(spec.job_id)
         if rec is None:
             return
         limit_memory(spec.memory_limit)  # threads: set in the forkserver's environment
-        ctx = JobContext(
-            job_id=spec.job_id,
-            job_dir=files.dir(spec.job_id),
-            input_path=files.input(spec.job_id, spec.fmt),
-            fmt=spec.fmt,
-            params=SmoothingParams.model_validate(rec.params),
-            report_progress=report_progress,
-            progress_interval=spec.progress_interval,
-            weld=rec.weld,
-            memory_limit=spec.memory_limit,
-        )
-        report = load_runner(spec.runner)(ctx)
-        ctx.flush_progress()
+        ctx, report = run_function(rec, files.dir(spec.job_id), files.input(spec.job_id, spec.fmt),
+                                   report_progress, options)  # fmt: skip
         elapsed = time.perf_counter() - started
         if not store.owns(spec.job_id, spec.owner, spec.attempt):
             return
-        ctx.write("report.json", json.dumps(report, indent=1, allow_nan=False).encode())
+        write_report(ctx, report)
         store.succeed(spec.job_id, spec.owner, spec.attempt, final_progress(report, elapsed),
                       elapsed)  # fmt: skip
     except RunLost:

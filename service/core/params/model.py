@@ -1,4 +1,5 @@
-"""Smoothing parameters: the one definition the library, CLI, HTTP API and job queue all use."""
+"""The flat :class:`SmoothingParams`: the one definition the library, CLI, HTTP API and job queue
+all use (its typed views per stage: :mod:`service.core.params.groups`)."""
 
 from __future__ import annotations
 
@@ -8,80 +9,39 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
-__all__ = [
-    "MAX_ITERATIONS",
-    "MAX_ITERATIONS_BOUND",
-    "MAX_K",
-    "REPORT_PRESET",
-    "SPECTRUM_MAX_POINTS",
-    "TOLERANCE",
-    "Boundary",
-    "Displacement",
-    "Ends",
-    "Junctions",
-    "LaplacianVariant",
-    "MethodName",
-    "NeighborhoodKind",
-    "NoiseWeights",
-    "Preset",
-    "RobustRule",
-    "SearchName",
-    "SmoothingParams",
-    "SolverName",
-    "Tangential",
-    "TauRule",
-    "WeightScheme",
-]
+from service.core.params.groups import (
+    BudgetParams,
+    DataParams,
+    FinishParams,
+    OperatorParams,
+    ScaleParams,
+    view,
+)
+from service.core.params.names import (
+    MAX_ITERATIONS,
+    MAX_ITERATIONS_BOUND,
+    MAX_K,
+    REPORT_PRESET,
+    SPECTRUM_MAX_POINTS,
+    TOLERANCE,
+    Boundary,
+    Displacement,
+    Ends,
+    Junctions,
+    LaplacianVariant,
+    MethodName,
+    NeighborhoodKind,
+    NoiseWeights,
+    Preset,
+    RobustRule,
+    SearchName,
+    SolverName,
+    Tangential,
+    TauRule,
+    WeightScheme,
+)
 
-LaplacianVariant = Literal["normalized", "curvature", "feature"]
-WeightScheme = Literal["auto", "uniform", "reciprocal", "mean-value", "cotangent"]
-NeighborhoodKind = Literal["knn", "delaunay"]
-# --- core-engine block (search, solver path, method, order) --------------------------------
-SolverName = Literal["auto", "cholmod", "superlu", "cg"]
-SearchName = Literal["auto", "newton", "rational"]
-MethodName = Literal["tikhonov", "windowed-sinc"]
-# --- end core-engine block --------------------------------------------------------------------
-TauRule = Literal["auto", "gcv"]
-RobustRule = Literal["auto", "none", "huber", "tukey"]
-NoiseWeights = Literal["auto", "none", "local"]
-Displacement = Literal["auto", "free", "normal"]
-Tangential = Literal["auto", "off"]
-Preset = Literal["report"]
-Junctions = Literal["corner", "smooth"]
-Ends = Literal["auto", "pulled", "fixed"]
-Boundary = Literal["auto", "ring", "curve"]
-
-# Bounds and defaults written once: the fields below, the API's per-key bounds (their defaults
-# in service.settings) and the defaults of the search functions read them.
-#: Default relative tolerance xi on |phi - tau| / tau (section 6.3).
-TOLERANCE = 1e-3
-#: Default and largest cap on lambda iterations of the tau search.
-MAX_ITERATIONS, MAX_ITERATIONS_BOUND = 50, 500
-#: Largest neighbours per point (k-NN with k = 64 already gives ~4000 entries per row of L^T L).
-MAX_K = 64
-#: Largest input (free points) for which the dense SVD of the spectral view is computed.
-SPECTRUM_MAX_POINTS = 3000
-
-#: ``preset="report"``: the choices of report TW 451, for every field the caller does not give.
-REPORT_PRESET: dict[str, Any] = {
-    "laplacian": "normalized",
-    "weights": "auto",
-    "neighborhood": "delaunay",
-    "k": 12,
-    "robust": "none",
-    "noise_weights": "none",
-    "displacement": "free",
-    "tangential": "off",
-    "presmooth": 0,
-    "junctions": "smooth",
-    "ends": "pulled",
-    "boundary": "ring",
-    "order": 1,
-    "method": "tikhonov",
-    "search": "rational",
-    "solver": "cholmod",
-}
-
+__all__ = ["SmoothingParams"]
 
 class SmoothingParams(BaseModel):
     """Parameters of one smoothing run (report sections 2, 4, 6 and 8).
@@ -406,3 +366,28 @@ class SmoothingParams(BaseModel):
         if isinstance(self.tau, float):
             return "tau"
         return "gcv" if self.tau == "gcv" else "auto"
+
+    @property
+    def operator(self) -> OperatorParams:
+        """The operator group (what the Laplacian depends on; the operator cache's key)."""
+        return view(self, OperatorParams)
+
+    @property
+    def budget(self) -> BudgetParams:
+        """The budget group: target, lambda search, solver path, order, max-norm bound."""
+        return view(self, BudgetParams)
+
+    @property
+    def data(self) -> DataParams:
+        """The data-weights group (robust and per-point noise weights)."""
+        return view(self, DataParams)
+
+    @property
+    def finish(self) -> FinishParams:
+        """The finishing group (tangential step, volume, clipping, checks, spectrum)."""
+        return view(self, FinishParams)
+
+    @property
+    def scale(self) -> ScaleParams:
+        """The scale group (tiles, fixed boundary, displacement mode)."""
+        return view(self, ScaleParams)

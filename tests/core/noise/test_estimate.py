@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from service.core import Geometry
-from service.core.search.noise import estimate_noise, log_mode, patch_variances
+from service.core.noise.estimate import estimate_noise, log_mode, patch_variances
 from tests.core.core_fixtures import polyline_edges
 
 

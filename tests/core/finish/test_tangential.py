@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from service.core import Geometry, SmoothingParams, smooth
-from service.core.system import tangential as tg
+from service.core.finish import tangential as tg
 from tests.core.core_fixtures import grid_mesh
 
 UP = np.array([0.0, 0.0, 1.0])

@@ -16,8 +16,9 @@ from :func:`rq_tiles`. Each call is one round of tiles:
    that tile (alone) itself; the others keep their results.
 
 Cancel: a tile's horse is stopped by its worker's heartbeat when the job is no longer running
-(:mod:`.worker`), and queued tiles of a finished job do nothing. Redis carries per tile one RQ
-job, a claim and its renewals, and one list entry; the blobs carry the tiles' points.
+(:mod:`service.jobs.distributed.worker`), and queued tiles of a finished job do nothing. Redis
+carries per tile one RQ job, a claim and its renewals, and one list entry; the blobs carry the
+tiles' points.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import uuid
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from service.jobs.distributed.backend import worker_config
 from service.jobs.files import write_durable
 from service.jobs.limits import set_parent_death_signal
 from service.jobs.queue import JobStatus
@@ -44,16 +46,13 @@ if TYPE_CHECKING:
 __all__ = ["TILE_TASK", "rq_tiles", "run_tile"]
 
 T = TypeVar("T")
-TILE_TASK = "service.jobs.tiles.rq.run_tile"
+TILE_TASK = "service.jobs.distributed.tiles.run_tile"
 #: Seconds between two checks for tiles nobody holds (claims expired, or never taken).
 SCAN_INTERVAL = 0.5
 
 
 def _backend() -> Backend:
-    from service.jobs.distributed.backend import WorkerConfig as _Config
-
-    assert _Config.backend is not None, "tiles run in a geosmooth worker"
-    return _Config.backend
+    return worker_config().backend
 
 
 def _key(backend: Backend, job_id: str, name: str) -> str:
@@ -116,8 +115,6 @@ def _run_one(backend: Backend, job_id: str, name: str, owner: str,
 def run_tile(job_id: str, name: str) -> None:
     """The RQ task of one tile (in a work horse): nothing if the job no longer runs or the
     tile is held or done elsewhere."""
-    from service.jobs.distributed.backend import WorkerConfig as _Config
-
     set_parent_death_signal()
     backend = _backend()
     rec = backend.store.get(job_id)
@@ -125,7 +122,7 @@ def run_tile(job_id: str, name: str) -> None:
         return
     from service.jobs.limits import limit_memory
 
-    limit_memory(_Config.memory_limit)
+    limit_memory(worker_config().memory_limit)
     _run_one(backend, job_id, name, f"{socket.gethostname()} pid {os.getpid()}")
 
 
@@ -133,7 +130,8 @@ def run_tile(job_id: str, name: str) -> None:
 def rq_tiles(
     job_id: str, on_tile: Callable[[], None] | None, counter: TileCounter
 ) -> Iterator[Callable[[Callable[..., T], list[tuple[Any, ...]]], list[T]]]:
-    """A ``run_map`` whose tiles run as RQ jobs (module docstring)."""
+    """A ``run_map`` whose tiles run as RQ jobs (module docstring): the
+    :data:`~service.jobs.tiles.TileMap` the RQ task gives its job function."""
     backend = _backend()
     owner = f"{socket.gethostname()} pid {os.getpid()} (coordinator)"
 

@@ -1,0 +1,31 @@
+"""The record the finish stage returns (:func:`service.core.pipeline.finish`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.core.finish.tangential import TangentialStep
+
+__all__ = ["Finished"]
+
+
+@dataclass(frozen=True)
+class Finished:
+    """The final points and what the finishing steps did.
+
+    Attributes
+    ----------
+    X : ndarray, shape (n, s)
+        The points in the input's frame.
+    volume_scale : float or None
+        The rescaling about the centroid that kept the volume or area (sections 8-9).
+    tangential : TangentialStep or None
+        The tangential step of normal displacement on meshes, when it applies.
+    """
+
+    X: NDArray[np.float64]
+    volume_scale: float | None = None
+    tangential: TangentialStep | None = None

@@ -1,0 +1,187 @@
+"""The :class:`Problem` of a run: what every analysis sets up before lambda, and the frame
+conversions of tau, phi and lambda into and out of the internal frame (:mod:`.frame`).
+
+:func:`prepare`: neighbourhoods and ``L`` (report section 4) -> the free points (fixed ones
+eliminated, section 8) -> data weights -> the smoothing system of the chosen displacement mode
+(eq. 4, or its normal-only form), in the internal frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from service.core.errors import ParameterError
+from service.core.finish.volume import check_preservable
+from service.core.frame import Frame
+from service.core.geometry import Geometry
+from service.core.noise.robust import DataWeights, data_weights
+from service.core.operator.build import SmoothingOperator, build_operator, operator_key
+from service.core.params import SmoothingParams
+from service.core.params.groups import OperatorParams, field_names
+from service.core.system.deviation import SmoothingSystem
+from service.core.system.displacement import auto_system, normal_mode
+from service.core.system.elimination import laplacian_system
+
+__all__ = ["Problem", "free_set", "prepare", "smoothing_system"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a run sets up before lambda (the opening every analysis shares).
+
+    Attributes
+    ----------
+    geometry : Geometry
+        With the data weights ``omega_i`` applied (issue 21).
+    params : SmoothingParams
+        The plan's (``"auto"`` choices resolved), with the displacement actually used.
+    op : SmoothingOperator
+        Neighbourhoods, weights, ``L`` (sections 2-4).
+    fixed : ndarray of bool, shape (n,)
+        Points eliminated from the system (section 8), see :func:`free_set`.
+    n_fixed : int
+        Points fixed by the input or ``fix_boundary``.
+    frame : Frame
+        The internal frame, weighted by the free points' ``omega``.
+    system : SmoothingSystem
+        Eq. (4) (or the normal-displacement system) in that frame.
+    to_points : callable
+        From the system's solution ``U`` to the free points (still in the frame).
+    weights : DataWeights or None
+        The robust and noise data weights, when any apply.
+    """
+
+    geometry: Geometry
+    params: SmoothingParams
+    op: SmoothingOperator
+    fixed: NDArray[np.bool_]
+    n_fixed: int
+    frame: Frame
+    system: SmoothingSystem
+    to_points: Callable[[Array], Array]
+    weights: DataWeights | None = None
+
+    def tau_in(self, tau: float) -> float:
+        """A budget of the input in the internal frame: ``tau / (s w)^2``."""
+        return self.frame.tau_in(tau)
+
+    def phi_out(self, phi: float) -> float:
+        """A deviation of the internal frame in the input's numbers: ``(s w)^2 phi``."""
+        return self.frame.phi_out(phi)
+
+    def lam_in(self, lam: float) -> float:
+        """``lambda' = lambda w^2 s^(2p)``."""
+        return self.frame.lam_in(lam)
+
+    def lam_out(self, lam: float) -> float:
+        """The input's lambda of an internal ``lambda'``."""
+        return self.frame.lam_out(lam)
+
+    def points(self, U: Array) -> Array:
+        """The input's points with the free ones moved to the solution ``U`` of the system."""
+        X = self.geometry.points.copy()
+        X[~self.fixed] = self.frame.back(self.to_points(U))
+        return X
+
+
+def prepare(
+    geometry: Geometry,
+    params: SmoothingParams,
+    requested: str,
+    *,
+    operator: SmoothingOperator | None = None,
+    notes: list[str] | None = None,
+) -> Problem:
+    """Neighbourhoods and ``L`` -> free points -> data weights -> the system of the mode.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    params : SmoothingParams
+        The plan's (:attr:`service.core.plan.Plan.params`: displacement resolved).
+    requested : str
+        The displacement the caller asked for (``"auto"`` may fall back to free displacement
+        for an input already smooth across itself, :func:`auto_system`).
+    operator : SmoothingOperator, optional
+        Built for this geometry and operator group (reuse across tau).
+    notes : list of str, optional
+        Collects what the caller should be told (e.g. ``fix_boundary`` without a boundary).
+    """
+    op = _operator(geometry, params, operator)
+    fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes)
+    geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
+    if weights is not None and notes is not None:
+        notes.extend(weights.notes)
+    frame = op.frame.weighted(geometry.omega()[~fixed])
+    params, system, to_points = auto_system(
+        params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
+    )
+    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points, weights)
+
+
+def _operator(
+    geometry: Geometry, params: SmoothingParams, operator: SmoothingOperator | None
+) -> SmoothingOperator:
+    if operator is None:
+        return build_operator(geometry, params)
+    if operator.key != operator_key(geometry, params):
+        raise ParameterError(
+            "the operator was built for another geometry or other build parameters "
+            f"({', '.join(field_names(OperatorParams))})",
+            field="operator",
+        )
+    return operator
+
+
+def free_set(
+    geometry: Geometry, op: SmoothingOperator, params: SmoothingParams, notes: list[str]
+) -> tuple[NDArray[np.bool_], int]:
+    """Points eliminated from the system: fixed ones (section 8) and uncoupled ones.
+
+    Returns
+    -------
+    fixed : ndarray of bool, shape (n,)
+        Given fixed points, the boundary with ``fix_boundary``, and points without any
+        coupling in ``L`` (they pass through bit-identical).
+    n_fixed : int
+        Points fixed by the input or ``fix_boundary``.
+    """
+    nb = op.neighborhoods
+    fixed = geometry.fixed_mask()
+    if params.fix_boundary:
+        if nb.source == "knn":
+            notes.append("fix_boundary has no effect on k-NN neighbourhoods (no boundary defined)")
+        fixed = fixed | nb.boundary
+    if params.preserve_volume:
+        check_preservable(geometry, fixed)
+    L = op.L
+    coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
+    pinned = op.pinned if op.pinned is not None else False  # open-curve ends (issue 21)
+    return fixed | ~coupled | pinned, int(fixed.sum())
+
+
+def smoothing_system(
+    geometry: Geometry,
+    op: SmoothingOperator,
+    fixed: NDArray[np.bool_],
+    frame: Frame,
+    params: SmoothingParams,
+) -> tuple[SmoothingSystem, Callable[[Array], Array]]:
+    """The system of the selected mode, in the internal frame (the mode dispatch point), and
+    the map from its solution ``U`` to the free points.
+
+    ``free`` displacement: eq. (4) with the fixed points eliminated
+    (:func:`~service.core.system.elimination.laplacian_system`); ``normal``: one unknown per normal
+    direction of each point (:func:`~service.core.system.displacement.normal_mode`).
+    """
+    P = frame.points(geometry.points)
+    omega = geometry.omega() / frame.weight_scale
+    if params.displacement == "normal":
+        return normal_mode(geometry, op.L, op.neighborhoods, P, omega, fixed)
+    return laplacian_system(op.L, P, omega, fixed), lambda U: U

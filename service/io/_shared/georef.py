@@ -1,0 +1,166 @@
+"""Georeference of geographic input (GPX, GeoJSON) written to a projected format.
+
+Longitude/latitude are smoothed in metres in the local east/north/up frame about the data's
+centre (:mod:`.geo`). Written to a format that holds no longitude/latitude (PLY, OBJ, DXF, LAS,
+...), the result is either
+
+* **the local frame** (default): metres east/north/up of the origin ``(lon0, lat0)`` on the
+  WGS84 ellipsoid (height 0), i.e. the PROJ pipeline
+  ``+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step +proj=cart
+  +ellps=WGS84 +step +proj=topocentric +ellps=WGS84 +lon_0=.. +lat_0=.. +h_0=0`` applied to
+  (longitude, latitude, ellipsoidal height); or
+* **a projected CRS** (writer option ``crs``: an EPSG code such as ``32633`` / ``"EPSG:32633"``,
+  or ``"utm"`` for the UTM zone of the data's centre): easting, northing (pyproj, from WGS84
+  longitude/latitude) and the elevation as read (0 without elevations).
+
+The frame is recorded where the format holds one (:class:`Georef`): LAS/LAZ a WKT VLR (LAS 1.4,
+point format 6/7; the local frame as an engineering CRS whose remark holds the pipeline), DXF the
+``$LATITUDE``/``$LONGITUDE`` header variables of the origin plus custom properties
+``CRS`` and ``CRS_FRAME``, PLY/OBJ header comments (and geosmooth JSON's ``comments``). XYZ, OFF,
+PCD, E57 and glTF record nothing (no comment or CRS field geosmooth writes there yet).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from service.io._shared.geo import LocalFrame
+    from service.io._shared.plain import PlainDocument
+    from service.io.document import GeometryDocument
+    from service.io.registry import Format
+
+__all__ = ["CrsOption", "Georef", "georeference", "utm_epsg"]
+
+CrsOption = str | int | None
+
+
+@dataclass(frozen=True)
+class Georef:
+    """The frame of written coordinates.
+
+    Attributes
+    ----------
+    crs : str
+        ``"EPSG:<code>"`` of a projected CRS, or ``"local"`` (east/north/up about the origin).
+    origin : tuple of float
+        Longitude, latitude (degrees) and ellipsoidal height (m) of the local frame's origin.
+    name : str
+        The CRS's name (``"WGS 84 / UTM zone 33N"``) or a description of the local frame.
+    """
+
+    crs: str
+    origin: tuple[float, float, float]
+    name: str
+
+    @property
+    def pipeline(self) -> str:
+        """PROJ pipeline from (lon, lat, h) in degrees/metres to local east/north/up."""
+        lon0, lat0, h0 = self.origin
+        return (
+            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step +proj=cart"
+            f" +ellps=WGS84 +step +proj=topocentric +ellps=WGS84 +lon_0={lon0!r}"
+            f" +lat_0={lat0!r} +h_0={h0!r}"
+        )
+
+    def lines(self) -> list[str]:
+        """Header comment lines stating the frame (PLY, OBJ, JSON)."""
+        lon0, lat0, _ = self.origin
+        if self.crs != "local":
+            return [f"crs {self.crs} ({self.name}); smoothed about lon {lon0!r} lat {lat0!r}"]
+        return [
+            f"crs local east/north/up metres about lon {lon0!r} lat {lat0!r} (WGS 84 ellipsoid,"
+            " height 0)",
+            f"crs_pipeline {self.pipeline}",
+        ]
+
+    def wkt(self) -> str:
+        """WKT of the CRS (an engineering CRS for the local frame; needs pyproj for EPSG)."""
+        if self.crs != "local":
+            import pyproj
+
+            return str(pyproj.CRS.from_user_input(self.crs).to_wkt())
+        metre = 'LENGTHUNIT["metre",1]'
+        axes = ",".join(
+            f'AXIS["{a}",{d},ORDER[{i}],{metre}]'
+            for i, (a, d) in enumerate((("E", "east"), ("N", "north"), ("U", "up")), start=1)
+        )
+        return (
+            f'ENGCRS["{self.name}",EDATUM["topocentric origin lon {self.origin[0]!r} lat '
+            f'{self.origin[1]!r} h 0 on WGS 84"],CS[Cartesian,3],{axes},'
+            f'REMARK["{self.pipeline}"]]'
+        )
+
+
+def utm_epsg(lon: float, lat: float) -> int:
+    """EPSG code of the WGS84 UTM zone holding ``(lon, lat)`` (326zz north, 327zz south)."""
+    zone = int(np.floor((lon + 180.0) / 6.0)) % 60 + 1
+    return (32600 if lat >= 0 else 32700) + zone
+
+
+def _target(option: CrsOption, frame: LocalFrame) -> str:
+    """``"EPSG:<code>"`` of the ``crs`` option (``ValueError`` for anything else)."""
+    text = str(option).strip()
+    if text.lower() == "utm":
+        return f"EPSG:{utm_epsg(frame.lon0, frame.lat0)}"
+    code = text.upper().removeprefix("EPSG:")
+    if not code.isdigit():
+        raise ValueError(
+            f"crs must be an EPSG code (e.g. 32633 or 'EPSG:32633') or 'utm', got {option!r}"
+        )
+    return f"EPSG:{int(code)}"
+
+
+def _project(target: str, lon: Any, lat: Any, ele: Any) -> tuple[Any, str]:
+    import pyproj
+
+    try:
+        crs = pyproj.CRS.from_user_input(target)
+    except pyproj.exceptions.CRSError:
+        raise ValueError(f"crs {target} is not a CRS pyproj knows") from None
+    if not crs.is_projected:
+        raise ValueError(f"crs {target} ({crs.name}) is not a projected CRS")
+    to = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    x, y = to.transform(lon, lat)
+    z = np.zeros_like(lon) if ele is None else ele
+    pts = np.column_stack([x, y, z])
+    if not np.isfinite(pts).all():
+        raise ValueError(f"crs {target} ({crs.name}) cannot hold these points (outside its area)")
+    return pts, str(crs.name)
+
+
+def georeference(
+    doc: GeometryDocument, spec: Format, plain: PlainDocument, option: CrsOption
+) -> PlainDocument:
+    """``plain`` with its frame recorded, and projected to the ``crs`` option if given.
+
+    Raises
+    ------
+    ValueError
+        ``crs`` given for input that is not geographic, for a longitude/latitude output, or not
+        a projected EPSG CRS.
+    """
+    from service.io.holds import same_family
+
+    geo = getattr(doc.layout, "frame", None)
+    frame = getattr(geo, "frame", None)
+    if option is not None and (frame is None or spec.geographic_only or same_family(doc, spec)):
+        where = "longitude/latitude" if spec.geographic_only else "planar coordinates"
+        raise ValueError(
+            "crs applies to geographic input (GPX, GeoJSON) written to a projected format;"
+            f" this {spec.title} output gets {where}"
+        )
+    if frame is None or spec.geographic_only or same_family(doc, spec):
+        return plain
+    assert geo is not None
+    origin = (frame.lon0, frame.lat0, 0.0)
+    if option is None:
+        name = "geosmooth local east/north/up metres"
+        return replace(plain, georef=Georef("local", origin, name))
+    target = _target(option, frame)
+    lon, lat, ele = geo.back(plain.points)
+    pts, name = _project(target, lon, lat, ele)
+    return replace(plain, points=pts, normals=None, georef=Georef(target, origin, name))

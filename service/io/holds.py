@@ -1,0 +1,109 @@
+"""What an output format holds of a document, and the notes naming what it does not.
+
+:func:`input_kinds` says what writing a document needs (faces, lines, points); a format that
+holds points (``"cloud"`` in its registry ``kinds``) but not the input's faces or lines writes
+the vertices as points, with a note (:func:`dropped_kinds`), as PDAL and CloudCompare do;
+:func:`output_notes` names every attribute the output cannot hold (colours, extra columns,
+texture coordinates) and where georeferenced input goes.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from service.io.document import GeometryDocument
+    from service.io.registry import Format
+
+__all__ = [
+    "dropped_kinds",
+    "input_kinds",
+    "is_geographic",
+    "output_notes",
+    "same_family",
+    "uv_count",
+]
+
+_LOST = {"mesh": "faces", "polyline": "lines"}
+
+
+def input_kinds(doc: GeometryDocument) -> frozenset[str]:
+    """What writing ``doc`` needs: ``"mesh"`` (faces), ``"polyline"`` (edges), else ``"cloud"``."""
+    g = doc.geometry
+    kinds = set()
+    if g.faces is not None and len(g.faces):
+        kinds.add("mesh")
+    if g.edges is not None and len(g.edges):
+        kinds.add("polyline")
+    return frozenset(kinds or {"cloud"})
+
+
+def same_family(doc: GeometryDocument, spec: Format) -> bool:
+    """Whether the writer gets the input's own layout (the file written back in its format)."""
+    source = doc.source_format
+    return source == spec.name or {source, spec.name} == {"las", "laz"}
+
+
+def dropped_kinds(doc: GeometryDocument, spec: Format) -> list[str]:
+    """Connectivity ``spec`` writes without: the input's faces/lines when it holds points only.
+
+    Empty when ``spec`` holds all of the input, or when it holds no points either (then the
+    output is refused, see :func:`service.io.dispatch.check_output`).
+    """
+    if same_family(doc, spec) or "cloud" not in spec.kinds:
+        return []
+    return sorted(k for k in input_kinds(doc) - spec.kinds if k != "cloud")
+
+
+def is_geographic(doc: GeometryDocument) -> bool:
+    """Whether ``doc`` holds longitude/latitude read from a geographic format (GPX, GeoJSON)."""
+    frame = getattr(doc.layout, "frame", None)
+    if frame is None or not hasattr(frame, "back"):
+        return False
+    if frame.frame is not None or doc.source_format == "gpx":
+        return True
+    from service.io.formats.geojson import _geographic
+
+    pts = doc.geometry.points
+    return pts.shape[1] >= 2 and _geographic(doc.layout.obj, pts[:, 0], pts[:, 1], None)  # type: ignore[attr-defined]
+
+
+def uv_count(doc: GeometryDocument) -> int:
+    """Texture coordinates of an OBJ input (its ``vt`` lines; glTF's are the ``uv`` attribute,
+    named with the other attributes)."""
+    data = getattr(doc.layout, "data", None)
+    if doc.source_format != "obj" or not isinstance(data, bytes):
+        return 0
+    return data.count(b"\nvt ") + data.startswith(b"vt ")
+
+
+def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) -> list[str]:
+    """The reader's notes that stay true for a file written in ``fmt``, and what it drops
+    (``crs``: the writer option of :func:`service.io.write_geometry`)."""
+    from service.io.registry import get_format
+
+    spec = get_format(fmt)
+    if same_family(doc, spec):
+        return list(doc.notes)
+    lost = [name for name in doc.attributes if not spec.keeps(name)]
+    notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
+    if lost:
+        notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
+    from service.io._shared.texture import keeps_uv
+
+    uvs = uv_count(doc)
+    if uvs and not keeps_uv(doc, spec.name):
+        notes.append(f"{spec.title} output keeps no texture coordinates: {uvs} UVs not written")
+    dropped = dropped_kinds(doc, spec)
+    if dropped:
+        what = " or ".join(_LOST[k] for k in dropped)
+        notes.append(f"{spec.title} keeps no {what}: wrote the {doc.n_output} vertices as points")
+    frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
+    if frame is not None and not spec.geographic_only and crs is not None:
+        notes.append(f"{spec.title} gets easting/northing in crs {crs}, not longitude/latitude")
+    elif frame is not None and not spec.geographic_only:  # metres about the data's centre
+        notes.append(
+            f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
+            " not longitude/latitude (write GPX or GeoJSON to keep them)"
+        )
+    return notes
