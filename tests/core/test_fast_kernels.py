@@ -7,11 +7,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
+from service.core.noise import fast_weights, robust
+from service.core.noise.estimate import estimate_noise
+from service.core.noise.fast_fits import leave_one_out as fast_loo
+from service.core.noise.pointfits import leave_one_out
 from service.core.operator import knn as knn_module
-from service.core.search import fast_weights, robust
-from service.core.search.fast_fits import leave_one_out as fast_loo
-from service.core.search.noise import estimate_noise
-from service.core.search.pointfits import leave_one_out
 
 
 def _sphere(n: int, noise: float, seed: int = 0) -> np.ndarray:
@@ -55,7 +55,6 @@ def test_surface_fits_agree_with_numpy() -> None:
 
 
 def test_data_weight_factors_agree(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(fast_weights, "GRID_FROM", 100)
     monkeypatch.setattr(knn_module, "GRID_FROM", 100)
     g = _icosphere(5, 0.002)
     P = g.points.copy()
@@ -64,8 +63,12 @@ def test_data_weight_factors_agree(monkeypatch: pytest.MonkeyPatch) -> None:
     P[out] += rng.normal(0, 0.05, (out.size, 3))
     g = Geometry(P, faces=g.faces)
     estimate_noise(g)
-    a = getattr(robust, "_factors")(g, "auto", "auto")  # noqa: B009
-    b = fast_weights.factors(g, "auto", "auto")
+    factors = getattr(robust, "_factors")  # noqa: B009
+    monkeypatch.setattr(fast_weights, "COMPILED_FROM", 10**9)
+    a = factors(g, "auto", "auto")  # the NumPy path
+    monkeypatch.setattr(fast_weights, "COMPILED_FROM", 100)
+    assert fast_weights.neighbours(g) is not None
+    b = factors(g, "auto", "auto")
     assert a is not None and b is not None
     np.testing.assert_allclose(b[0], a[0], rtol=1e-9, atol=1e-12)
     np.testing.assert_array_equal(b[1], a[1])
@@ -92,12 +95,14 @@ def test_closed_form_normals_agree(monkeypatch: pytest.MonkeyPatch) -> None:
     from service.core.operator.build import build_operator
     from service.core.params import SmoothingParams
     from service.core.system import displacement
-    from service.core.system.fast_frames import surface_normals
 
     g = _icosphere(4, 0.003)
     A = build_operator(g, SmoothingParams()).neighborhoods.adjacency
-    ref = getattr(displacement, "_frames")(g.points, A, 1, 12, 5, None)  # noqa: B009
-    got = surface_normals(g.points, A, 12, 5)
-    assert got is not None and got.shape == ref.shape
+    frames = getattr(displacement, "_frames")  # noqa: B009
+    ref = frames(g.points, A, 1, 12, 5, None)
+    monkeypatch.setattr(displacement, "COMPILED_FRAMES_FROM", 100)
+    monkeypatch.setattr(knn_module, "GRID_FROM", 100)
+    got = frames(g.points, A, 1, 12, 5, None)
+    assert got.shape == ref.shape
     cos = np.abs(np.einsum("ns,ns->n", ref[:, :, 0], got[:, :, 0]))
     assert np.all(cos > 1 - 1e-12)

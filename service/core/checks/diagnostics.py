@@ -115,7 +115,24 @@ def diagnostics(
         noise_found=None if params.tau_rule != "auto" else bool(target.sigma),
         **_data_weights(weights),
         tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
+        output_deviation=(
+            None if dev is None else _output_deviation(geometry, moved, phi, fin, frame)
+        ),
     )
+
+
+def _output_deviation(
+    geometry: Geometry, moved: Array, phi: float, fin: Finished, frame: Frame
+) -> dict[str, float]:
+    """What the output is (issue 30): its own deviation ``||D (X - P)||_F^2`` (input frame, the
+    run's weights ``omega``) first, then its parts: the Tikhonov solve's ``phi`` at the
+    reported lambda (eq. 15), the tangential step's ``psi`` (moves orthogonal to the normal
+    solve's, so the two add), and the rest (outliers placed by eq. 4 without their data weight,
+    volume rescaling, clipping)."""
+    w2 = geometry.omega() ** 2
+    total = float(np.sum(w2 * np.einsum("ij,ij->i", moved, moved)))
+    psi = 0.0 if fin.tangential is None else float(fin.tangential.psi * frame.phi_factor)
+    return {"total": total, "tikhonov": phi, "tangential": psi, "other": total - phi - psi}
 
 
 def _shape(

@@ -40,7 +40,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.stats import chi2, poisson
 
 from service.core.geometry import Geometry
-from service.core.noise.estimate import estimate_noise, manifold_dim
+from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
 
@@ -149,7 +149,17 @@ def _factors(
 ) -> tuple[Array, Array, NDArray[np.int64], str, bool, float] | None:
     """``rho``, ``sigma_i / sigma``, the outliers, the robust rule applied, whether the noise
     weights apply and the spread; coincident points (split normals, repeated scans) are
-    measured once (a copy among the neighbours fits the point exactly), as a cloud."""
+    measured once (a copy among the neighbours fits the point exactly), as a cloud.
+
+    Surfaces in 3-D from :data:`~service.core.noise.fast_weights.COMPILED_FROM` points take the
+    compiled kernels (issue 30: the grid ``k``-NN, whose distances also tell coincident points,
+    the fits and the isolation pass; same rules, same numbers to rounding).
+    """
+    from service.core.noise import fast_weights
+
+    fast = fast_weights.neighbours(geometry)
+    if fast is not None:
+        return _from_neighbours(geometry, *fast, robust, uneven, compiled=True)
     P = geometry.points
     uniq, inv = np.unique(P, axis=0, return_inverse=True)
     if uniq.shape[0] < geometry.n:
@@ -167,7 +177,18 @@ def _factors(
     if est is None or not est.noise_found or geometry.dim - d < 1:
         return None
     nbr = point_neighbours(geometry, est.k, d, est.neighbours)
-    r, v = leave_one_out(P, nbr, d)
+    return _from_neighbours(geometry, est, d, nbr, robust, uneven, compiled=False)
+
+
+def _from_neighbours(
+    geometry: Geometry, est: NoiseEstimate, d: int, nbr: NDArray[np.int64], robust: str,
+    uneven: str, compiled: bool,
+) -> tuple[Array, Array, NDArray[np.int64], str, bool, float]:  # fmt: skip
+    """:func:`_factors` from each point's neighbours (row ``i``: ``i`` first)."""
+    from service.core.noise import fast_fits, fast_weights
+
+    P = geometry.points
+    r, v = (fast_fits.leave_one_out if compiled else leave_one_out)(P, nbr, d)
     c = geometry.dim - d
     nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
     s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
@@ -181,7 +202,7 @@ def _factors(
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
     ratio = np.clip(ratio, 0.05, 20.0)
     s2 = (est.sigma * ratio) ** 2
-    far = isolated(geometry, nbr, np.sqrt(s2))
+    far = (fast_weights.isolated if compiled else isolated)(geometry, nbr, np.sqrt(s2))
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )

@@ -5,36 +5,33 @@ variance of the ``k`` nearest neighbours after :data:`~.displacement.FRAME_STEPS
 steps) with two costs replaced for one normal direction in 3-D: the neighbours come from the
 exact grid search :func:`service.core.operator.knn.knn` instead of a k-d tree, and the normal
 from the closed-form eigenvalues of each 3 x 3 covariance and the largest cross product of two
-rows of ``C - mu_3 I`` (:func:`service.core.search.fast_fits._eig3`) instead of a batched
+rows of ``C - mu_3 I`` (:func:`service.core.noise.fast_fits._eig3`) instead of a batched
 ``eigh``. The sign of a normal is arbitrary on both paths (the normal system is invariant
 under ``n_i -> -n_i``: ``t_i`` changes sign, ``p_i + n_i t_i`` does not); directions agree to
-rounding (tests). Other cases, and frames at a subset of the points, take the general path.
+rounding (tests). :func:`service.core.system.displacement.normal_frames` takes this path for
+one normal direction in 3-D at every point, from
+:data:`~service.core.system.displacement.COMPILED_FRAMES_FROM` points (the averaging steps are
+its own).
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 from numpy.typing import NDArray
 
+from service.core.noise.fast_fits import _eig3
 from service.core.operator.knn import knn
-from service.core.operator.laplacian import presmooth
-from service.core.search.fast_fits import _eig3
 
 __all__ = ["surface_normals"]
 
 Array = NDArray[np.float64]
 
 
-def surface_normals(
-    points: Array, adjacency: sp.csr_matrix, k: int, steps: int
-) -> NDArray[np.float64] | None:
-    """Frames ``(n, 3, 1)`` of every point of a surface in 3-D, or ``None`` for other
-    inputs (the caller's general path)."""
-    if points.shape[1] != 3:
-        return None
-    X = np.ascontiguousarray(presmooth(points, adjacency, steps), dtype=np.float64)
+def surface_normals(X: Array, k: int) -> NDArray[np.float64]:
+    """Frames ``(n, 3, 1)`` of every point of the (averaged) surface points ``X`` in 3-D: the
+    least-variance direction of each point's ``k`` nearest (itself included)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
     _, idx = knn(X, min(k, X.shape[0]))
     return _normals(X, np.ascontiguousarray(idx, dtype=np.int64))[:, :, None]
 

@@ -1,20 +1,16 @@
-"""The data weights' factors with compiled kernels (issue 30; same rules as :mod:`.robust`).
+"""Compiled pieces of the data weights for surfaces in 3-D (issue 30; the rules are
+:mod:`.robust`'s).
 
-:func:`factors` returns what ``robust._factors`` returns (``rho``, ``sigma_i / sigma``, the
-outliers, the rule applied, whether the noise weights apply, the spread), computed the same way
-for surfaces in 3-D with three costs replaced:
+* :func:`neighbours`: each point's ``k`` nearest by the exact grid search of
+  :func:`service.core.operator.knn.knn` instead of a k-d tree; its distances tell coincident
+  points (a zero distance to the second neighbour), which :mod:`.robust` otherwise looks for with
+  ``np.unique(points, axis=0)`` on every run (inputs with coincident points keep that path);
+* :func:`isolated`: :func:`service.core.noise.robust.isolated` in one compiled pass (the mean
+  distances, their neighbourhood medians, the graph neighbours' coordinate-wise medians);
+* the leave-one-out fits are :func:`service.core.noise.fast_fits.leave_one_out`.
 
-* neighbours: the exact grid ``k``-NN of :func:`service.core.operator.knn.knn` instead of a k-d
-  tree, and coincident points detected from its distances (a zero distance to the second
-  neighbour) instead of ``np.unique(points, axis=0)`` on every run (inputs with coincident points
-  take the NumPy path, which measures them once);
-* the leave-one-out fits: :func:`service.core.search.fast_fits.leave_one_out`;
-* isolated points: one compiled pass (:func:`isolated`) for the mean distances, their
-  neighbourhood medians and the graph neighbours' coordinate-wise medians.
-
-Everything else (the calibration, outlier flags and refits, ``sigma_i``, the rules) is
-:mod:`.robust`'s own code. Other inputs (curves, other dimensions, small inputs) take the
-NumPy path unchanged.
+Measured (164K icosphere, one thread): the factors 2.4-2.9 s -> 0.65 s; 1M torus 12.4 s ->
+see ``benchmarks/speed/results``. Same decisions as the NumPy path (tests).
 """
 
 from __future__ import annotations
@@ -25,59 +21,36 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from service.core.geometry import Geometry
+from service.core.noise import robust
+from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
 from service.core.operator.knn import GRID_FROM, knn
-from service.core.search import robust
-from service.core.search.fast_fits import leave_one_out
-from service.core.search.noise import estimate_noise, manifold_dim
 
-__all__ = ["factors", "isolated"]
+__all__ = ["COMPILED_FROM", "isolated", "neighbours"]
 
 Array = NDArray[np.float64]
-Factors = tuple[Array, Array, NDArray[np.int64], str, bool, float]
+#: Points from which surfaces in 3-D take the compiled path (below, the NumPy path is as fast
+#: and small inputs load no compiled code).
+COMPILED_FROM = GRID_FROM
 
 
-def factors(geometry: Geometry, rule: str, uneven: str) -> Factors | None:
-    """``robust._factors(geometry, rule, uneven)`` with the compiled kernels (module
-    docstring)."""
-    P = geometry.points
-    fallback = getattr(robust, "_factors")  # noqa: B009 (the NumPy path, same answers)
-    if geometry.n < GRID_FROM or geometry.dim != 3:
-        return fallback(geometry, rule, uneven)
+def neighbours(geometry: Geometry) -> tuple[NoiseEstimate, int, NDArray[np.int64]] | None:
+    """The noise estimate, the manifold dimension and each point's ``k + 1`` nearest (itself
+    first) for the compiled path; ``None`` when it does not apply (small, not a surface in 3-D,
+    no noise found, coincident points)."""
+    if geometry.n < COMPILED_FROM or geometry.dim != 3:
+        return None
     est = estimate_noise(geometry)
     d = manifold_dim(geometry)
     if est is None or not est.noise_found or d != 2:
-        return fallback(geometry, rule, uneven)
-    dist, nbr = knn(P, est.k + 1)
-    if np.any(dist[:, 1] == 0.0):  # coincident points: measured once on the NumPy path
-        return fallback(geometry, rule, uneven)
-    r, v = leave_one_out(P, nbr, d)
-    c = geometry.dim - d
-    nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
-    s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
-    _, r, v = robust.flag_outliers(P, nbr, d, r, v, s2, nu)
-    sig = robust.local_sigma(v, nbr, nu)
-    finite = np.isfinite(sig) & (sig > 0)
-    spread = (
-        float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() else 0.0
-    )
-    clean = est.scale_ratio is None or est.scale_ratio <= robust.SHAPE_FREE
-    use_uneven = uneven == "local" or (uneven == "auto" and spread > robust.SPREAD and clean)
-    ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
-    ratio = np.clip(ratio, 0.05, 20.0)
-    s2 = (est.sigma * ratio) ** 2
-    far = isolated(geometry, nbr, np.sqrt(s2))
-    rho, outliers, applied = robust.robust_weights(
-        P, d, r, v, s2 * _calibration(r, s2, c), nu, rule, far
-    )
-    return rho, ratio, outliers, applied, use_uneven, spread
-
-
-def _calibration(r: Array, s2: Array | float, c: int) -> float:
-    return float(getattr(robust, "_calibration")(r, s2, c))  # noqa: B009
+        return None
+    dist, nbr = knn(geometry.points, est.k + 1)
+    if np.any(dist[:, 1] == 0.0):
+        return None
+    return est, d, nbr
 
 
 def isolated(geometry: Geometry, nbr: NDArray[np.int64], sigma: Array) -> NDArray[np.bool_]:
-    """:func:`service.core.search.robust.isolated` in one compiled pass (same rule)."""
+    """:func:`service.core.noise.robust.isolated` in one compiled pass (same rule)."""
     P = np.ascontiguousarray(geometry.points, dtype=np.float64)
     E = geometry.faces if geometry.faces is not None else geometry.edges
     n = geometry.n

@@ -1,6 +1,6 @@
 """Compiled leave-one-out fits of surfaces in 3-D (issue 30: data weights 12 s -> ~1 s at 1M).
 
-The same numbers as :func:`service.core.search.pointfits.leave_one_out` (its docstring defines
+The same numbers as :func:`service.core.noise.pointfits.leave_one_out` (its docstring defines
 ``r_i`` and ``v_i``) for the case that dominates the default's cost, surfaces in 3-D
 (``s = 3``, ``d = 2``, one normal direction), one point at a time in numba instead of batched
 ``(chunk, k, 3)`` NumPy arrays (``eigh`` and ``inv`` of stacks, temporaries of ``k x 6``
@@ -38,9 +38,9 @@ def leave_one_out(
     manifold_dim: int,
     use: NDArray[np.bool_] | None = None,
 ) -> tuple[Array, Array]:
-    """``(r, v)`` as :func:`service.core.search.pointfits.leave_one_out` (same arguments)."""
+    """``(r, v)`` as :func:`service.core.noise.pointfits.leave_one_out` (same arguments)."""
     if points.shape[1] != 3 or manifold_dim != 2:
-        from service.core.search.pointfits import leave_one_out as numpy_path
+        from service.core.noise.pointfits import leave_one_out as numpy_path
 
         return numpy_path(points, nbr, manifold_dim, use)
     m = nbr.shape[0]
