@@ -47,6 +47,7 @@ REPORT_ATTRIBUTES: Mapping[str, str] = {
     "outliers": "outliers",
     "data_weights": "data_weights",
     "tangential": "tangential",
+    "output_deviation": "output_deviation",
     "shape_warnings": "shape_warnings",
     "flipped_faces": "flipped_faces",
     "folded_faces": "folded_faces",
