@@ -185,7 +185,7 @@ def _from_neighbours(
     uneven: str, compiled: bool,
 ) -> tuple[Array, Array, NDArray[np.int64], str, bool, float]:  # fmt: skip
     """:func:`_factors` from each point's neighbours (row ``i``: ``i`` first)."""
-    from service.core.noise import fast_fits, fast_weights
+    from service.core.noise import fast_fits
 
     P = geometry.points
     r, v = (fast_fits.leave_one_out if compiled else leave_one_out)(P, nbr, d)
@@ -202,7 +202,7 @@ def _from_neighbours(
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
     ratio = np.clip(ratio, 0.05, 20.0)
     s2 = (est.sigma * ratio) ** 2
-    far = (fast_weights.isolated if compiled else isolated)(geometry, nbr, np.sqrt(s2))
+    far = isolated(geometry, nbr, np.sqrt(s2), compiled)
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
@@ -248,14 +248,24 @@ def flag_outliers(
     return flagged, r, v
 
 
-def isolated(geometry: Geometry, nbr: NDArray[np.int64], sigma: Array) -> NDArray[np.bool_]:
+def isolated(
+    geometry: Geometry, nbr: NDArray[np.int64], sigma: Array, compiled: bool = False
+) -> NDArray[np.bool_]:
     """Points far from their neighbours: from the median of their graph neighbours for meshes
     and curves (coordinate-wise, so that a neighbour thrown off does not move it), their mean
     distance to the ``k`` nearest for clouds; beyond :data:`ISOLATION` times the local spacing
     (median over the ``k`` nearest of their mean distance to their own) and beyond twice the
     Gaussian extreme of the noise. A
     point thrown far off (inside a sphere, far along the surface) has neighbours that fit
-    nothing, so its residual test is undecided; this catches it."""
+    nothing, so its residual test is undecided; this catches it. ``compiled``: the distances
+    from :func:`service.core.noise.fast_weights.isolation_distances` (one pass, issue 30)."""
+    z0 = float(np.sqrt(chi2.isf(ALPHA, 1)))
+    if compiled:
+        from service.core.noise.fast_weights import isolation_distances
+
+        d, spacing, far = isolation_distances(geometry, nbr)
+        dist = d if far is None else far
+        return (dist > ISOLATION * spacing) & (dist > 2 * z0 * sigma)
     P = geometry.points
     d = np.mean(np.linalg.norm(P[nbr[:, 1:]] - P[:, None, :], axis=2), axis=1)
     spacing = np.median(d[nbr[:, 1:]], axis=1)
