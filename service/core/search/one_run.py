@@ -204,21 +204,24 @@ def one_run(
         return OneRun(lam_g, target, knee_tau, None, {}, math.nan, math.inf, (lam_g, lam_r),
                       run.steps, run.products, False, knee_steps, notes)  # fmt: skip
     if stop == "converged":  # the fewest steps whose solution meets the bound (the knee may
-        model = _shortest(run, order, lam_g, rtol)  # have taken many more: no second pass)
+        above = [j for j, e in trail if e > rtol]  # the last checkpoint short of the bound
+        model = _shortest(run, order, lam_g, rtol, above[-1] + 1 if above else 1)
     return _solution(run, model, c, d, lam_g, lam_r, target, knee_tau, knee_steps, rtol,
                      stop == "converged", notes)  # fmt: skip
 
 
-def _shortest(run: LanczosRun, order: int, lam: float, rtol: float) -> TikhonovModel:
+def _shortest(
+    run: LanczosRun, order: int, lam: float, rtol: float, lo: int = 1
+) -> TikhonovModel:
     """The model of the fewest steps whose error bound at ``lam`` is at most ``rtol`` of its
     solution (bisection on the steps; the bound decreases with them in practice, and the
-    caller verifies the vectors anyway)."""
+    caller verifies the vectors anyway); from ``lo`` steps on."""
 
     def ok(j: int) -> bool:
         m = run.model(order, j)
         return m.error_bound(lam) <= rtol * math.sqrt(max(float(m.phi(lam)), 1e-300))
 
-    lo, hi = 1, run.steps
+    hi = run.steps
     while lo < hi:
         mid = (lo + hi) // 2
         lo, hi = (lo, mid) if ok(mid) else (mid + 1, hi)
