@@ -84,6 +84,17 @@ def _epilog(*extra: Mapping[int, str]) -> str:
     )
 
 
+def _exit_status(text: str) -> int:
+    """``--exit-unchanged``: an exit status, 0 to 255."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"must be an exit status 0..255, got {text!r}")
+    return value
+
+
 def _formats() -> str:
     from service.io import FORMATS
 
@@ -157,6 +168,11 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
         "--ascii", action=argparse.BooleanOptionalAction, default=None,
         help="PLY output: ASCII (--ascii) or binary little-endian (--no-ascii) [default: the "
         "input's encoding for PLY input, else binary]",
+    )  # fmt: skip
+    more.add_argument(
+        "--exit-unchanged", type=_exit_status, default=0, metavar="N",
+        help="exit status when nothing was smoothed (the output is the input: copied, or "
+        "converted to another format), so a batch can branch on it [default: 0]",
     )  # fmt: skip
     for name, (choices, default) in writer_options().items():
         more.add_argument(

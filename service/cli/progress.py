@@ -216,6 +216,10 @@ def format_summary(
         search = "  not smoothed: the input is returned unchanged (see noise and tau below)."
     else:
         search += f": phi={_g(report['phi'])} (lambda given, no search)."
+    if report.get("unchanged") == "copied":
+        search = "  not smoothed: returned unchanged: input bytes copied (see noise and tau below)."
+    elif report.get("unchanged") == "converted":
+        search = "  not smoothed: converted unchanged (see noise and tau below)."
     lines.append(search)
     lines.extend(_noise_lines(report))
     lines.append(

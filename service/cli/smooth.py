@@ -232,9 +232,10 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
         done = smooth_file(source, target, params, fmt=streamed, out_fmt=out_fmt,
                            read_options={"weld": ns.weld, "xyz_dims": ns.xyz_dims},
                            write_options=options, geometry=geometry, progress=progress,
-                           run_map=run_map, stage=lambda _name: progress.finish())  # fmt: skip
+                           run_map=run_map, stage=lambda _name: progress.finish(),
+                           original=None if ns.input == "-" else Path(ns.input))  # fmt: skip
     _report(ns, params, done, started, progress)
-    return EXIT_OK
+    return ns.exit_unchanged if done.unchanged else EXIT_OK
 
 
 def _report(

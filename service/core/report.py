@@ -146,6 +146,13 @@ class Report(BaseModel):
         "unchanged, tau_how says why).",
         examples=[True],
     )
+    unchanged: str | None = Field(
+        default=None,
+        description="Nothing was smoothed (the points are the input's, bit for bit): 'copied' "
+        "(the output file is the input's bytes) or 'converted' (a straight conversion to "
+        "another format or with writer options); null when smoothed or not written to a file.",
+        examples=[None],
+    )
     outlier_count: int = Field(
         default=0,
         description="Points the robust data weights treated as outliers (robust).",

@@ -113,6 +113,9 @@ class SmoothResult:
     data_weights : str or None
         Which data weights beyond the user's were applied: ``"robust (<rule>)"``, ``"noise"``
         (``1/sigma_i``, uneven noise), both joined by ``" + "``, or ``None``.
+    unchanged : str or None
+        Nothing smoothed, the output written by :mod:`service.workflows.smooth_file`:
+        ``"copied"`` (the input's bytes) or ``"converted"`` (a straight conversion).
     """
 
     points: NDArray[np.float64]
@@ -162,6 +165,7 @@ class SmoothResult:
     pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     tangential: dict[str, Any] | None = None  # issue 21: the tangential step
     plan: Plan | None = None  # issue 29: every automatic choice and its evidence
+    unchanged: str | None = None  # issue 32: set by service.workflows.smooth_file
 
     @property
     def rms_deviation(self) -> float:
@@ -226,6 +230,7 @@ class SmoothResult:
             outliers=[int(i) for i in self.outliers],
             data_weights=self.data_weights,
             plan=None if self.plan is None else self.plan.to_dict(),
+            unchanged=self.unchanged,
         )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()

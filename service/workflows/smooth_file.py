@@ -21,6 +21,14 @@ that cannot hold the smoothed points is an :class:`OutputFormatError` (a
 :class:`~service.io.errors.FormatError`, so HTTP and job answers are those of the format error;
 the CLI answers it as an output failure); every other typed error of the readers and the
 engine propagates as raised.
+
+**Unchanged is byte-identical** (issue 32): when the engine returns the input's points bit for
+bit (no noise found, every point fixed, nothing coupled, no valid budget: whatever the reason,
+:func:`returned_unchanged` compares the points), nothing is rewritten. In the input's format
+and without writer options the output is the input's bytes (a file copied, a callable target
+given those bytes): :data:`COPIED`; otherwise (another format, writer options, no input bytes
+at hand) a straight conversion: :data:`CONVERTED`. The result's ``unchanged`` member (and so
+every report) says which.
 """
 
 from __future__ import annotations
@@ -40,11 +48,14 @@ if TYPE_CHECKING:
     from service.io import GeometryDocument
 
 __all__ = [
+    "CONVERTED",
+    "COPIED",
     "Engine",
     "OutputFormatError",
     "Smoothed",
     "Store",
     "encode",
+    "returned_unchanged",
     "run_engine",
     "smooth_document",
     "smooth_file",
@@ -57,6 +68,13 @@ __all__ = [
 Engine = Callable[["Geometry"], "SmoothResult"]
 #: A target that is not a file path: takes the result and the encoded output.
 Store = Callable[["SmoothResult", bytes], None]
+#: The input's bytes, or the file holding them (kept to copy an unchanged input).
+Original = bytes | Path
+
+#: ``unchanged`` of a run whose output is the input's bytes, copied.
+COPIED = "copied"
+#: ``unchanged`` of a run whose unchanged points were converted (another format or options).
+CONVERTED = "converted"
 
 
 class OutputFormatError(FormatError):
@@ -98,6 +116,9 @@ class Smoothed:
         Formats read and written.
     streamed : bool
         Whether the streamed path ran.
+    unchanged : str or None
+        Nothing smoothed: :data:`COPIED` (the output is the input's bytes) or
+        :data:`CONVERTED` (a straight conversion); ``None`` when smoothed.
     """
 
     result: SmoothResult
@@ -105,6 +126,48 @@ class Smoothed:
     input_format: str
     output_format: str
     streamed: bool = False
+    unchanged: str | None = None
+
+    @property
+    def summary(self) -> str | None:
+        """The summary's words for an unchanged run (``None`` when smoothed)."""
+        return unchanged_words(self.unchanged)
+
+
+def unchanged_words(how: str | None) -> str | None:
+    """``"returned unchanged: input bytes copied"``, ``"converted unchanged"`` or ``None``."""
+    if how == COPIED:
+        return "returned unchanged: input bytes copied"
+    if how == CONVERTED:
+        return "converted unchanged"
+    return None
+
+
+def returned_unchanged(result: SmoothResult, points: Any) -> bool:
+    """Whether ``result`` holds ``points`` bit for bit (the engine smoothed nothing)."""
+    import numpy as np
+
+    if result.max_displacement != 0.0:
+        return False
+    ours = np.asarray(points)
+    return bool(result.points.shape == ours.shape and np.array_equal(result.points, ours))
+
+
+def _marked(result: SmoothResult, how: str) -> SmoothResult:
+    """``result`` with its ``unchanged`` member set (so its report says it)."""
+    import dataclasses
+
+    return dataclasses.replace(result, unchanged=how)
+
+
+def _original_bytes(original: Original | None) -> bytes | None:
+    """The input's bytes (``None``: not at hand, or the file cannot be read again)."""
+    if original is None or isinstance(original, bytes):
+        return original
+    try:
+        return Path(original).read_bytes()
+    except OSError:
+        return None
 
 
 def run_engine(
@@ -195,9 +258,17 @@ def smooth_streamed(
     P, faces = read_coordinates(src, fmt)
     result = run_engine(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit,
                         run_map=run_map)  # fmt: skip
+    same = returned_unchanged(result, P)
     del P
     with atomic_path(dst) as tmp:
-        rewrite(src, tmp, fmt, result.points)
+        if same:  # nothing smoothed: the input's bytes, not a rewrite
+            import shutil
+
+            shutil.copyfile(src, tmp)
+        else:
+            rewrite(src, tmp, fmt, result.points)
+    if same:
+        return Smoothed(_marked(result, COPIED), None, fmt, fmt, streamed=True, unchanged=COPIED)
     return Smoothed(result, None, fmt, fmt, streamed=True)
 
 
@@ -240,9 +311,11 @@ def smooth_file(
     run_map: Any = None,
     check: Callable[[Geometry], None] | None = None,
     stage: Callable[[str], None] | None = None,
+    original: Original | None = None,
 ) -> Smoothed:
     """Read ``source``, smooth it, write ``target``: streamed when it can be (tiles, a file to
-    a file in the same format), else in memory.
+    a file in the same format), else in memory. When nothing is smoothed the output is the
+    input's bytes (same format, no writer options) or a straight conversion (module docstring).
 
     Parameters
     ----------
@@ -271,6 +344,10 @@ def smooth_file(
         A refusal of the geometry read, before the engine runs.
     stage : callable, optional
         Told ``"reading"`` and ``"writing"`` as those stages start.
+    original : bytes or Path, optional
+        The input's bytes (or its file) when ``source`` is a document read already: copied as
+        the output when nothing is smoothed (default: ``source`` itself when it is a file; else
+        an unchanged output is converted).
     """
     reading, writing = dict(read_options or {}), dict(write_options or {})
     tell = stage or (lambda name: None)
@@ -283,6 +360,7 @@ def smooth_file(
     if not isinstance(source, Path):
         doc = source
     else:
+        original = source if original is None else original
         from service.io import read_geometry
 
         tell("reading")
@@ -292,8 +370,34 @@ def smooth_file(
     done = smooth_document(doc, params, out_fmt, geometry=geometry, engine=engine, check=check,
                            progress=progress)  # fmt: skip
     tell("writing")
+    return _write(done, target, geometry or doc.geometry, original, writing)
+
+
+def _write(
+    done: Smoothed,
+    target: Path | Store,
+    smoothed: Geometry,
+    original: Original | None,
+    writing: Mapping[str, Any],
+) -> Smoothed:
+    """Write the in-memory path's output: the input's bytes when nothing was smoothed and they
+    can stand for the output (same format, no writer options), else the encoded document."""
+    import dataclasses
+
+    doc = done.document
+    assert doc is not None
+    data = None
+    if returned_unchanged(done.result, smoothed.points):
+        if done.output_format == doc.source_format and not any(writing.values()):
+            data = _original_bytes(original)
+        how = CONVERTED if data is None else COPIED
+        done = dataclasses.replace(done, result=_marked(done.result, how), unchanged=how)
+    if data is None:
+        data = encode(doc, done.output_format, done.result.points, **writing)
     if isinstance(target, Path):
-        write_document(doc, target, done.output_format, done.result.points, **writing)
+        from service.io.atomic import write_file
+
+        write_file(target, data)
     else:
-        target(done.result, encode(doc, done.output_format, done.result.points, **writing))
+        target(done.result, data)
     return done

@@ -70,6 +70,7 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
             data = b'{"geometry":' + data.strip() + b',"report":' + text.encode() + b"}"
         write_file(out, data)
 
-    smooth_file(parsed.document, store, parsed.params, out_fmt=fmt,
+    original = None if req.kind == "json" else Path(parsed.input_path)  # the upload's bytes
+    smooth_file(parsed.document, store, parsed.params, out_fmt=fmt, original=original,
                 check=lambda geometry: check_sync(geometry, parsed.params))  # fmt: skip
     return {**answer, "input_fmt": parsed.fmt}
