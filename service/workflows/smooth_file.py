@@ -130,17 +130,11 @@ class Smoothed:
 
     @property
     def summary(self) -> str | None:
-        """The summary's words for an unchanged run (``None`` when smoothed)."""
-        return unchanged_words(self.unchanged)
+        """``"returned unchanged: input bytes copied"``, ``"converted unchanged"`` or ``None``."""
+        return _WORDS.get(self.unchanged or "")
 
 
-def unchanged_words(how: str | None) -> str | None:
-    """``"returned unchanged: input bytes copied"``, ``"converted unchanged"`` or ``None``."""
-    if how == COPIED:
-        return "returned unchanged: input bytes copied"
-    if how == CONVERTED:
-        return "converted unchanged"
-    return None
+_WORDS = {COPIED: "returned unchanged: input bytes copied", CONVERTED: "converted unchanged"}
 
 
 def returned_unchanged(result: SmoothResult, points: Any) -> bool:
