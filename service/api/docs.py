@@ -9,6 +9,7 @@ from service.api.schemas import Problem, SmoothJsonRequest
 from service.io.registry import FORMATS
 
 __all__ = [
+    "CRS_QUERY_DESCRIPTION",
     "FORMAT_QUERY_DESCRIPTION",
     "JOB_SUBMIT_OPENAPI",
     "MEDIA_TYPES",
@@ -22,6 +23,13 @@ __all__ = [
 MEDIA_TYPES: dict[str, str] = {name: f.media_type for name, f in FORMATS.items()}
 
 FORMAT_QUERY_DESCRIPTION = f"Output format: {', '.join(FORMATS)} (default: the input's format)."
+CRS_QUERY_DESCRIPTION = (
+    "Geographic input (GPX, GeoJSON) written to a projected format: the output's projected "
+    "CRS, an EPSG code (``32633``, ``EPSG:32633``) or ``utm`` (the WGS84 UTM zone of the data's "
+    "centre). Default: metres in the local east/north/up frame about the data's centre, "
+    "recorded in the file. 422 (field ``crs``) for other input, a longitude/latitude output or "
+    "a CRS that is not projected."
+)
 #: ``format`` was the query's name before ``output_format`` (every surface now says which file).
 FORMAT_ALIAS_DESCRIPTION = "Deprecated: the former name of ``output_format``."
 

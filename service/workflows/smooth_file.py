@@ -39,6 +39,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from service.io.errors import FormatError
+from service.workflows.unchanged import (
+    CONVERTED,
+    COPIED,
+    WORDS,
+    Original,
+    marked,
+    original_bytes,
+    returned_unchanged,
+)
 
 if TYPE_CHECKING:
     from service.core.geometry import Geometry
@@ -68,13 +77,6 @@ __all__ = [
 Engine = Callable[["Geometry"], "SmoothResult"]
 #: A target that is not a file path: takes the result and the encoded output.
 Store = Callable[["SmoothResult", bytes], None]
-#: The input's bytes, or the file holding them (kept to copy an unchanged input).
-Original = bytes | Path
-
-#: ``unchanged`` of a run whose output is the input's bytes, copied.
-COPIED = "copied"
-#: ``unchanged`` of a run whose unchanged points were converted (another format or options).
-CONVERTED = "converted"
 
 
 class OutputFormatError(FormatError):
@@ -131,37 +133,7 @@ class Smoothed:
     @property
     def summary(self) -> str | None:
         """``"returned unchanged: input bytes copied"``, ``"converted unchanged"`` or ``None``."""
-        return _WORDS.get(self.unchanged or "")
-
-
-_WORDS = {COPIED: "returned unchanged: input bytes copied", CONVERTED: "converted unchanged"}
-
-
-def returned_unchanged(result: SmoothResult, points: Any) -> bool:
-    """Whether ``result`` holds ``points`` bit for bit (the engine smoothed nothing)."""
-    import numpy as np
-
-    if result.max_displacement != 0.0:
-        return False
-    ours = np.asarray(points)
-    return bool(result.points.shape == ours.shape and np.array_equal(result.points, ours))
-
-
-def _marked(result: SmoothResult, how: str) -> SmoothResult:
-    """``result`` with its ``unchanged`` member set (so its report says it)."""
-    import dataclasses
-
-    return dataclasses.replace(result, unchanged=how)
-
-
-def _original_bytes(original: Original | None) -> bytes | None:
-    """The input's bytes (``None``: not at hand, or the file cannot be read again)."""
-    if original is None or isinstance(original, bytes):
-        return original
-    try:
-        return Path(original).read_bytes()
-    except OSError:
-        return None
+        return WORDS.get(self.unchanged or "")
 
 
 def run_engine(
@@ -189,6 +161,8 @@ def encode(doc: GeometryDocument, fmt: str, points: Any = None, **options: Any) 
         ``fmt`` cannot hold these points (a coordinate a LAS scale cannot hold, ...).
     OutputRefused, UnsupportedFormat
         As :func:`service.io.write_geometry` raises them.
+    ParameterError
+        A ``crs`` this input or format cannot take (field ``crs``: HTTP 422, CLI status 4).
     """
     from service.io import write_geometry
 
@@ -198,6 +172,12 @@ def encode(doc: GeometryDocument, fmt: str, points: Any = None, **options: Any) 
         if type(exc) is not FormatError:  # refused or unsupported formats keep their class
             raise
         raise OutputFormatError.of(exc, fmt) from exc
+    except ValueError as exc:
+        if options.get("crs") is None or isinstance(exc, FormatError):
+            raise
+        from service.core.errors import ParameterError
+
+        raise ParameterError(str(exc), field="crs") from exc
 
 
 def write_document(
@@ -262,7 +242,7 @@ def smooth_streamed(
         else:
             rewrite(src, tmp, fmt, result.points)
     if same:
-        return Smoothed(_marked(result, COPIED), None, fmt, fmt, streamed=True, unchanged=COPIED)
+        return Smoothed(marked(result, COPIED), None, fmt, fmt, streamed=True, unchanged=COPIED)
     return Smoothed(result, None, fmt, fmt, streamed=True)
 
 
@@ -359,6 +339,8 @@ def smooth_file(
 
         tell("reading")
         doc = read_geometry(source, fmt, **reading)
+    if writing.get("crs") is not None:  # a crs this output cannot take: refused before smoothing
+        encode(doc, out_fmt or doc.source_format, None, **writing)
     if engine is None and run_map is not None:
         engine = lambda g: run_engine(g, params, progress, run_map=run_map)  # noqa: E731
     done = smooth_document(doc, params, out_fmt, geometry=geometry, engine=engine, check=check,
@@ -383,9 +365,9 @@ def _write(
     data = None
     if returned_unchanged(done.result, smoothed.points):
         if done.output_format == doc.source_format and not any(writing.values()):
-            data = _original_bytes(original)
+            data = original_bytes(original)
         how = CONVERTED if data is None else COPIED
-        done = dataclasses.replace(done, result=_marked(done.result, how), unchanged=how)
+        done = dataclasses.replace(done, result=marked(done.result, how), unchanged=how)
     if data is None:
         data = encode(doc, done.output_format, done.result.points, **writing)
     if isinstance(target, Path):

@@ -43,6 +43,7 @@ REPORT_ATTRIBUTES: Mapping[str, str] = {
     "tau_how": "tau_how",
     "bound": "bound",
     "noise_found": "noise_found",
+    "unchanged": "unchanged",
     "outlier_count": "outlier_count",
     "outliers": "outliers",
     "data_weights": "data_weights",

@@ -71,6 +71,8 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
         write_file(out, data)
 
     original = None if req.kind == "json" else Path(parsed.input_path)  # the upload's bytes
+    crs = req.options.get("crs")  # the crs query: a projected output of geographic input
     smooth_file(parsed.document, store, parsed.params, out_fmt=fmt, original=original,
+                write_options={"crs": crs} if crs else None,
                 check=lambda geometry: check_sync(geometry, parsed.params))  # fmt: skip
     return {**answer, "input_fmt": parsed.fmt}
