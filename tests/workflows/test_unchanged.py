@@ -141,3 +141,27 @@ def test_streamed_unchanged_copies_the_file(tmp_path: Path, monkeypatch: Any) ->
     done = wf.smooth_file(src, out, SmoothingParams(tau=2.0, tile_points=1000))
     assert done.streamed and done.unchanged == wf.COPIED
     assert out.read_bytes() == src.read_bytes()
+
+
+@needs_shared
+def test_facade_smooth_file_copies_too(tmp_path: Path) -> None:
+    import geosmooth
+
+    src, out = SHARED / "wrench.dxf", tmp_path / "w.dxf"
+    result = geosmooth.smooth_file(src, out)
+    assert result.unchanged == "copied" and out.read_bytes() == src.read_bytes()
+
+
+@needs_shared
+def test_a_bad_crs_is_refused_before_smoothing(tmp_path: Path, monkeypatch: Any) -> None:
+    from service.core.errors import ParameterError
+
+    monkeypatch.setattr(wf, "run_engine", lambda *a, **k: pytest.fail("smoothed"))
+    src = SHARED / "korita-zbevnica.gpx"
+    for out_fmt, crs, words in (("dxf", 4326, "not a projected CRS"), ("gpx", "utm", "projected"),
+                                ("dxf", "mercator", "EPSG code")):  # fmt: skip
+        with pytest.raises(ParameterError, match=words) as caught:
+            wf.smooth_file(src, tmp_path / f"o.{out_fmt}", LAM, out_fmt=out_fmt,
+                           write_options={"crs": crs})  # fmt: skip
+        assert caught.value.field == "crs"
+    assert not list(tmp_path.iterdir())
