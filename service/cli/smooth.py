@@ -173,8 +173,8 @@ def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]
 
 def _streamed(ns: argparse.Namespace, params: SmoothingParams, out_fmt: str | None) -> str | None:
     """The format of a tiled run read and written in chunks (issue 23), else ``None``: a file
-    to a file, no ``--fixed``, no writer option (:func:`service.workflows.smooth_file.
-    streamed_format_of`)."""
+    to a file, no ``--fixed``, no writer option
+    (:func:`service.workflows.smooth_file.streamed_format_of`)."""
     if ns.fixed or "-" in (ns.input, ns.output):
         return None
     from service.workflows.smooth_file import streamed_format_of

@@ -29,6 +29,8 @@ import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from service.workflows.errors import ServiceError
+
 if TYPE_CHECKING:
     from service.core.geometry import Geometry
     from service.core.linalg.resources import ResourceEstimate
@@ -86,31 +88,17 @@ class JobSize:
         )
 
 
-class JobTooLarge(Exception):
+class JobTooLarge(ServiceError):
     """The job's estimated memory or time is above the per-job limit (refused at submit).
 
     Extras: ``estimate_bytes``, ``estimate_seconds``, ``path``, ``limit_bytes`` or
-    ``limit_seconds``. Carries the typed-error surface of :class:`service.jobs.errors.JobsError`
-    (``code``, ``title``, ``status``, ``exit_code``, ``field``, ``message``, ``to_dict``).
+    ``limit_seconds``.
     """
 
     code: ClassVar[str] = "job-too-large"
     title: ClassVar[str] = "Job too large"
     status: ClassVar[int] = 422
     exit_code: ClassVar[int] = 2  # see the CLI's table, service/exit_codes.py
-
-    def __init__(self, message: str, *, field: str | None = None, **extra: Any) -> None:
-        super().__init__(message)
-        self.message = message
-        self.field = field
-        self.extra = extra
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{code, message, field?, **extra}`` (JSON-ready)."""
-        out: dict[str, Any] = {"code": self.code, "message": self.message}
-        if self.field is not None:
-            out["field"] = self.field
-        return {**out, **self.extra}
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,10 @@ __all__ = ["check_job", "smooth_input"]
 def check_job(req: IngestRequest) -> NewJob:
     """``POST /v1/jobs``: the parsed, checked job (format, parameters, file, the key's bounds,
     then the submit check of :func:`service.workflows.admission.check_submit`: estimate, ``tau``,
-    dry run, tiles), typed and carrying the check's :class:`~service.workflows.admission.
-    Admission`; the router adds tenant and idempotency key. An inline geometry becomes a JSON
-    file next to the spooled body, written once every check passed."""
+    dry run, tiles), typed and carrying the check's
+    :class:`~service.workflows.admission.Admission`; the router adds tenant and idempotency
+    key. An inline geometry becomes a JSON file next to the spooled body, written once every
+    check passed."""
     from service.workflows.admission import Policy, check_submit
 
     parsed = parse_request(req, req.limits.max_points)

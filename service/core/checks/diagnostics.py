@@ -165,7 +165,8 @@ def _timings(op: SmoothingOperator, sol: Solution, run: Run) -> dict[str, float]
 
 
 def _data_weights(dw: DataWeights | None) -> dict[str, Any]:
-    """The outliers and data weights of the run (issue 21), as :class:`SmoothResult` fields."""
+    """The outliers and data weights of the run (issue 21), as
+    :class:`~service.core.result.SmoothResult` fields."""
     if dw is None:
         return {}
     kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
