@@ -88,7 +88,8 @@ def admit_size(job: NewJob, limit: int | None) -> SmoothingParams:
     """The job's params as the submit check decided them
     (:func:`service.workflows.admission.decide`): refused
     (:class:`~service.workflows.admission.JobTooLarge`) when its memory estimate is above
-    ``limit`` or its time estimate above the job time limit, with ``tile_points`` set when only a tiled run fits the memory limit.
+    ``limit`` or its time estimate above the job time limit, with ``tile_points`` set when only
+    a tiled run fits the memory limit.
 
     The decision the job carries (:attr:`NewJob.admission <service.jobs.queue.NewJob>`) is
     taken when it was made against this queue's limits; otherwise it is made here (reading the
