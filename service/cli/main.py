@@ -31,6 +31,7 @@ _COMMANDS = {
     "serve": ".serve",
     "submit": ".submit",
     "worker": ".worker",
+    "completion": ".completion",
 }
 
 

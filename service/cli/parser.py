@@ -101,6 +101,20 @@ def _add_worker(sub: argparse._SubParsersAction[Parser]) -> None:
     wk.add_argument("worker_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)  # see main
 
 
+def _add_completion(sub: argparse._SubParsersAction[Parser]) -> None:
+    co = sub.add_parser(
+        "completion",
+        help=HELP["completion"],
+        description=wrap(
+            "Print a completion script for SHELL on stdout: commands, options, their choices "
+            'and file names. bash: eval "$(geosmooth completion bash)" in ~/.bashrc; zsh: '
+            "geosmooth completion zsh > a directory of $fpath, as _geosmooth."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    co.add_argument("shell", metavar="SHELL", choices=("bash", "zsh"), help="bash or zsh")
+
+
 #: command -> builder of its full parser
 _COMMANDS: dict[str, Callable[[argparse._SubParsersAction[Parser]], None]] = {
     "smooth": add_smooth,
@@ -108,6 +122,7 @@ _COMMANDS: dict[str, Callable[[argparse._SubParsersAction[Parser]], None]] = {
     "serve": _add_serve,
     "submit": add_submit,
     "worker": _add_worker,
+    "completion": _add_completion,
 }
 
 
@@ -118,7 +133,7 @@ def command_of(args: Collection[str]) -> str | None:
 
 
 def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
-    """The ``geosmooth`` argument parser: smooth, info, serve, submit and worker.
+    """The ``geosmooth`` argument parser: smooth, info, serve, submit, worker and completion.
 
     Parameters
     ----------

@@ -31,6 +31,7 @@ HELP = {
     "serve": "run the HTTP service",
     "submit": "smooth a file on a running geosmooth server",
     "worker": "run a worker of the distributed (Redis + RQ) job queue",
+    "completion": "print a shell completion script (bash or zsh)",
 }
 
 
