@@ -215,9 +215,6 @@ def job_bound(inputs: Sequence[str]) -> tuple[int, str]:
 
 
 def _jobs(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int:
-    if ns.jobs < 0:
-        raise CliError(f"-j: must be 0 (as many as the machine holds) or more, got {ns.jobs}",
-                       EXIT_USAGE)  # fmt: skip
     bound, why = job_bound(inputs)
     if ns.jobs == 0:
         return bound
@@ -285,6 +282,9 @@ def _prepare(ns: argparse.Namespace, inputs: Sequence[str]) -> list[argparse.Nam
     if not (ns.output.endswith(os.sep) or os.path.isdir(ns.output)):
         raise CliError(f"{len(inputs)} inputs need an output directory: -o DIR/ (got "
                        f"{ns.output!r})", EXIT_USAGE)  # fmt: skip
+    if ns.jobs < 0:
+        raise CliError(f"-j: must be 0 (as many as the machine holds) or more, got {ns.jobs}",
+                       EXIT_USAGE)  # fmt: skip
     if ns.fixed:
         raise CliError("--fixed names the points of one file: not with several inputs",
                        EXIT_USAGE)  # fmt: skip
