@@ -66,7 +66,7 @@ DEFAULT_NAME = "{stem}.{ext}"
 #: One file's memory estimate: a fixed part (interpreter, numpy/scipy, the engine's caches)
 #: plus this many times the input file's size (the geometry, its neighbourhoods, the factor).
 JOB_BASE_BYTES = 512 * 2**20
-JOB_BYTES_PER_INPUT_BYTE = 100
+JOB_BYTES_PER_INPUT_BYTE = 150
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,8 @@ def test_a_batch_writes_each_file_and_one_line_each_plus_a_total(cli: Run, tmp_p
     out = tmp_path / "out"
     report = tmp_path / "batch.json"
     res = cli(["smooth", HELIX, SPHERE, "-o", f"{out}/", "--name", "{stem}-smooth.{ext}",
-               "--output-format", "ply", "-j", "2", "--rms", "0.02", "--report", report])  # fmt: skip
+               "--output-format", "ply", "-j", "2", "--rms", "0.02",
+               "--report", report])  # fmt: skip
     assert res.returncode == EXIT_OK, res.stderr
     assert sorted(p.name for p in out.iterdir()) == ["noisy-helix-smooth.ply",
                                                      "noisy-sphere-smooth.ply"]  # fmt: skip
@@ -138,8 +139,10 @@ def test_bash_completion_completes_commands_choices_and_files(cli: Run, tmp_path
     (tmp_path / "scan.ply").write_text("")
 
     def complete(*words: str) -> list[str]:
-        shell = (f"source {script}; COMP_WORDS=(geosmooth {' '.join(words)}); "
-                 f"COMP_CWORD={len(words)}; _shtab_geosmooth; printf '%s\\n' \"${{COMPREPLY[@]}}\"")
+        shell = (
+            f"source {script}; COMP_WORDS=(geosmooth {' '.join(words)}); "
+            f"COMP_CWORD={len(words)}; _shtab_geosmooth; printf '%s\\n' \"${{COMPREPLY[@]}}\""
+        )
         out = subprocess.run(["bash", "-c", shell], cwd=tmp_path, capture_output=True, text=True,
                              timeout=30, check=False)  # fmt: skip
         return out.stdout.split()
