@@ -1,5 +1,8 @@
 """``geosmooth smooth A B C -o DIR/``: a batch, one file at a time or ``-j N`` at once.
 
+The entry point of ``smooth`` (:func:`run`): several inputs, a glob or an output directory make
+a batch; one input to a file is :func:`service.cli.smooth.run`.
+
 Each file is the same use case as a single run (:func:`service.cli.smooth.smooth_one`, i.e.
 :func:`service.workflows.smooth_file.smooth_file`), in this process (``-j 1``) or in worker
 processes (``spawn``: a fresh interpreter each, nothing inherited from a half-initialised
@@ -42,6 +45,7 @@ __all__ = [
     "is_batch",
     "job_bound",
     "output_names",
+    "run",
     "run_batch",
     "worst",
 ]
@@ -323,6 +327,17 @@ def _outcomes(each: Sequence[argparse.Namespace], jobs: int) -> Iterator[FileOut
         futures = [pool.submit(smooth_one_file, one) for one in each]
         for future in as_completed(futures):
             yield future.result()
+
+
+def run(ns: argparse.Namespace, err: TextIO) -> int:
+    """Run ``geosmooth smooth``: a batch, or the one file :func:`service.cli.smooth.run` smooths."""
+    inputs = expand_inputs(ns.input)
+    if is_batch(inputs, ns.output):
+        return run_batch(ns, inputs, err)
+    from service.cli.smooth import run as run_one
+
+    ns.input = inputs[0]
+    return run_one(ns, err)
 
 
 def run_batch(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int:

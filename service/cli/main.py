@@ -26,7 +26,7 @@ __all__ = ["failure", "main"]
 #: command -> module with ``run(ns, err) -> int`` (imported when the command runs, so that
 #: ``smooth`` never loads the HTTP stack).
 _COMMANDS = {
-    "smooth": ".smooth",
+    "smooth": ".batch",  # several inputs, or the one file of .smooth
     "info": ".info",
     "serve": ".serve",
     "submit": ".submit",

@@ -235,13 +235,8 @@ def _check_crs_applies(doc: GeometryDocument, out_fmt: str | None, options: dict
 
 
 def run(ns: argparse.Namespace, err: TextIO) -> int:
-    """Run ``geosmooth smooth``; returns the exit status (errors are raised)."""
-    from service.cli.batch import expand_inputs, is_batch, run_batch
-
-    inputs = expand_inputs(ns.input)
-    if is_batch(inputs, ns.output):
-        return run_batch(ns, inputs, err)
-    ns.input = inputs[0]
+    """Run ``geosmooth smooth INPUT -o OUTPUT`` (one file: :func:`service.cli.batch.run` decides);
+    returns the exit status (errors are raised)."""
     started = time.perf_counter()
     progress = ProgressDisplay(err, enabled=not ns.quiet)
     params, done = smooth_one(ns, progress)

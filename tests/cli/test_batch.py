@@ -195,3 +195,12 @@ def test_crs_writes_a_projected_las(cli: Run, data: Callable[[str], Path], tmp_p
     assert res.returncode == EXIT_OK, res.stderr
     crs = laspy.read(out).header.parse_crs()
     assert crs is not None and crs.to_epsg() == 32633
+
+
+def test_one_input_to_a_directory_is_written_inside_it(cli: Run, tmp_path: Path) -> None:
+    """``-o DIR`` (an existing directory) was exit status 6, "Is a directory"."""
+    (tmp_path / "out").mkdir()
+    res = cli(["smooth", HELIX, "-o", tmp_path / "out", "--rms", "0.02"])
+    assert res.returncode == EXIT_OK, res.stderr
+    assert (tmp_path / "out" / "noisy-helix.obj").is_file()
+    assert _lines(res)[-1].startswith("geosmooth: 1 file: 1 smoothed, 0 failed;")
