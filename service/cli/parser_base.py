@@ -18,6 +18,8 @@ __all__ = ["HELP", "Parser", "epilog", "formats", "version", "wrap"]
 EXAMPLES = (
     "geosmooth smooth bunny.ply -o bunny-smooth.ply --tau 2e-4 --report report.json",
     "geosmooth smooth track.obj -o track-smooth.obj --rms 3 --fix-boundary",
+    "geosmooth smooth 'scans/*.laz' -o smoothed/ --name '{stem}-smooth.{ext}' -j 0",
+    "geosmooth smooth track.gpx -o track.las --rms 3 --crs utm",
     "geosmooth info scan.xyz        # noise estimate, valid tau / rms ranges",
     "geosmooth serve --port 8000",
     "geosmooth submit bunny.ply --server http://127.0.0.1:8000 -o out.ply --tau 2e-4",
