@@ -322,11 +322,15 @@ def _outcomes(each: Sequence[argparse.Namespace], jobs: int) -> Iterator[FileOut
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+    try:
         futures = [pool.submit(smooth_one_file, one) for one in each]
         for future in as_completed(futures):
             yield future.result()
+    except BaseException:  # Ctrl-C (the workers get it too): do not wait for queued files
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
 
 
 def run(ns: argparse.Namespace, err: TextIO) -> int:
