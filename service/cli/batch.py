@@ -262,7 +262,7 @@ def smooth_one_file(ns: argparse.Namespace) -> FileOutcome:
 
 def _ok_line(ns: argparse.Namespace, report: dict[str, Any], seconds: float) -> str:
     what = f"{report.get('kind', 'geometry')}, {report['n_points']} points"
-    if report.get("tau") is None and report.get("tau_rule") == "auto":
+    if _unchanged(report):
         result = "returned unchanged (no noise found)"
     else:
         tau = f"tau={report['tau']:.4g}, " if report.get("tau") is not None else ""
@@ -364,15 +364,22 @@ def run_batch(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int
     return code
 
 
+def _unchanged(report: dict[str, Any] | None) -> bool:
+    """The automatic rule found nothing to remove: the file was returned unchanged."""
+    return report is not None and report.get("tau") is None and report.get("tau_rule") == "auto"
+
+
 def _total(outcomes: Sequence[FileOutcome], seconds: float, jobs: int, code: int) -> str:
     failed = [o for o in outcomes if o.code != EXIT_OK]
+    unchanged = sum(_unchanged(o.report) for o in outcomes if o.code == EXIT_OK)
     by_code: dict[int, int] = {}
     for o in failed:
         by_code[o.code] = by_code.get(o.code, 0) + 1
     how = ", ".join(f"{n} with exit {c}" for c, n in sorted(by_code.items()))
     return (f"{len(outcomes)} file{'s' if len(outcomes) != 1 else ''}: "
-            f"{len(outcomes) - len(failed)} smoothed, {len(failed)} failed"
-            + (f" ({how})" if how else "")
+            f"{len(outcomes) - len(failed) - unchanged} smoothed, "
+            + (f"{unchanged} returned unchanged, " if unchanged else "")
+            + f"{len(failed)} failed" + (f" ({how})" if how else "")
             + f"; {seconds:.2f} s with -j {jobs}; exit status {code}")  # fmt: skip
 
 
