@@ -203,8 +203,9 @@ def local_sigma(v: Array, nbr: NDArray[np.int64], nu: int) -> Array:
     with np.errstate(all="ignore"):
         s2 = row_quantile(v[nbr], QUANTILE) / (chi2.ppf(QUANTILE, nu) / nu)
         logs = np.log(np.where(s2 > 0, s2, np.nan))
-        for _ in range(2):
-            logs = np.nanmean(logs[nbr], axis=1)
+        for _ in range(2):  # nanmean's sum / count, without its warning for all-NaN rows
+            rows = logs[nbr]
+            logs = np.where(np.isnan(rows), 0.0, rows).sum(axis=1) / (~np.isnan(rows)).sum(axis=1)
     return np.sqrt(np.exp(logs))
 
 
