@@ -105,6 +105,26 @@ def _clean_rows(cases: list[dict[str, Any]]) -> list[str]:
     return out
 
 
+def _draws(group: list[dict[str, Any]]) -> list[str]:
+    """One line per case drawn with several seeds: how often each miss occurred."""
+    bases: dict[str, list[dict[str, Any]]] = {}
+    for c in group:
+        bases.setdefault(c["key"].split("#")[0], []).append(c)
+    out = []
+    for base, draws in bases.items():
+        ok = [c for c in draws if c.get("checks")]
+        if len(draws) < 2 or not ok:
+            continue
+        ratios = [c["checks"]["sigma_ratio"] for c in ok if c["checks"]["sigma_ratio"]]
+        worse = sum(1 for c in ok if c["checks"]["not_worse"] is False)
+        nw = sum(1 for c in ok if c["flags"]["noise_weights"])
+        warned = sum(1 for c in ok if c["checks"]["not_worse"] is False and c["flags"]["warnings"])
+        out.append(f"* {base} over {len(draws)} draws: worse than the input {worse} "
+                   f"(with a warning {warned}), noise weights {nw}, sigma^/sigma "
+                   f"{_f(min(ratios, default=None))} - {_f(max(ratios, default=None))}")
+    return ["", *out] if out else []
+
+
 def render(doc: dict[str, Any]) -> str:
     """The whole document."""
     cases = doc["cases"]
@@ -130,7 +150,8 @@ def render(doc: dict[str, Any]) -> str:
         for ph, title in TITLES.items():
             group = [c for c in mine if c["phenomenon"] == ph]
             if group:
-                lines += ["", f"### {title}", "", HEADER, *(_row(c) for c in group)]
+                lines += ["", f"### {title}", "", HEADER, *(_row(c) for c in group),
+                          *_draws(group)]
         clean = [c for c in mine if c["phenomenon"] == "clean"]
         if clean:
             lines += ["", "### Noise-free inputs", "", *_clean_rows(clean)]
