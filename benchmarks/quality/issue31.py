@@ -40,7 +40,8 @@ __all__ = ["TAUBIN", "graph_taubin", "main", "run_case", "taubin"]
 FloatArray = NDArray[np.float64]
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Fixed Taubin settings: lambda, mu (pass band 0.1), iterations (shrink + inflate pairs).
-TAUBIN = {"lambda": 0.5, "mu": -0.53, "iterations": (10, 50)}
+TAUBIN_ITERATIONS = (10, 50)
+TAUBIN: dict[str, Any] = {"lambda": 0.5, "mu": -0.53, "iterations": TAUBIN_ITERATIONS}
 CLOUD_KNN = 20
 REPORT_KEYS = ("sigma_estimate", "noise_found", "tau", "lambda", "warnings", "shape_warnings",
                "outlier_count", "data_weights", "rms_displacement", "max_displacement",
@@ -113,7 +114,7 @@ def run_case(key: str) -> dict[str, Any]:
     out.update(auto=auto, report=report, flags=flag, sigma_hat=sigma_hat)
     tb: dict[str, Any] = {}
     if case.noise != "clean":
-        for it in TAUBIN["iterations"]:
+        for it in TAUBIN_ITERATIONS:
             try:
                 tb[f"x{it}"] = scorer.score(taubin(case, it))
             except RuntimeError as exc:

@@ -118,9 +118,10 @@ def _draws(group: list[dict[str, Any]]) -> list[str]:
         ratios = [c["checks"]["sigma_ratio"] for c in ok if c["checks"]["sigma_ratio"]]
         worse = sum(1 for c in ok if c["checks"]["not_worse"] is False)
         nw = sum(1 for c in ok if c["flags"]["noise_weights"])
-        warned = sum(1 for c in ok if c["checks"]["not_worse"] is False and c["flags"]["warnings"])
+        warned = sum(1 for c in ok if c["checks"]["not_worse"] is False
+                     and (c["report"].get("shape_warnings") or []))
         out.append(f"* {base} over {len(draws)} draws: worse than the input {worse} "
-                   f"(with a warning {warned}), noise weights {nw}, sigma^/sigma "
+                   f"(with a shape warning {warned}), noise weights {nw}, sigma^/sigma "
                    f"{_f(min(ratios, default=None))} - {_f(max(ratios, default=None))}")
     return ["", *out] if out else []
 
