@@ -292,8 +292,11 @@ def smooth_file(
     done = smooth_document(doc, params, out_fmt, geometry=geometry, engine=engine, check=check,
                            progress=progress)  # fmt: skip
     tell("writing")
+    from service.io._shared.flags import with_outliers
+
+    doc, points = with_outliers(doc, done.result.points, done.result, done.output_format)
     if isinstance(target, Path):
-        write_document(doc, target, done.output_format, done.result.points, **writing)
+        write_document(doc, target, done.output_format, points, **writing)
     else:
-        target(done.result, encode(doc, done.output_format, done.result.points, **writing))
+        target(done.result, encode(doc, done.output_format, points, **writing))
     return done

@@ -45,6 +45,7 @@ REPORT_ATTRIBUTES: Mapping[str, str] = {
     "noise_found": "noise_found",
     "outlier_count": "outlier_count",
     "outliers": "outliers",
+    "outlier_mode": "outlier_mode",
     "data_weights": "data_weights",
     "tangential": "tangential",
     "shape_warnings": "shape_warnings",

@@ -45,7 +45,8 @@ from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
 
 __all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
-           "isolated", "local_sigma", "pull_in", "robust_weights", "row_quantile"]
+           "isolated", "local_sigma", "outlier_note", "pull_in", "robust_weights",
+           "row_quantile"]
 
 Array = NDArray[np.float64]
 #: Per-point probability of a Gaussian residual beyond the outlier threshold ``z0``.
@@ -130,6 +131,9 @@ def data_weights(
     if got is None:
         return geometry, None
     rho, ratio, outliers, applied, use_uneven, spread = got
+    if params.outliers in ("flag", "drop") and outliers.size:  # no part in tau (issue 31)
+        rho = rho.copy()
+        rho[outliers] = OMEGA_MIN
     omega = geometry.omega() * rho / ratio**UNEVEN_POWER
     weights = omega if geometry.weights is None else np.where(
         np.isfinite(geometry.weights), omega, geometry.weights)
@@ -138,10 +142,26 @@ def data_weights(
         said.append(f"noise varies across the input (spread of log sigma_i {spread:.2f}): "
                      "weights 1/sigma_i")
     if outliers.size:
-        said.append(f"{outliers.size} points treated as outliers ({applied} weights)")
+        said.append(outlier_note(int(outliers.size), params.outliers, applied))
     pulled = outliers[(rho[outliers] <= PULLED) & ~geometry.fixed_mask()[outliers]]
     dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said), pulled)
     return replace(geometry, weights=weights), dw
+
+
+def outlier_note(count: int, mode: str, applied: str) -> str:
+    """The warning that names the outliers and what happened to them (never tau advice)."""
+    if mode == "flag":
+        return (f"{count} points far from the surface flagged as outliers ({applied} weights): "
+                "kept at their input positions and left out of tau; listed in the report "
+                "(outliers) and flagged in the output where the format holds a flag (LAS "
+                "classification 7, PLY/PCD vertex attribute 'outlier'); outliers='drop' "
+                "removes them")
+    if mode == "drop":
+        return (f"{count} points far from the surface dropped as outliers ({applied} weights): "
+                "the output is written without them; their indices are in the report "
+                "(outliers)")
+    return (f"{count} points far from the surface treated as outliers ({applied} weights): "
+            "pulled back into their neighbours' ring")
 
 
 def _factors(

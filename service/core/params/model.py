@@ -32,6 +32,7 @@ from service.core.params.names import (
     MethodName,
     NeighborhoodKind,
     NoiseWeights,
+    OutlierMode,
     Preset,
     RobustRule,
     SearchName,
@@ -150,6 +151,17 @@ class SmoothingParams(BaseModel):
             "the automatic tau counting the noise each point carries. 'auto': with the "
             "automatic tau and no given weights, when the noise level varies across the input; "
             "'local': always; 'none': never."
+        ),
+    )
+    outliers: OutlierMode = Field(
+        default="auto",
+        description=(
+            "What happens to the points the robust weights find as outliers: 'flag' keeps them "
+            "at their input positions, lists them in the report and flags them in the output "
+            "where the format holds a flag (LAS classification 7, a PLY/PCD 'outlier' "
+            "attribute); 'drop' writes a point cloud without them; 'pull' places them where "
+            "the smoothness term alone puts them (eq. 4 with omega_i -> 0), no further than "
+            "their ring reaches. 'auto': flag for point clouds, pull for meshes and curves."
         ),
     )
     tolerance: float = Field(
