@@ -18,12 +18,13 @@ from service.core.checks.diagnostics import diagnostics
 from service.core.errors import TauOutOfRange
 from service.core.finish.clip import clip_points
 from service.core.finish.finished import Finished
-from service.core.finish.outliers import place_outliers
+from service.core.finish.outliers import far_moved, place_outliers
 from service.core.finish.tangential import relax_tangential
 from service.core.finish.volume import preserve_measure
 from service.core.geometry import Geometry
 from service.core.linalg.cache import analysis_of
 from service.core.linalg.resources import choose_solver
+from service.core.noise.estimate import codimension
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.plan import Plan, make_plan, with_problem, with_solution
@@ -247,10 +248,16 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
         X, volume_scale = preserve_measure(problem.geometry, X)
     if group.max_deviation is not None:
         X, _ = clip_points(problem.geometry.points, X, group.max_deviation)
+    kept = None
     if problem.weights is not None and plan.outliers.value != "pull":
-        X = place_outliers(problem.geometry.points, X, problem.op.L, problem.weights.pulled,
+        P = problem.geometry.points
+        kept = problem.weights.outliers
+        if problem.geometry.kind == "cloud":  # strays the residual test left undecided
+            kept = far_moved(P, X, kept, sol.target.sigma, codimension(problem.geometry),
+                             problem.weights.tau_scale)
+        X = place_outliers(P, X, problem.op.L, kept[~problem.geometry.fixed_mask()[kept]],
                            plan.outliers.value)
-    return Finished(X, volume_scale, along)
+    return Finished(X, volume_scale, along, kept)
 
 
 def report(

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -72,6 +73,12 @@ def diagnostics(
         )
     stats = dev.stats if dev is not None else None
     rms = float(np.sqrt(np.mean(dev_pt**2)))
+    kept = fin.outliers
+    if weights is not None and kept is not None and kept.size > weights.outliers.size:
+        extra = kept.size - weights.outliers.size
+        run.notes.append(f"{extra} more points the solve moved far from their input (beyond "
+                         "twice the outliers' threshold) were kept in place as outliers too")
+        weights = replace(weights, outliers=kept)
     checks, shape_warnings, sigma = _shape(
         geometry, params, target, X, _bulk_rms(dev_pt, weights), run.notes
     )

@@ -21,7 +21,13 @@ from numpy.typing import NDArray
 
 from service.core.noise.robust import pull_in
 
-__all__ = ["bound_to_ring", "place_outliers"]
+__all__ = ["FAR_MOVE", "bound_to_ring", "far_moved", "place_outliers"]
+
+#: After the solve, a cloud point the solution moved more than this many ``sigma sqrt(c)`` is
+#: one the surface does not pass near (twice the Gaussian extreme ``z0`` of the outlier test,
+#: as :func:`service.core.noise.robust.isolated`): a stray the residual test left undecided
+#: (its neighbours are strays too). Only where that test found outliers already.
+FAR_MOVE = 2.0 * 3.89
 
 Array = NDArray[np.float64]
 
@@ -37,6 +43,21 @@ def place_outliers(
         out[idx] = P[idx]
         return out
     return bound_to_ring(pull_in(X, L, idx), L, idx)
+
+
+def far_moved(
+    P: Array, X: Array, known: NDArray[np.int64], sigma: float | None, codim: int,
+    scale: Array | None = None,
+) -> NDArray[np.int64]:
+    """``known`` with the points ``X`` moved more than :data:`FAR_MOVE` ``sigma_i sqrt(codim)``
+    from ``P`` added (sorted; ``sigma_i = sigma scale_i``, the per-point noise level where the
+    noise varies); ``known`` alone without a noise level or known outliers."""
+    if not sigma or known.size == 0:
+        return known
+    moved = np.linalg.norm(X - P, axis=1)
+    level = sigma * (1.0 if scale is None else scale)
+    far = np.flatnonzero(moved > FAR_MOVE * level * np.sqrt(max(codim, 1)))
+    return np.union1d(known, far).astype(np.int64)
 
 
 def bound_to_ring(X: Array, L: sp.spmatrix, idx: NDArray[np.int64]) -> Array:

@@ -45,7 +45,7 @@ from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
 
 __all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
-           "isolated", "local_sigma", "outlier_note", "pull_in", "robust_weights",
+           "isolated", "local_sigma", "on_grid", "outlier_note", "pull_in", "robust_weights",
            "row_quantile"]
 
 Array = NDArray[np.float64]
@@ -64,9 +64,15 @@ PULLED = 0.1
 ISOLATION = 4.0
 #: ``"auto"`` noise weights only where the residuals are clearly noise: the estimate's scale
 #: ratio ``v(2k) / v(k)`` (:mod:`.noise`) at most this (calibration: smooth shapes with
-#: constant or varying noise <= 1.05; a CAD part with creases at low noise 1.62, where the
-#: residuals vary with the shape: spread 1.21, and the weights would smooth its creases away).
-SHAPE_FREE = 1.15
+#: constant or varying noise <= 1.05, the issue-31 varying cloud 1.00; CAD parts with creases
+#: under uniform noise 1.07 (6K cube at 0.05 and 0.1 h) - 1.62 (fandisk 0.1 h), where the crease
+#: band's fits make the spread 0.8 - 1.3 and the weights smoothed the creases away: 1.15 let
+#: the cube through, 1.96x worse than its input).
+SHAPE_FREE = 1.05
+#: Bounds of ``sigma_i / sigma`` (the spread cap): a point's share of the automatic budget
+#: ``(omega_i sigma_i / sigma)^2 = sigma_i / sigma`` is at most this many times the mean's, so
+#: one region cannot take the budget (issue 31).
+RATIO_CAP = 4.0
 HUBER, TUKEY = 1.345, 4.685
 #: Quantile of the neighbourhood's ``v_j`` that estimates ``sigma_i^2``.
 QUANTILE = 0.25
@@ -196,16 +202,34 @@ def _factors(
     finite = np.isfinite(sig) & (sig > 0)
     spread = float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() \
         else 0.0
-    clean = est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE
+    clean = (est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE) and not on_grid(P, est.sigma)
     use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
-    ratio = np.clip(ratio, 0.05, 20.0)
+    ratio = np.clip(ratio, 1.0 / RATIO_CAP, RATIO_CAP)
     s2 = (est.sigma * ratio) ** 2
     far = isolated(geometry, nbr, np.sqrt(s2))
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
     return rho, ratio, outliers, applied, use_uneven, spread
+
+
+def on_grid(P: Array, sigma: float, share: float = 0.5) -> bool:
+    """Whether the coordinates are quantized at a step of at least ``sigma``: on some axis the
+    points take fewer than ``share * n`` distinct values, all on multiples of one step (a
+    scan stored at 1 mm with 5 cm noise is not: no terraces form). Quantization leaves exactly
+    flat terraces where the surface runs along the grid (zero fit residuals, a spread of
+    ``log sigma_i`` of 5 - 18) while its noise is one level everywhere (issue 31)."""
+    n = P.shape[0]
+    for col in P.T:
+        u = np.unique(col)
+        if u.size < 3 or u.size >= share * n:
+            continue
+        gaps = np.diff(u)
+        step = float(gaps.min())
+        if step >= sigma and np.all(np.abs(gaps / step - np.round(gaps / step)) < 1e-3):
+            return True
+    return False
 
 
 def _calibration(r: Array, s2: Array | float, c: int) -> float:
