@@ -44,9 +44,22 @@ from service.core.noise.estimate import estimate_noise, manifold_dim
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
 
-__all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
-           "isolated", "local_sigma", "on_grid", "outlier_note", "pull_in", "robust_weights",
-           "row_quantile"]
+__all__ = [
+    "ALPHA",
+    "OMEGA_MIN",
+    "SPREAD",
+    "DataWeights",
+    "crease_factor",
+    "data_weights",
+    "flag_outliers",
+    "isolated",
+    "local_sigma",
+    "on_grid",
+    "outlier_note",
+    "pull_in",
+    "robust_weights",
+    "row_quantile",
+]
 
 Array = NDArray[np.float64]
 #: Per-point probability of a Gaussian residual beyond the outlier threshold ``z0``.
@@ -73,6 +86,10 @@ SHAPE_FREE = 1.05
 #: ``(omega_i sigma_i / sigma)^2 = sigma_i / sigma`` is at most this many times the mean's, so
 #: one region cannot take the budget (issue 31).
 RATIO_CAP = 4.0
+#: ``median(sigma_i) / sigma`` below this: the estimate's mode came from crease-straddling
+#: fits (calibration half: the step block's 3.4x over-estimates 0.49 - 0.52; every other case,
+#: uniform, varying, quantized or 1 h noise, 0.85 - 2.16).
+CREASE_MEDIAN = 0.67
 HUBER, TUKEY = 1.345, 4.685
 #: Quantile of the neighbourhood's ``v_j`` that estimates ``sigma_i^2``.
 QUANTILE = 0.25
@@ -211,7 +228,20 @@ def _factors(
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
-    return rho, ratio, outliers, applied, use_uneven, spread
+    return rho, ratio * crease_factor(sig, est.sigma), outliers, applied, use_uneven, spread
+
+
+def crease_factor(sig: Array, sigma: float) -> float:
+    """The budget's correction when the global estimate was taken from fits that straddle
+    creases (issue 31): ``median(sigma_i) / sigma`` below :data:`CREASE_MEDIAN` says the mode
+    of the residual variances sits on the crease band, not on the faces; the budget then uses
+    the lower quartile of ``sigma_i`` (the least crease-affected level), else 1."""
+    with np.errstate(all="ignore"):
+        med = float(np.nanmedian(sig)) / sigma if sigma > 0 else np.nan
+        low = float(np.nanquantile(sig, 0.25)) / sigma if sigma > 0 else np.nan
+    if not (np.isfinite(med) and np.isfinite(low)) or med >= CREASE_MEDIAN:
+        return 1.0
+    return float(np.clip(low, 1.0 / RATIO_CAP, 1.0))
 
 
 def on_grid(P: Array, sigma: float, share: float = 0.5) -> bool:
