@@ -73,12 +73,7 @@ def diagnostics(
         )
     stats = dev.stats if dev is not None else None
     rms = float(np.sqrt(np.mean(dev_pt**2)))
-    kept = fin.outliers
-    if weights is not None and kept is not None and kept.size > weights.outliers.size:
-        extra = kept.size - weights.outliers.size
-        run.notes.append(f"{extra} more points the solve moved far from their input (beyond "
-                         "twice the outliers' threshold) were kept in place as outliers too")
-        weights = replace(weights, outliers=kept)
+    weights = _kept(weights, fin, run.notes)
     checks, shape_warnings, sigma = _shape(
         geometry, params, target, X, _bulk_rms(dev_pt, weights), run.notes
     )
@@ -125,6 +120,17 @@ def diagnostics(
         **_data_weights(weights, params.outliers),
         tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
     )
+
+
+def _kept(dw: DataWeights | None, fin: Finished, notes: list[str]) -> DataWeights | None:
+    """The data weights with the outliers the finish stage kept in place (issue 31: a cloud's
+    points the solve moved far are kept and flagged too), with a note when it added some."""
+    kept = fin.outliers
+    if dw is None or kept is None or kept.size <= dw.outliers.size:
+        return dw
+    notes.append(f"{kept.size - dw.outliers.size} more points the solve moved far from their "
+                 "input (beyond twice the outliers' threshold) were kept in place as outliers too")
+    return replace(dw, outliers=kept)
 
 
 def _bulk_rms(dev_pt: Array, dw: DataWeights | None) -> float:

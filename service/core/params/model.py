@@ -153,17 +153,10 @@ class SmoothingParams(BaseModel):
             "'local': always; 'none': never."
         ),
     )
-    outliers: OutlierMode = Field(
-        default="auto",
-        description=(
-            "What happens to the points the robust weights find as outliers: 'flag' keeps them "
-            "at their input positions, lists them in the report and flags them in the output "
-            "where the format holds a flag (LAS classification 7, a PLY/PCD 'outlier' "
-            "attribute); 'drop' writes a point cloud without them; 'pull' places them where "
-            "the smoothness term alone puts them (eq. 4 with omega_i -> 0), no further than "
-            "their ring reaches. 'auto': flag for point clouds, pull for meshes and curves."
-        ),
-    )
+    outliers: OutlierMode = Field(default="auto", description=(
+        "Outliers found by the robust weights: 'flag' keeps them in place, flagged in the output "
+        "(LAS class 7, PLY/PCD 'outlier'); 'drop' writes a cloud without them; 'pull' moves them "
+        "into their ring (eq. 4, omega_i -> 0). 'auto': flag for clouds, pull otherwise."))
     tolerance: float = Field(
         default=TOLERANCE,
         gt=0,
