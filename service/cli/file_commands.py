@@ -50,7 +50,7 @@ def add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
         "--weld", action=argparse.BooleanOptionalAction, default=None,
         help="weld exactly coincident vertices before smoothing (meshes stored with split "
         "normals, e.g. STL exports); the output keeps the input's vertices [default: yes for "
-        "STL and GLB, no for other formats]",
+        "STL and GLB; other formats when duplicate positions tie faces]",
     )  # fmt: skip
     what = "the run's diagnostics" if local else "the job's report"
     files.add_argument("--report", metavar="REPORT.json", help=f"write {what} as JSON")

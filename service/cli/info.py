@@ -35,6 +35,7 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     facts.update(describe(doc.geometry, params))
     if doc.weld is not None:
         facts["welded_from"] = int(doc.weld.n_original)
+        facts["duplicates_welded"] = int(doc.weld.n_original - doc.geometry.n)  # issue 31
     json.dump(facts, sys.stdout, indent=None if ns.compact else 2, allow_nan=False)
     sys.stdout.write("\n")
     return EXIT_OK

@@ -107,6 +107,9 @@ class SmoothResult:
         The weights ``omega_i`` of the data term the run used when data weights were applied
         (the user's times the robust and noise weights): ``phi`` is ``sum omega_i^2
         ||x_i - p_i||^2`` with these over the points not in ``pulled``. ``None``: the user's.
+    outlier_mode : str or None
+        ``"flag"``, ``"drop"`` or ``"pull"``: what was done with the outliers (issue 31);
+        ``None`` without outliers.
     pulled : ndarray of int
         Outliers with (next to) no weight, placed after the solve by ``argmin ||L X||^2`` over
         them (eq. 4 as ``omega_i -> 0``); their displacement is not part of ``phi``.
@@ -163,6 +166,7 @@ class SmoothResult:
     data_weights: str | None = None
     omega: NDArray[np.float64] | None = None
     pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    outlier_mode: str | None = None  # issue 31: "flag", "drop" or "pull" when there are outliers
     tangential: dict[str, Any] | None = None  # issue 21: the tangential step
     plan: Plan | None = None  # issue 29: every automatic choice and its evidence
     unchanged: str | None = None  # issue 32: set by service.workflows.smooth_file
@@ -228,6 +232,7 @@ class SmoothResult:
         out.update(
             outlier_count=int(self.outliers.size),
             outliers=[int(i) for i in self.outliers],
+            outlier_mode=self.outlier_mode,
             data_weights=self.data_weights,
             plan=None if self.plan is None else self.plan.to_dict(),
             unchanged=self.unchanged,

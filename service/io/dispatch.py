@@ -121,7 +121,9 @@ def read_geometry(
     weld : bool, optional
         Merge exactly coincident vertices (see :mod:`service.io._shared.weld`); writers still write
         the
-        file's vertex count and order. Default: the format's (STL and GLB: yes, others: no).
+        file's vertex count and order. Default: the format's (STL and GLB: yes); other formats
+        weld when duplicate positions tie faces (a mesh stored one vertex per position and
+        normal would otherwise tear apart when smoothed; issue 31).
     **options
         Reader options of the format (``xyz_dims`` for XYZ, ``geographic`` for GPX/GeoJSON);
         options given as ``None`` are ignored.
@@ -151,6 +153,10 @@ def read_geometry(
             raise ValueError(f"{key} applies to {' and '.join(users)} files only")
     do_weld = spec.weld_default if weld is None else bool(weld)
     doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+    if weld is None and not do_weld:
+        from service.io._shared.weld import weld_if_tied
+
+        doc = weld_if_tied(doc)
     return doc
 
 

@@ -360,16 +360,19 @@ def _write(
     can stand for the output (same format, no writer options), else the encoded document."""
     import dataclasses
 
-    doc = done.document
-    assert doc is not None
+    from service.io._shared.flags import with_outliers
+
+    assert done.document is not None
+    doc, points = with_outliers(done.document, done.result.points, done.result,
+                                done.output_format)  # fmt: skip
     data = None
-    if returned_unchanged(done.result, smoothed.points):
+    if returned_unchanged(done.result, smoothed.points) and doc is done.document:
         if done.output_format == doc.source_format and not any(writing.values()):
             data = original_bytes(original)
         how = CONVERTED if data is None else COPIED
         done = dataclasses.replace(done, result=marked(done.result, how), unchanged=how)
     if data is None:
-        data = encode(doc, done.output_format, done.result.points, **writing)
+        data = encode(doc, done.output_format, points, **writing)
     if isinstance(target, Path):
         from service.io.atomic import write_file
 

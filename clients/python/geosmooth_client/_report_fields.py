@@ -46,6 +46,7 @@ REPORT_ATTRIBUTES: Mapping[str, str] = {
     "unchanged": "unchanged",
     "outlier_count": "outlier_count",
     "outliers": "outliers",
+    "outlier_mode": "outlier_mode",
     "data_weights": "data_weights",
     "tangential": "tangential",
     "shape_warnings": "shape_warnings",

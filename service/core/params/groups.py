@@ -68,6 +68,7 @@ class DataParams:
 
     robust: str
     noise_weights: str
+    outliers: str
 
 
 @dataclass(frozen=True)

@@ -195,6 +195,8 @@ def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: 
         at = 0
         for chunk in reader.chunk_iterator(CHUNK):
             k = len(chunk)
+            if "classification" in plain.attributes:  # outliers flagged as class 7 (issue 31)
+                chunk["classification"] = plain.attributes["classification"][at : at + k]
             if plain.moved:
                 for j, name in enumerate(_COORDS):
                     scale, offset = float(header.scales[j]), float(header.offsets[j])
