@@ -194,6 +194,16 @@ class Intake:
     ) -> T | None:
         """``func`` on the spooled upload in a worker process (``None``: the client left)."""
         assert upload.path is not None
+        shown = upload.filename or "the upload"
+        redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
+        redact[str(Path(self.settings.data_dir).resolve())] = "data"
+        if mode == "sync":
+            limiter, timeout = self.sync_limiter, self.settings.sync_timeout
+            budget: int = self.settings.sync_memory_bytes
+        else:
+            limiter = self.ingest_limiter
+            timeout = min(self.settings.ingest_timeout, self.settings.parse_timeout)
+            budget = INGEST_BASE_BYTES + INGEST_FACTOR * upload.size
         req = IngestRequest(
             kind=upload.kind,
             path=str(upload.path),
@@ -208,19 +218,13 @@ class Intake:
             options={
                 "dry_run_points": self.settings.submit_dry_run_points,
                 "job_timeout": self.settings.job_timeout,
+                # what the submit check may spend on its own analysis (half the process's
+                # budget: the parsed input holds the rest)
+                "check_memory_bytes": budget // 2,
+                "check_seconds": timeout / 2,
                 **(options or {}),
             },
         )
-        shown = upload.filename or "the upload"
-        redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
-        redact[str(Path(self.settings.data_dir).resolve())] = "data"
-        if mode == "sync":
-            limiter, timeout = self.sync_limiter, self.settings.sync_timeout
-            budget: int = self.settings.sync_memory_bytes
-        else:
-            limiter = self.ingest_limiter
-            timeout = min(self.settings.ingest_timeout, self.settings.parse_timeout)
-            budget = INGEST_BASE_BYTES + INGEST_FACTOR * upload.size
         async with self.fair_slot(principal.bucket, limiter, wait=timeout):
             answer = await self.isolation.run(
                 func,
