@@ -193,6 +193,7 @@ class Maintenance:
         self._last_strays = time.monotonic()
         for tmp in self.files.stray_temporaries(ORPHAN_AGE):
             tmp.unlink(missing_ok=True)
+        self._remove_orphans(ORPHAN_AGE)  # job directories whose record is gone, not only at start
 
     def _migrate_v0_files(self) -> None:
         for job_id in self.store.ids():

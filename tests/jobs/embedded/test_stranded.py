@@ -61,3 +61,23 @@ def test_the_sweep_requeues_a_run_no_slot_holds(make_queue: MakeQueue) -> None:
     done = wait_finished(queue, stranded.id, timeout=60)
     assert done.status is JobStatus.SUCCEEDED, done.problem
     assert done.attempts == 2  # the stranded run counted as a try
+
+
+def test_orphan_job_directories_are_swept_while_running(make_queue: MakeQueue) -> None:
+    """A job directory whose record is gone (not only at start): removed by the periodic sweep
+    once older than ORPHAN_AGE; a young one (a submit in progress) is kept."""
+    import os
+
+    from service.jobs.embedded.maintenance import ORPHAN_AGE
+
+    queue = make_queue(sweep_interval=0.2)
+    root = queue.files.root
+    old, young = root / ("a" * 32), root / ("b" * 32)
+    for d in (old, young):
+        d.mkdir()
+        (d / "input.json").write_text("{}")
+    past = time.time() - ORPHAN_AGE - 60
+    os.utime(old, (past, past))
+    queue._last_strays = 0.0  # the next sweep walks the store (every ORPHAN_AGE otherwise)
+    wait_for(lambda: not old.exists(), timeout=30)
+    assert young.exists()
