@@ -13,7 +13,7 @@ and checked in a worker process (:mod:`service.api.intake.isolation`) with
   readers keep their peak near 3x the file), ``sync_memory_bytes`` for a synchronous solve,
 * at most ``max(2, workers)`` of them at once (``workers`` solves for ``/v1/smooth``), of which
   one key (or client address) holds at most ``parse_share`` (:meth:`Intake.fair_slot`); a
-  request that gets no slot within its CPU limit's seconds is answered 503 + ``Retry-After``.
+  request that gets no slot within the wall-clock safety net is answered 503 + ``Retry-After``.
 
 Inline JSON bodies are parsed with the standard library's ``json`` (about 10-15x the body in
 Python objects), so they are bounded separately by ``MAX_JSON_BODY_BYTES``; larger inputs are
@@ -34,7 +34,7 @@ from fastapi import Request
 from service.api.errors import ApiProblem
 from service.api.http.auth import Principal
 from service.api.intake.ingest import IngestRequest
-from service.api.intake.isolation import Isolation, busy_problem
+from service.api.intake.isolation import Isolation, busy_problem, wall_limit
 from service.api.intake.uploads import Upload, receive_upload
 from service.settings import Settings
 
@@ -225,7 +225,7 @@ class Intake:
                 **(options or {}),
             },
         )
-        async with self.fair_slot(principal.bucket, limiter, wait=timeout):
+        async with self.fair_slot(principal.bucket, limiter, wait=wall_limit(timeout)):
             answer = await self.isolation.run(
                 func,
                 req,
