@@ -149,6 +149,7 @@ PARAMS_EXAMPLE = '{"lam": 1.0}'
 _MULTIPART_SCHEMA: dict[str, Any] = {
     "type": "object",
     "required": ["file", "params"],
+    "additionalProperties": False,  # any other part is refused (422 unknown form field)
     "properties": {
         "file": {
             "type": "string",
@@ -161,7 +162,9 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
             "description": "SmoothingParams as a JSON object, sent as a text field or as a JSON "
             "file part. At most one of tau, rms or lam (none: tau from the estimated noise); lam "
             "(no search) is scale-free, tau and rms are in the input's units (docs/method.md, "
-            "'Choosing tau').",
+            "'Choosing tau'). Must be JSON (anything else is a 422).",
+            "contentMediaType": "application/json",
+            "contentSchema": {"$ref": "#/components/schemas/SmoothingParams"},
             "example": PARAMS_EXAMPLE,
         },
         "input_format": {
@@ -197,7 +200,10 @@ def _request_body(description: str) -> dict[str, Any]:
             "required": True,
             "description": description,
             "content": {
-                "multipart/form-data": {"schema": _MULTIPART_SCHEMA},
+                "multipart/form-data": {
+                    "schema": _MULTIPART_SCHEMA,
+                    "encoding": {"params": {"contentType": "application/json, text/plain"}},
+                },
                 "application/json": {
                     "schema": {"$ref": "#/components/schemas/SmoothJsonRequest"},
                     "example": SmoothJsonRequest.model_config["json_schema_extra"]["examples"][0],  # type: ignore[index]

@@ -37,6 +37,8 @@ def check_job(req: IngestRequest) -> NewJob:
         exact_tau_max_points=req.exact_tau_max_points,
         dry_run_points=int(options.get("dry_run_points", 0)),
         tile_workers=int(options.get("tile_workers", 1)),
+        check_memory_bytes=options.get("check_memory_bytes"),
+        check_seconds=options.get("check_seconds"),
     )
     admission = check_submit(parsed.document.geometry, parsed.params, policy)  # 422: refused
     if "geometry" in parsed.extra:
