@@ -7,9 +7,7 @@ found, tau is met and the result is closer to the clean data than the input.
 
 from __future__ import annotations
 
-import os
 import zlib
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +16,9 @@ from service.core import Geometry, SmoothingParams, smooth
 from service.core.errors import ShapeLost
 from service.core.noise.estimate import NOISE_RATIO, estimate_noise
 from tests.core.core_fixtures import grid_mesh, noisy_icosphere, polyline_edges
+from tests.shared_data import shared_data_dir
 
-DATA = Path(os.environ.get("GEOSMOOTH_SHARED_DATA", Path(__file__).parents[3] / "shared" / "data"))
+DATA = shared_data_dir()
 needs_data = pytest.mark.skipif(
     not (DATA / "wrench.dxf").is_file(), reason="shared data not available"
 )
