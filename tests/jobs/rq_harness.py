@@ -50,14 +50,28 @@ class RedisServer:
     def url(self) -> str:
         return f"redis://127.0.0.1:{self.port}/0"
 
-    def start(self) -> RedisServer:
+    def start(self, retries: int = 3) -> RedisServer:
         self.dir.mkdir(parents=True, exist_ok=True)
         args = ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1", "--dir",
                 str(self.dir), "--appendonly", "yes", "--appendfsync", "always", "--save", "",
                 "--logfile", str(self.dir / "redis.log")]  # fmt: skip
         self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        wait_for(lambda: _ping(self.port), timeout=15)
+        # ours, not another test's server on a port taken since it was chosen (parallel tests):
+        # a redis-server that cannot bind exits
+        proc = self.proc
+        wait_for(lambda: proc.poll() is not None or _ping(self.port), timeout=15)
+        if proc.poll() is not None:
+            if retries and "Address already in use" in self._log():
+                self.port = free_port()
+                return self.start(retries - 1)
+            raise RuntimeError(f"redis-server exited with {proc.returncode}: {self._log()}")
         return self
+
+    def _log(self) -> str:
+        try:
+            return (self.dir / "redis.log").read_text(errors="replace")[-2000:]
+        except OSError:
+            return ""
 
     def kill(self) -> None:
         """SIGKILL (no shutdown save: only what the append-only file holds survives)."""
