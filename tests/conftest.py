@@ -1,4 +1,14 @@
-"""Session-wide setup of the test suite: SIGINT restored, the shared real data located."""
+"""Session-wide setup of the test suite: SIGINT restored, the shared real data located, and the
+placement of tests on pytest-xdist's workers (``make test`` runs ``-n auto --dist loadgroup``).
+
+Parallel runs: every live server, redis-server and browser the tests start binds a free port of
+its own (and takes another if a parallel test took it first), every file goes to a pytest
+temporary directory, so any two tests may run at once. Session fixtures are per worker (each
+worker starts its own live servers and browser when its first test needs one); tests that must
+share one worker can say so with ``@pytest.mark.xdist_group(name)``. Tests marked ``serial``
+(they load the whole machine, e.g. a flood of 20,000 connections) run in a second, serial pass
+after the parallel one.
+"""
 
 from __future__ import annotations
 

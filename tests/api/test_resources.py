@@ -194,6 +194,7 @@ print(attempts)
 """
 
 
+@pytest.mark.serial  # the flood holds 14,000 loopback ports: no other test beside it
 def test_twenty_thousand_idle_connections_do_not_lock_out_healthz(tight: LiveServer) -> None:
     """20,000 idle connections from one client (127.0.0.1; up to 14,000 held at once: more
     makes the kernel's ephemeral port search the bottleneck, not the server) while /healthz is
