@@ -17,6 +17,7 @@ from typing import Any
 
 from service.settings import Settings
 from tests.jobs.jobs_helpers import HERE, REPO, wait_for
+from tests.timing import load_factor
 
 PYTHON = sys.executable
 WEBHOOK_SECRET = "whsec-rq-7d2e"
@@ -95,7 +96,9 @@ def rq_settings(redis_url: str, data_dir: Path, **overrides: Any) -> Settings:
         "redis_url": redis_url,
         "data_dir": data_dir,
         "rq_queue_name": "geosmooth-test",
-        "worker_lease": 3.0,
+        # short, so that a dead worker's job moves on quickly; long enough that a busy machine
+        # delaying a heartbeat does not take a live worker for a dead one
+        "worker_lease": 4.0 * load_factor(),
         "retry_backoff": 0.2,
         "job_timeout": 30.0,
         "result_ttl": 3600.0,
