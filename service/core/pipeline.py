@@ -33,6 +33,8 @@ from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
 from service.core.run import Run
 from service.core.search.maxnorm import bound_deviation
+from service.core.search.one_run_target import applies as one_run_applies
+from service.core.search.one_run_target import knee_and_solve
 from service.core.search.polyfilter import filter_system
 from service.core.search.roots import LambdaSearch
 from service.core.search.target import (
@@ -134,15 +136,19 @@ def tikhonov(
     dev.listener = run.listener(frame, aim.tau)
     seconds = 0.0
     try:
-        if plan.automatic_tau:
+        search: LambdaSearch | None = None
+        t0 = time.perf_counter()
+        if one_run_applies(params, problem.system.size):  # issue 30: knee, lambda, solution
+            aim, search = knee_and_solve(dev, aim, frame, plan.automatic_tau, params.tolerance)
+            dev.listener = run.listener(frame, aim.tau)
+        elif plan.automatic_tau:
             aim = knee(dev, aim, frame)
             dev.listener = run.listener(frame, aim.tau)
         if params.tau_rule == "gcv":
             search, aim = gcv_search(dev, problem.geometry, params, problem.fixed, frame)
-        else:
-            t0 = time.perf_counter()
+        elif search is None:
             search = find_lambda(dev, problem.op, problem.fixed, params, aim, frame, run.notes)
-            seconds = time.perf_counter() - t0
+        seconds = time.perf_counter() - t0
     except TauOutOfRange as exc:
         if not plan.automatic_tau:
             raise

@@ -273,6 +273,8 @@ def with_solution(plan: Plan, target: Target, solver: str, notes: list[str]) -> 
         why = plan.solver.why
     elif solver == "none":
         why = "no system solved"
+    elif solver == "lanczos":
+        why = "one Lanczos run: the knee, lambda and the solution without a factorization"
     else:
         why = "; ".join(reasons) or "direct: nothing selected the matrix-free path"
     return replace(plan, tau_rule=tau_rule, solver=Choice(solver, why, plan.solver.evidence))

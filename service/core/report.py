@@ -105,7 +105,9 @@ class Report(BaseModel):
         examples=[{"laplacian": 0.004, "analysis": 0.002, "solve": 0.011, "total": 0.03}],
     )
     solver: str = Field(
-        description="cholmod, superlu, cg (matrix-free) or none (filter).", examples=["cholmod"]
+        description="cholmod, superlu, cg (matrix-free), lanczos (the default's one Lanczos "
+        "run: knee, lambda and solution without a factorization) or none (filter).",
+        examples=["cholmod"],
     )
     warnings: list[str] = Field(description="Anything the user should know.", examples=[[]])
     spectrum: dict[str, list[float]] | None = Field(
@@ -182,6 +184,14 @@ class Report(BaseModel):
         description="Meshes, normal displacement with the automatic tau: the step along the "
         "surface (share, budget, psi, steps, reverted); the total deviation is phi + psi.",
         examples=[{"share": 0.4, "budget": 0.012, "psi": 0.0119, "steps": 3, "reverted": 0}],
+    )
+    output_deviation: dict[str, float] | None = Field(
+        default=None,
+        description="What the output is: its own deviation total = ||D(X - P)||_F^2 (input "
+        "frame, the run's weights), then its parts: tikhonov (phi of the solve at the reported "
+        "lambda), tangential (the tangential step's psi) and other (outliers placed without "
+        "their data weight, volume rescaling, clipping); null when nothing was solved.",
+        examples=[{"total": 3.42, "tikhonov": 1.22, "tangential": 2.2, "other": 0.0}],
     )
     shape_warnings: list[str] = Field(
         default_factory=list,

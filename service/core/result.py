@@ -99,6 +99,12 @@ class SmoothResult:
         noise), ``budget`` and ``psi`` (its target and the tangential deviation reached, input
         frame), ``reverted`` (points kept at the normal solve's position to avoid folds);
         ``None`` when the step does not apply.
+    output_deviation : dict or None
+        The output's own deviation ``total = ||D (X - P)||_F^2`` (input frame, the run's
+        weights), then its parts: ``tikhonov`` (``phi`` of the Tikhonov solve at the reported
+        lambda), ``tangential`` (the tangential step's ``psi``) and ``other`` (outliers placed
+        without their data weight, volume rescaling, clipping); ``None`` when nothing was
+        solved. With a given tau the output's total is the Tikhonov ``phi``.
     tiles : dict or None
         Tiled runs: count, halo, rounds and every tile (points, halo, worker, seconds, phi).
     outliers : ndarray of int
@@ -168,6 +174,7 @@ class SmoothResult:
     pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     outlier_mode: str | None = None  # issue 31: "flag", "drop" or "pull" when there are outliers
     tangential: dict[str, Any] | None = None  # issue 21: the tangential step
+    output_deviation: dict[str, float] | None = None  # issue 30: what the output is
     plan: Plan | None = None  # issue 29: every automatic choice and its evidence
     unchanged: str | None = None  # issue 32: set by service.workflows.smooth_file
 
@@ -227,6 +234,7 @@ class SmoothResult:
             shape_warnings=list(self.shape_warnings),
             bound=self.bound,
             tangential=self.tangential,
+            output_deviation=self.output_deviation,
             **self.checks,
         )
         out.update(

@@ -49,6 +49,7 @@ REPORT_ATTRIBUTES: Mapping[str, str] = {
     "outlier_mode": "outlier_mode",
     "data_weights": "data_weights",
     "tangential": "tangential",
+    "output_deviation": "output_deviation",
     "shape_warnings": "shape_warnings",
     "flipped_faces": "flipped_faces",
     "folded_faces": "folded_faces",

@@ -119,6 +119,9 @@ def diagnostics(
         noise_found=None if params.tau_rule != "auto" else bool(target.sigma),
         **_data_weights(weights, params.outliers),
         tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
+        output_deviation=(
+            None if dev is None else _output_deviation(geometry, moved, phi, fin, frame)
+        ),
     )
 
 
@@ -141,6 +144,20 @@ def _bulk_rms(dev_pt: Array, dw: DataWeights | None) -> float:
     keep = np.ones(dev_pt.size, dtype=bool)
     keep[dw.outliers] = False
     return float(np.sqrt(np.mean(dev_pt[keep] ** 2)))
+
+
+def _output_deviation(
+    geometry: Geometry, moved: Array, phi: float, fin: Finished, frame: Frame
+) -> dict[str, float]:
+    """What the output is (issue 30): its own deviation ``||D (X - P)||_F^2`` (input frame, the
+    run's weights ``omega``) first, then its parts: the Tikhonov solve's ``phi`` at the
+    reported lambda (eq. 15), the tangential step's ``psi`` (moves orthogonal to the normal
+    solve's, so the two add), and the rest (outliers placed by eq. 4 without their data weight,
+    volume rescaling, clipping)."""
+    w2 = geometry.omega() ** 2
+    total = float(np.sum(w2 * np.einsum("ij,ij->i", moved, moved)))
+    psi = 0.0 if fin.tangential is None else float(fin.tangential.psi * frame.phi_factor)
+    return {"total": total, "tikhonov": phi, "tangential": psi, "other": total - phi - psi}
 
 
 def _shape(

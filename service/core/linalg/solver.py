@@ -34,6 +34,7 @@ from service.core.linalg.krylov import pcg
 __all__ = [
     "Direct",
     "Gram",
+    "Lanczos",
     "LinearSolver",
     "MatrixFree",
     "SolverStats",
@@ -186,6 +187,13 @@ class MatrixFree(LinearSolver):
                 f"in {self.maxiter} products"
             )
         return self._check(X, lam)
+
+
+class Lanczos(MatrixFree):
+    """The matrix-free solver of a run whose solution came from one Lanczos run (issue 30,
+    :mod:`service.core.search.one_run`): reported as ``"lanczos"``; later solves are CG's."""
+
+    name = "lanczos"
 
 
 class Direct(LinearSolver):

@@ -40,7 +40,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.stats import chi2, poisson
 
 from service.core.geometry import Geometry
-from service.core.noise.estimate import estimate_noise, manifold_dim
+from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
 
@@ -192,7 +192,17 @@ def _factors(
 ) -> tuple[Array, Array, NDArray[np.int64], str, bool, float] | None:
     """``rho``, ``sigma_i / sigma``, the outliers, the robust rule applied, whether the noise
     weights apply and the spread; coincident points (split normals, repeated scans) are
-    measured once (a copy among the neighbours fits the point exactly), as a cloud."""
+    measured once (a copy among the neighbours fits the point exactly), as a cloud.
+
+    Surfaces in 3-D from :data:`~service.core.noise.fast_weights.COMPILED_FROM` points take the
+    compiled kernels (issue 30: the grid ``k``-NN, whose distances also tell coincident points,
+    the fits and the isolation pass; same rules, same numbers to rounding).
+    """
+    from service.core.noise import fast_weights
+
+    fast = fast_weights.neighbours(geometry)
+    if fast is not None:
+        return _from_neighbours(geometry, *fast, robust, uneven, compiled=True)
     P = geometry.points
     uniq, inv = np.unique(P, axis=0, return_inverse=True)
     if uniq.shape[0] < geometry.n:
@@ -210,7 +220,18 @@ def _factors(
     if est is None or not est.noise_found or geometry.dim - d < 1:
         return None
     nbr = point_neighbours(geometry, est.k, d, est.neighbours)
-    r, v = leave_one_out(P, nbr, d)
+    return _from_neighbours(geometry, est, d, nbr, robust, uneven, compiled=False)
+
+
+def _from_neighbours(
+    geometry: Geometry, est: NoiseEstimate, d: int, nbr: NDArray[np.int64], robust: str,
+    uneven: str, compiled: bool,
+) -> tuple[Array, Array, NDArray[np.int64], str, bool, float]:  # fmt: skip
+    """:func:`_factors` from each point's neighbours (row ``i``: ``i`` first)."""
+    from service.core.noise import fast_fits
+
+    P = geometry.points
+    r, v = (fast_fits.leave_one_out if compiled else leave_one_out)(P, nbr, d)
     c = geometry.dim - d
     nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
     s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
@@ -224,7 +245,7 @@ def _factors(
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
     ratio = np.clip(ratio, 1.0 / RATIO_CAP, RATIO_CAP)
     s2 = (est.sigma * ratio) ** 2
-    far = isolated(geometry, nbr, np.sqrt(s2))
+    far = isolated(geometry, nbr, np.sqrt(s2), compiled)
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
@@ -302,14 +323,24 @@ def flag_outliers(
     return flagged, r, v
 
 
-def isolated(geometry: Geometry, nbr: NDArray[np.int64], sigma: Array) -> NDArray[np.bool_]:
+def isolated(
+    geometry: Geometry, nbr: NDArray[np.int64], sigma: Array, compiled: bool = False
+) -> NDArray[np.bool_]:
     """Points far from their neighbours: from the median of their graph neighbours for meshes
     and curves (coordinate-wise, so that a neighbour thrown off does not move it), their mean
     distance to the ``k`` nearest for clouds; beyond :data:`ISOLATION` times the local spacing
     (median over the ``k`` nearest of their mean distance to their own) and beyond twice the
     Gaussian extreme of the noise. A
     point thrown far off (inside a sphere, far along the surface) has neighbours that fit
-    nothing, so its residual test is undecided; this catches it."""
+    nothing, so its residual test is undecided; this catches it. ``compiled``: the distances
+    from :func:`service.core.noise.fast_weights.isolation_distances` (one pass, issue 30)."""
+    z0 = float(np.sqrt(chi2.isf(ALPHA, 1)))
+    if compiled:
+        from service.core.noise.fast_weights import isolation_distances
+
+        d, spacing, far = isolation_distances(geometry, nbr)
+        dist = d if far is None else far
+        return (dist > ISOLATION * spacing) & (dist > 2 * z0 * sigma)
     P = geometry.points
     d = np.mean(np.linalg.norm(P[nbr[:, 1:]] - P[:, None, :], axis=2), axis=1)
     spacing = np.median(d[nbr[:, 1:]], axis=1)

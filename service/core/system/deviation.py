@@ -36,7 +36,15 @@ from numpy.typing import NDArray
 
 from service.core.errors import ParameterError
 from service.core.linalg.krylov import ShiftInvert, log_bisect, shift_invert
-from service.core.linalg.solver import Direct, Gram, LinearSolver, MatrixFree, SolverStats, explicit
+from service.core.linalg.solver import (
+    Direct,
+    Gram,
+    Lanczos,
+    LinearSolver,
+    MatrixFree,
+    SolverStats,
+    explicit,
+)
 
 __all__ = ["LAMBDA_FLOOR", "Deviation", "SmoothingSystem", "make_solver"]
 
@@ -186,6 +194,17 @@ class Deviation:
         self.solver = MatrixFree(self.system.M, self.system.d2)
         self.solver.stats = stats
         self._warm.clear()
+
+    def adopt(self, lam: float, E: Array) -> None:
+        """Take ``E`` as ``E_k(lam)``: computed elsewhere to a bound the caller checked (the one
+        Lanczos run of issue 30, :mod:`service.core.search.one_run`), so that
+        :meth:`deviation`, :meth:`value` and :meth:`solution` at ``lam`` need no solve; the
+        solver becomes :class:`~service.core.linalg.solver.Lanczos` (work counted so far kept)."""
+        stats = self.solver.stats
+        self.solver = Lanczos(self.system.M, self.system.d2)
+        self.solver.stats = stats
+        self._warm.clear()
+        self._E = {float(lam): E}
 
     def _solve(self, lam: float, R: Array, role: str, offset: Array | None = None) -> Array:
         X = self.solver.solve(lam, R, self._warm.get(role), offset)

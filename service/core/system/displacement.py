@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
 from service.core.linalg.cache import digest, frames
+from service.core.linalg.gram import Gram
 from service.core.noise.estimate import codimension
 from service.core.operator.laplacian import presmooth
 from service.core.operator.neighborhoods import Neighborhoods
@@ -72,6 +73,14 @@ NORMAL_MAX_ENTRIES = 50_000_000
 #: normals 19 degrees off, 3 steps 6.5, 10 steps 2.3; 10 steps round the creases of
 #: fandisk.obj, 3-5 do not; see benchmarks/quality/README.md).
 FRAME_STEPS = 5
+#: Unknowns from which the normal system keeps ``M = A^T A`` as ``A``
+#: (:class:`~service.core.linalg.gram.Gram`): the one-run Lanczos path of issue 30 needs only
+#: products (``2 nnz(A)``, 14M at 1M vertices, against ``nnz(A^T A)`` = 19M), and forming
+#: ``A^T A`` cost 1.7 s at 1M; a factorization forms it on demand.
+GRAM_FROM = 20_000
+#: Points from which the frames of surfaces in 3-D are computed in closed form on the grid
+#: k-NN (:mod:`.fast_frames`; ``service.core.noise.fast_weights.COMPILED_FROM``).
+COMPILED_FRAMES_FROM = 50_000
 
 
 def normal_frames(
@@ -123,6 +132,10 @@ def _frames(
     n = X.shape[0]
     k = min(k, n)
     query = X if at is None else X[at]
+    if codim == 1 and at is None and X.shape[1] == 3 and n >= COMPILED_FRAMES_FROM:
+        from service.core.system.fast_frames import surface_normals  # issue 30: closed form
+
+        return surface_normals(X, k)
     from service.core.operator.kernels import neighbourhood_covariances
 
     _, idx = cKDTree(X).query(query, k=k)
@@ -140,8 +153,8 @@ class NormalSystem:
 
     Attributes
     ----------
-    M : scipy.sparse.csc_matrix, shape (m r, m r)
-        ``A^T A``.
+    M : scipy.sparse.csc_matrix or Gram, shape (m r, m r)
+        ``A^T A`` (kept as ``A`` from :data:`GRAM_FROM` unknowns).
     d2 : ndarray, shape (m r,)
         ``omega_i^2`` repeated for the ``r`` unknowns of each free point.
     b : ndarray, shape (m r, 1)
@@ -152,7 +165,7 @@ class NormalSystem:
         Normal bases of the free points.
     """
 
-    M: sp.csc_matrix
+    M: sp.csc_matrix | Gram
     d2: NDArray[np.float64]
     b: NDArray[np.float64]
     U0: NDArray[np.float64]
@@ -201,9 +214,11 @@ def projected_normal_system(
         rows, cols, vals = _blocks(sp.coo_matrix(L_F), frames, r)
         A = sp.csr_matrix((vals, (rows, cols)), shape=(m * r, m * r))
     g = -np.einsum("nsa,ns->na", frames, np.asarray(LP)).reshape(m * r)
+    b = np.asarray(A.T @ g).reshape(m * r, 1)
+    if m * r >= GRAM_FROM:  # issue 30: products by A and A^T; formed only if factorized
+        return NormalSystem(Gram(A), np.repeat(w2, r), b, np.zeros((m * r, 1)), frames)
     M = (A.T @ A).tocsc()
     M.eliminate_zeros()
-    b = np.asarray(A.T @ g).reshape(m * r, 1)
     return NormalSystem(M, np.repeat(w2, r), b, np.zeros((m * r, 1)), frames)
 
 
