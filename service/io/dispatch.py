@@ -36,6 +36,7 @@ from service.io.source import Source
 __all__ = [
     "FORMATS",
     "OutputRefused",
+    "check_not_empty",
     "check_output",
     "detect_format",
     "formats_for",
@@ -98,6 +99,12 @@ def _resolve(source: Source, fmt: str | None, filename: str | None) -> str:
     return sniffed
 
 
+def check_not_empty(src: Source, fmt: str) -> None:
+    """:class:`FormatError` ``the file is empty`` (no bytes, or a little whitespace)."""
+    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
+        raise FormatError("the file is empty", fmt=fmt)
+
+
 def read_geometry(
     source: SourceLike,
     fmt: str | None = None,
@@ -142,8 +149,7 @@ def read_geometry(
     spec = FORMATS[_resolve(bare, fmt, filename)]
     if not spec.binary or spec.name in _TEXT_HEADERS:
         src = bare
-    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
-        raise FormatError("the file is empty", fmt=spec.name)
+    check_not_empty(src, spec.name)
     given = {k: v for k, v in options.items() if v is not None}
     for key in given:
         if key not in spec.options:
