@@ -158,6 +158,7 @@ def _add_smooth(sub: argparse._SubParsersAction[_Parser]) -> None:
         help="PLY output: ASCII (--ascii) or binary little-endian (--no-ascii) [default: the "
         "input's encoding for PLY input, else binary]",
     )  # fmt: skip
+    _add_limits(more)
     for name, (choices, default) in writer_options().items():
         more.add_argument(
             "--" + name.replace("_", "-"), dest=name, choices=choices,
@@ -197,6 +198,21 @@ def _add_info(sub: argparse._SubParsersAction[_Parser]) -> None:
         help="weld exactly coincident vertices first, as smooth does [default: the format's]",
     )  # fmt: skip
     more.add_argument("--compact", action="store_true", help="one line of JSON")
+    _add_limits(more)
+
+
+def _add_limits(group: argparse._ArgumentGroup) -> None:
+    """Reader limits (``service.io.limits``), on every path of the command (streamed too)."""
+    group.add_argument(
+        "--max-points", metavar="N",
+        help="refuse an input that holds or declares more than N points, before reading it "
+        "[default: 1000000000; 'none': no bound]",
+    )  # fmt: skip
+    group.add_argument(
+        "--max-memory", metavar="BYTES",
+        help="refuse an input whose reading is estimated (before allocating) to need more "
+        "than BYTES, e.g. 8G or 512M [default: 3/4 of the machine's memory; 'none': no bound]",
+    )  # fmt: skip
 
 
 def _add_serve(sub: argparse._SubParsersAction[_Parser]) -> None:

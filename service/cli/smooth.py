@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from service.io import GeometryDocument
     from service.workflows.smooth_file import Smoothed, Store
 
-__all__ = ["read_fixed_indices", "run"]
+__all__ = ["read_fixed_indices", "read_limits", "run"]
 
 
 def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
@@ -211,8 +211,27 @@ def _tile_map(streamed: str | None) -> contextlib.AbstractContextManager[Any]:
     return local_tiles(workers)
 
 
+def read_limits(ns: argparse.Namespace) -> contextlib.AbstractContextManager[Any]:
+    """``--max-points`` / ``--max-memory`` in force for the reads of this command (every path:
+    :mod:`service.io.limits`)."""
+    from service.io.limits import ReadLimits, limits_of, reading
+
+    given: dict[str, Any] = {}
+    for option in ("max_points", "max_memory"):
+        try:
+            given[option] = getattr(limits_of(**{option: getattr(ns, option, None)}), option)
+        except ValueError as exc:
+            raise CliError(f"--{option.replace('_', '-')}: {exc}", EXIT_USAGE) from exc
+    return reading(ReadLimits(**given))
+
+
 def run(ns: argparse.Namespace, err: TextIO) -> int:
     """Run ``geosmooth smooth``; returns the exit status (errors are raised)."""
+    with read_limits(ns):
+        return _run(ns, err)
+
+
+def _run(ns: argparse.Namespace, err: TextIO) -> int:
     from service.workflows.smooth_file import smooth_file
 
     started = time.perf_counter()

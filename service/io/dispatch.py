@@ -23,6 +23,7 @@ from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, p
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
 from service.io.holds import dropped_kinds, input_kinds, is_geographic, output_notes, same_family
+from service.io.limits import ReadLimits, reading
 from service.io.registry import (
     FORMATS,
     Format,
@@ -111,6 +112,7 @@ def read_geometry(
     *,
     filename: str | None = None,
     weld: bool | None = None,
+    limits: ReadLimits | None = None,
     **options: Any,
 ) -> GeometryDocument:
     """Read a geometry file.
@@ -129,6 +131,10 @@ def read_geometry(
         Merge exactly coincident vertices (see :mod:`service.io._shared.weld`); writers still write
         the
         file's vertex count and order. Default: the format's (STL and GLB: yes, others: no).
+    limits : ReadLimits, optional
+        Points a file may hold and memory its reading may take, checked from the declared
+        counts before anything is allocated (:mod:`service.io.limits`; default: the limits in
+        force, else ``ReadLimits()``: 1e9 points, 3/4 of the machine's memory).
     **options
         Reader options of the format (``xyz_dims`` for XYZ, ``geographic`` for GPX/GeoJSON);
         options given as ``None`` are ignored.
@@ -137,6 +143,8 @@ def read_geometry(
     ------
     UnsupportedFormat
         A format geosmooth does not read.
+    InputTooLarge
+        More points, or a larger memory estimate, than ``limits`` allow (a ``FormatError``).
     FormatError
         A malformed file (one-line message; the line number for text formats).
     GeometryError
@@ -156,7 +164,9 @@ def read_geometry(
             users = [f.title for f in FORMATS.values() if key in f.options] or ["no"]
             raise ValueError(f"{key} applies to {' and '.join(users)} files only")
     do_weld = spec.weld_default if weld is None else bool(weld)
-    doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+    with reading(limits) as bounds:
+        doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+        bounds.check(int(doc.geometry.n), 0, spec.name)  # formats without a declared count
     return doc
 
 

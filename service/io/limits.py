@@ -33,6 +33,8 @@ __all__ = [
     "check_points",
     "current",
     "default_max_memory",
+    "limits_of",
+    "parse_count",
     "reading",
 ]
 
@@ -136,3 +138,53 @@ def reading(limits: ReadLimits | None) -> Iterator[ReadLimits]:
 def check_points(n: int, bytes_per_point: float, fmt: str | None, what: str = "points") -> None:
     """:meth:`ReadLimits.check` with the limits in force."""
     current().check(n, bytes_per_point, fmt, what)
+
+
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_count(text: str, *, units: bool = False) -> int | None:
+    """A limit as the command line gives it: an integer (``units``: with an optional ``K``,
+    ``M``, ``G`` or ``T`` suffix, powers of 1024, an optional ``B``/``iB``), ``0`` or ``none``
+    for no bound.
+
+    Raises
+    ------
+    ValueError
+        Anything else (the message says what is expected).
+    """
+    raw = text.strip().upper().removesuffix("IB").removesuffix("B")
+    if raw in ("NONE", "0"):
+        return None
+    unit = raw[-1:] if units and raw[-1:] in _UNITS else ""
+    number = raw[: len(raw) - len(unit)]
+    try:
+        value = float(number) if unit else int(number.replace("_", ""))
+    except ValueError:
+        kind = "a byte count such as 8G, 512M or 1000000" if units else "an integer"
+        raise ValueError(f"expected {kind}, or 'none', got {text!r}") from None
+    if value < 0:
+        raise ValueError(f"must not be negative, got {text!r}")
+    return int(value * _UNITS[unit])
+
+
+def limits_of(
+    max_points: str | int | None = None, max_memory: str | int | None = None
+) -> ReadLimits:
+    """:class:`ReadLimits` from optional values (``None``: the default of that bound)."""
+    base = ReadLimits()
+    points = (
+        base.max_points
+        if max_points is None
+        else (parse_count(max_points) if isinstance(max_points, str) else max_points or None)
+    )
+    memory = (
+        base.max_memory
+        if max_memory is None
+        else (
+            parse_count(max_memory, units=True)
+            if isinstance(max_memory, str)
+            else max_memory or None
+        )
+    )
+    return ReadLimits(max_points=points, max_memory=memory)
