@@ -68,3 +68,14 @@ def test_the_banded_curve_is_ezdxf_curve(tmp_path: Path, tangents: bool) -> None
     ours = np.array([tuple(v) for v in dxf._path(entity).flattening(0.01)])
     assert ours.shape == ref.shape
     assert np.abs(ours - ref).max() < 1e-9 * np.abs(ref).max()
+
+
+def test_flattened_points_are_under_the_reader_limits(tmp_path: Path) -> None:
+    from service.io import InputTooLarge, ReadLimits, read_geometry
+
+    path = spline_dxf(tmp_path / "l.dxf", 600)
+    with pytest.raises(InputTooLarge, match=r"flatten to more than 1000 points .* the limit"):
+        read_geometry(path, limits=ReadLimits(max_points=1000))
+    with pytest.raises(InputTooLarge, match=r"600 spline fit points, more than the limit of 500"):
+        read_geometry(path, limits=ReadLimits(max_points=500))
+    assert read_geometry(path, limits=ReadLimits(max_points=None)).geometry.n > 1000

@@ -36,7 +36,7 @@ from service.io._shared.assemble import assemble
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
-from service.io.limits import check_points, current
+from service.io.limits import InputTooLarge, ReadLimits, check_points, current
 from service.io.source import Source
 
 __all__ = ["DxfLayout", "read_dxf", "write_dxf"]
@@ -84,6 +84,8 @@ def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, boo
     for e in entities:
         try:
             paths.append((e, _path(e)))
+        except FormatError:  # the reader limits (a ValueError too)
+            raise
         except (TypeError, ValueError):
             continue
     corners = np.array([v for _, p in paths for v in p.control_vertices()], dtype=np.float64)
@@ -197,7 +199,13 @@ def _flatten(e: Any, p: Any, sagitta: float, budget: int, done: int) -> NDArray[
     for v in p.flattening(sagitta):
         pts.append(tuple(v))
         if len(pts) > budget:
-            check_points(done + len(pts), 0, "dxf", "flattened points")
+            if budget < MAX_POINTS - done:  # the reader limits' bound, not ours
+                raise InputTooLarge(
+                    f"DXF: the entities flatten to more than {done + budget} points (at "
+                    f"{e.dxftype()} handle {e.dxf.get('handle', '?')}), the limit; "
+                    f"{ReadLimits.HINT}",
+                    fmt="dxf",
+                )
             raise FormatError(
                 f"DXF: the entities flatten to more than {MAX_POINTS} points "
                 f"(at {e.dxftype()} handle {e.dxf.get('handle', '?')})",
