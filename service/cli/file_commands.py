@@ -100,6 +100,7 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
         help="PLY output: ASCII (--ascii) or binary little-endian (--no-ascii) [default: the "
         "input's encoding for PLY input, else binary]",
     )  # fmt: skip
+    add_limits(more)
     more.add_argument(
         "--exit-unchanged", type=_exit_status, default=0, metavar="N",
         help="exit status when nothing was smoothed (the output is the input: copied, or "
@@ -157,3 +158,17 @@ def add_submit(sub: argparse._SubParsersAction[Parser]) -> None:
 
     add_smoothing_options(su)
     add_result_options(su, local=False)
+
+
+def add_limits(group: argparse._ArgumentGroup) -> None:
+    """Reader limits (``service.io.limits``), on every path of the command (streamed too)."""
+    group.add_argument(
+        "--max-points", metavar="N",
+        help="refuse an input that holds or declares more than N points, before reading it "
+        "[default: 1000000000; 'none': no bound]",
+    )  # fmt: skip
+    group.add_argument(
+        "--max-memory", metavar="BYTES",
+        help="refuse an input whose reading is estimated (before allocating) to need more "
+        "than BYTES, e.g. 8G or 512M [default: 3/4 of the machine's memory; 'none': no bound]",
+    )  # fmt: skip

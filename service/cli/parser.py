@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Collection
 
-from service.cli.file_commands import add_smooth, add_submit
+from service.cli.file_commands import add_limits, add_smooth, add_submit
 from service.cli.parser_base import HELP, Parser, epilog, formats, version, wrap
 from service.exit_codes import SERVE_EXIT_CODES, SUBMIT_EXIT_CODES
 
@@ -52,6 +52,7 @@ def _add_info(sub: argparse._SubParsersAction[Parser]) -> None:
         help="weld exactly coincident vertices first, as smooth does [default: the format's]",
     )  # fmt: skip
     more.add_argument("--compact", action="store_true", help="one line of JSON")
+    add_limits(more)
 
 
 def _add_serve(sub: argparse._SubParsersAction[Parser]) -> None:

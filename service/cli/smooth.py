@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from service.io import GeometryDocument
     from service.workflows.smooth_file import Smoothed, Store
 
-__all__ = ["read_fixed_indices", "run", "smooth_one", "write_options"]
+__all__ = ["read_fixed_indices", "read_limits", "run", "smooth_one", "write_options"]
 
 
 def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
@@ -213,6 +213,20 @@ def _tile_map(streamed: str | None) -> contextlib.AbstractContextManager[Any]:
     return local_tiles(workers)
 
 
+def read_limits(ns: argparse.Namespace) -> contextlib.AbstractContextManager[Any]:
+    """``--max-points`` / ``--max-memory`` in force for the reads of this command (every path:
+    :mod:`service.io.limits`)."""
+    from service.io.limits import ReadLimits, limits_of, reading
+
+    given: dict[str, Any] = {}
+    for option in ("max_points", "max_memory"):
+        try:
+            given[option] = getattr(limits_of(**{option: getattr(ns, option, None)}), option)
+        except ValueError as exc:
+            raise CliError(f"--{option.replace('_', '-')}: {exc}", EXIT_USAGE) from exc
+    return reading(ReadLimits(**given))
+
+
 def write_options(ns: argparse.Namespace) -> dict[str, Any]:
     """The writer options of the command line (:func:`service.io.write_geometry`)."""
     options = {**given_writer_options(ns), "ply_ascii": ns.ascii}
@@ -248,6 +262,13 @@ def smooth_one(
     ns: argparse.Namespace, progress: ProgressDisplay
 ) -> tuple[SmoothingParams, Smoothed]:
     """Smooth the one file ``ns.input`` into ``ns.output`` (errors are raised)."""
+    with read_limits(ns):
+        return _smooth_one(ns, progress)
+
+
+def _smooth_one(
+    ns: argparse.Namespace, progress: ProgressDisplay
+) -> tuple[SmoothingParams, Smoothed]:
     from service.workflows.smooth_file import smooth_file
 
     params, out_fmt = _check_options(ns)
