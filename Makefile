@@ -34,10 +34,15 @@ run: setup
 lint: setup-dev
 	$(BIN)/ruff check .
 
+# The suite on every core (pytest-xdist; TEST_WORKERS=0 runs it in this process), then the few
+# tests marked `serial` (they load the whole machine) one at a time. tests/conftest.py says which
+# tests share a worker; tests/timing.py why no bound breaks on a busy machine.
+TEST_WORKERS ?= auto
 test: setup-dev
 	$(BIN)/ruff check .
 	$(BIN)/mypy service geosmooth
-	$(BIN)/python -m pytest -q --durations=25
+	$(BIN)/python -m pytest -q --durations=25 -n $(TEST_WORKERS) --dist loadgroup -m "not serial"
+	$(BIN)/python -m pytest -q --durations=5 -p no:xdist -m serial
 
 openapi: setup
 	$(BIN)/python -m service.api.openapi_export openapi/openapi.json

@@ -221,7 +221,10 @@ class Settings(BaseSettings):
         "instead of 202 and a failed job; 0: never.",
     )
     sync_timeout: float = Field(
-        default=60.0, gt=0, description="Seconds a POST /v1/smooth may take; then it is stopped."
+        default=60.0,
+        gt=0,
+        description="CPU seconds a POST /v1/smooth may use; then it is stopped (413). Ten times "
+        "as long in wall-clock time (at least 60 s): 503 + Retry-After, the server is busy.",
     )
     sync_memory_bytes: int = Field(
         default=2 * 1024**3,
@@ -229,14 +232,18 @@ class Settings(BaseSettings):
         description="Address space a POST /v1/smooth process may add (RLIMIT_AS).",
     )
     ingest_timeout: float = Field(
-        default=600.0, gt=0, description="Seconds the parse and checks of an upload may take."
+        default=600.0,
+        gt=0,
+        description="CPU seconds the parse and checks of an upload may use (see parse_timeout).",
     )
     parse_timeout: float = Field(
         default=45.0,
         gt=0,
-        description="Seconds the parse and checks of one upload may take before its process is "
-        "killed (413 parse-time-limit); the effective limit is the smaller of this and "
-        "ingest_timeout.",
+        description="CPU seconds the parse and checks of one upload may use before its process "
+        "is killed (413 ingest-time-limit); the effective limit is the smaller of this and "
+        "ingest_timeout. CPU time, not wall time: a busy machine never makes a legal upload a "
+        "413; the wall-clock safety net is ten times as long (at least 60 s) and answers 503 + "
+        "Retry-After, as does an upload that waits that long for a parse slot.",
     )
     parse_share: int = Field(
         default=0,

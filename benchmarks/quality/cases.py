@@ -106,13 +106,14 @@ def make_case(key: str) -> Case:
     """``"<shape>/<noise>-<level>"``, e.g. ``"sphere-2.5K/aniso-0.5"``.
 
     Shapes of :data:`SHAPES` or ``families.NEW_SHAPES``; noise models of this module or of
-    ``noises.NOISE_MODELS`` (issue 21).
+    ``noises.NOISE_MODELS`` (issue 21). A suffix ``#k`` (``"stepblock/iso-0.1#3"``) is another
+    draw of the same noise: the seed comes from the whole key.
     """
     shape_key, spec = key.split("/")
     noise, level_s = spec.rsplit("-", 1)
     if noise not in NOISES and noise not in NOISE_MODELS:
         raise KeyError(f"unknown noise {noise!r}")
-    level = float(level_s)
+    level = float(level_s.split("#")[0])
     shape = make_shape(shape_key)
     rng = np.random.default_rng(zlib.crc32(key.encode()))
     if noise in NOISE_MODELS:

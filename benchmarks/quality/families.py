@@ -7,6 +7,12 @@ adding a case never moves another; a family missing from it is an error
 (:func:`half_of`). Each half holds every kind (mesh, grid, curve, cloud) and roughly half of
 each noise model. The in-repo families of ``cases.FULL`` are in the table too.
 
+Issue 31's families (:data:`CASES31`, run by :mod:`benchmarks.quality.issue31`) are in the same
+split, one phenomenon of the issue per group, each present in both halves on different shapes
+or noise: uniform Gaussian noise on CAD shapes with corners and creases, quantized coordinates,
+high noise (1 and 1.5 spacings) on regular meshes, GPS-like tracks with corners and correlated
+noise, clouds with stray points far off the surface, and noise-free inputs.
+
 New shapes (:mod:`~benchmarks.quality.surfaces`, :mod:`~benchmarks.quality.knots`) and noise
 models (:mod:`~benchmarks.quality.noises`) are registered here; ``cases.make_case`` builds
 ``"<shape>/<noise>-<level>"`` from either registry.
@@ -16,10 +22,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from benchmarks.quality import knots, surfaces
+from benchmarks.quality import cad, knots, surfaces, tracks
 from benchmarks.quality.shapes import Shape
 
-__all__ = ["CASES", "KIND", "NEW_SHAPES", "SPLIT", "half_cases", "half_of"]
+__all__ = ["CASES", "CASES31", "KIND", "NEW_SHAPES", "PHENOMENON", "REPEATS31", "SPLIT",
+           "half_cases", "half_of", "issue31_cases"]
 
 #: The issue's new shapes (1K - 10K points each).
 NEW_SHAPES: dict[str, Callable[[], Shape]] = {
@@ -34,16 +41,24 @@ NEW_SHAPES: dict[str, Callable[[], Shape]] = {
     "track-2d": knots.track,
     "cloud-dens-sphere": surfaces.dense_cloud_sphere,
     "cloud-dens-terrain": surfaces.dense_cloud_terrain,
+    # issue 31
+    "cube-6K": cad.cube,
+    "bracket": cad.bracket,
+    "stepblock": cad.stepblock,
+    "helicoid": surfaces.helicoid,
+    "track-corners-a": tracks.track_a,
+    "track-corners-b": tracks.track_b,
 }
 
 #: Kind of every shape in the split (``grid``: regular grid triangulations of height fields).
 KIND: dict[str, str] = {
     **dict.fromkeys(("sphere-642", "sphere-2.5K", "sphere-10K", "sphere-41K", "torus-1.4K",
                      "torus-5.8K", "torus-40K", "box", "fandisk", "spot", "bunny", "horse",
-                     "hemisphere", "saddle-irr", "sphere-irr"), "mesh"),
+                     "hemisphere", "saddle-irr", "sphere-irr", "cube-6K", "bracket", "stepblock",
+                     "helicoid"), "mesh"),
     **dict.fromkeys(("terrain", "dem"), "grid"),
     **dict.fromkeys(("circle-2d", "trefoil-3d", "network-2d", "network-3d", "torusknot", "fig8",
-                     "helix", "track-2d"), "curve"),
+                     "helix", "track-2d", "track-corners-a", "track-corners-b"), "curve"),
     **dict.fromkeys(("cloud-sphere", "cloud-torus", "cloud-fandisk", "cloud-bunny",
                      "cloud-dens-sphere", "cloud-dens-terrain"), "cloud"),
 }
@@ -109,11 +124,70 @@ _TABLE: tuple[tuple[str, str, str, tuple[float, ...]], ...] = (
     ("cloud-dens-terrain", "laplace", C, (0.5,)), ("cloud-dens-terrain", "student", T, (0.5,)),
 )
 
+#: Issue 31: (shape, noise model, half, levels, phenomenon). A family already in :data:`_TABLE`
+#: (e.g. fandisk x iso) keeps its half there; the levels here are new ones.
+_TABLE31: tuple[tuple[str, str, str, tuple[float, ...], str], ...] = (
+    # uniform Gaussian noise on CAD shapes with corners and creases
+    ("cube-6K", "iso", C, (0.05, 0.1, 0.25), "cad"), ("stepblock", "iso", C, (0.05, 0.1), "cad"),
+    ("box", "iso", C, (0.05,), "cad"), ("fandisk", "normal", C, (0.05,), "cad"),
+    ("bracket", "iso", T, (0.05, 0.1, 0.25), "cad"), ("cube-6K", "normal", T, (0.05, 0.1), "cad"),
+    ("fandisk", "iso", T, (0.05,), "cad"), ("stepblock", "normal", T, (0.1,), "cad"),
+    # quantized coordinates (grid step = level x h)
+    ("sphere-2.5K", "quant", C, (0.5, 1.0), "quant"), ("stepblock", "quant", C, (1.0,), "quant"),
+    ("helicoid", "quant", T, (0.5, 1.0), "quant"), ("bracket", "quant", T, (1.0,), "quant"),
+    # high noise on regular meshes
+    ("sphere-2.5K", "iso", C, (1.0, 1.5), "high"), ("torus-5.8K", "normal", C, (1.0, 1.5), "high"),
+    ("torus-5.8K", "iso", T, (1.0, 1.5), "high"), ("sphere-2.5K", "normal", T, (1.0, 1.5), "high"),
+    ("terrain", "iso", T, (1.0,), "high"),
+    # GPS-like tracks: corners, uneven spacing, AR(1) noise
+    ("track-corners-a", "gps", C, (0.1, 0.5), "gps"),
+    ("track-corners-b", "gps", T, (0.1, 0.5), "gps"),
+    # clouds with stray points 10 - 50 spacings off the surface
+    ("cloud-sphere", "stray2", C, (0.25,), "stray"),
+    ("cloud-dens-terrain", "stray05", C, (0.1,), "stray"),
+    ("cloud-torus", "stray1", T, (0.25,), "stray"), ("cloud-fandisk", "stray2", T, (0.1,), "stray"),
+    # noise-free inputs (level 0)
+    ("cube-6K", "clean", C, (0.0,), "clean"), ("stepblock", "clean", C, (0.0,), "clean"),
+    ("track-corners-a", "clean", C, (0.0,), "clean"), ("bracket", "clean", T, (0.0,), "clean"),
+    ("helicoid", "clean", T, (0.0,), "clean"), ("track-corners-b", "clean", T, (0.0,), "clean"),
+)
+
+
+def _split() -> dict[tuple[str, str], str]:
+    out = {(s, nz): half for s, nz, half, _ in _TABLE}
+    for s, nz, half, _, _ in _TABLE31:
+        if out.setdefault((s, nz), half) != half:
+            raise ValueError(f"family {s} x {nz} is in both halves")
+    return out
+
+
 #: (shape, noise model) -> half.
-SPLIT: dict[tuple[str, str], str] = {(s, nz): half for s, nz, half, _ in _TABLE}
+SPLIT: dict[tuple[str, str], str] = _split()
 
 #: The cases the halves' tables run (issue 21's families), in table order.
 CASES: list[str] = [f"{s}/{nz}-{lv:g}" for s, nz, _, levels in _TABLE for lv in levels]
+
+
+#: Issue-31 cases drawn with several seeds (``key#1`` ... ``key#k-1`` besides ``key``): the
+#: misses that occur on some draws only (the step block's crease sigma^: 4 of 8 draws at iso
+#: 0.1 h, 1 of 8 at normal 0.1 h; the 6K cube's noise weights at 0.05 h: every draw).
+REPEATS31: dict[str, int] = {"stepblock/iso-0.1": 8, "stepblock/normal-0.1": 8,
+                             "cube-6K/iso-0.05": 4, "cube-6K/normal-0.05": 4}
+
+
+def _cases31() -> dict[str, str]:
+    out = {}
+    for s, nz, _, levels, ph in _TABLE31:
+        for lv in levels:
+            key = f"{s}/{nz}-{lv:g}"
+            out[key] = ph
+            out.update({f"{key}#{k}": ph for k in range(1, REPEATS31.get(key, 1))})
+    return out
+
+
+#: Issue 31's cases (:mod:`benchmarks.quality.issue31`), in table order, and their phenomenon.
+PHENOMENON: dict[str, str] = _cases31()
+CASES31: list[str] = list(PHENOMENON)
 
 
 def half_of(key: str) -> str:
@@ -129,3 +203,8 @@ def half_of(key: str) -> str:
 def half_cases(half: str) -> list[str]:
     """The issue-21 cases of one half (``"calibration"``, ``"test"`` or ``"all"``)."""
     return [k for k in CASES if half == "all" or half_of(k) == half]
+
+
+def issue31_cases(half: str) -> list[str]:
+    """Issue 31's cases of one half (``"calibration"``, ``"test"`` or ``"all"``)."""
+    return [k for k in CASES31 if half == "all" or half_of(k) == half]

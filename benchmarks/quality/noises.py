@@ -18,6 +18,11 @@ normal direction* (what a local fit's residual sees), computed from the model's 
   stationary std ``sigma`` per coordinate), the correlated error of a GPS track;
 * ``out3`` / ``out10`` / ``out30``: ``aniso`` bulk noise (``cases.py``) plus 0.5 % of the points
   moved by 3, 10 or 30 spacings in a random direction (the true level is the bulk's).
+* ``stray05`` / ``stray1`` / ``stray2`` (issue 31): isotropic Gaussian bulk noise plus 0.5, 1 or
+  2 % of the points moved far off the shape: 10 - 50 spacings (uniform) in a random direction,
+  redrawn until the stray point lies at least :data:`STRAY_MIN` spacings from the true surface
+  (the outlier mask says which; the true level is the bulk's);
+* ``clean`` (issue 31): no noise at all (level 0): what the default does to a noise-free input.
 
 Every model draws from the generator it is given (seeded by the case key), so a case is
 reproducible on its own.
@@ -43,6 +48,8 @@ OUTLIER_FRACTION = 0.005
 GPS_PHI = 0.9
 VARY_MAX = 5.0
 VIEW_DISTANCE = 3.0  # viewpoint distance in diameters
+STRAY_RANGE = (10.0, 50.0)  # stray distances, in spacings
+STRAY_MIN = 5.0  # a stray point is at least this many spacings from the true shape
 
 
 @dataclass
@@ -159,6 +166,32 @@ def _outliers(distance: float) -> Callable[[Shape, float, np.random.Generator], 
     return noise
 
 
+def _stray(fraction: float) -> Callable[[Shape, float, np.random.Generator], Noise]:
+    def noise(shape: Shape, level: float, rng: np.random.Generator) -> Noise:
+        sigma = level * shape.h
+        n, s = shape.points.shape
+        E = sigma * rng.normal(size=(n, s))
+        idx = np.sort(rng.choice(n, max(1, round(fraction * n)), replace=False))
+        dist = rng.uniform(*STRAY_RANGE, idx.size) * shape.h
+        todo = np.arange(idx.size)
+        for _ in range(100):
+            d = rng.normal(size=(todo.size, s))
+            E[idx[todo]] = dist[todo, None] * d / np.linalg.norm(d, axis=1, keepdims=True)
+            near = shape.distance(shape.points[idx[todo]] + E[idx[todo]]) < STRAY_MIN * shape.h
+            todo = todo[near]
+            if not todo.size:
+                break
+        out = np.zeros(n, dtype=bool)
+        out[idx] = True
+        return Noise(E, sigma, out)
+
+    return noise
+
+
+def _clean(shape: Shape, level: float, rng: np.random.Generator) -> Noise:
+    return Noise(np.zeros_like(shape.points), 0.0, _no_outliers(shape))
+
+
 NOISE_MODELS: dict[str, Callable[[Shape, float, np.random.Generator], Noise]] = {
     "view": _view,
     "laplace": _laplace,
@@ -169,4 +202,8 @@ NOISE_MODELS: dict[str, Callable[[Shape, float, np.random.Generator], Noise]] = 
     "out3": _outliers(3.0),
     "out10": _outliers(10.0),
     "out30": _outliers(30.0),
+    "stray05": _stray(0.005),
+    "stray1": _stray(0.01),
+    "stray2": _stray(0.02),
+    "clean": _clean,
 }

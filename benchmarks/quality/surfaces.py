@@ -22,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import ConvexHull, Delaunay
+from scipy.spatial import ConvexHull, Delaunay, cKDTree
 
 from benchmarks import metrics
 from benchmarks.quality.shapes import Shape, _cloud, frame_from_normal, vertex_normals
@@ -30,9 +30,11 @@ from benchmarks.shapes import mean_edge_length
 
 __all__ = [
     "HeightField",
+    "Helicoid",
     "dem",
     "dense_cloud_sphere",
     "dense_cloud_terrain",
+    "helicoid",
     "hemisphere",
     "saddle",
     "sphere_irregular",
@@ -233,3 +235,74 @@ def mesh_normals_check(shape: Shape) -> float:
     assert shape.faces is not None
     c = np.abs(np.einsum("ij,ij->i", vertex_normals(shape.points, shape.faces), shape.normals))
     return float(np.degrees(np.arccos(np.clip(c.min(), 0, 1))))
+
+
+class Helicoid:
+    """Distance to the helicoid patch ``(u cos v, u sin v, c v)``, ``u`` in ``[u0, u1]``, ``v``
+    in ``[0, v1]``: the nearest of a dense parameter sample, then projected Newton on
+    ``(u, v)`` (points beyond the patch measure to its boundary)."""
+
+    def __init__(self, u0: float, u1: float, v1: float, c: float) -> None:
+        self.u0, self.u1, self.v1, self.c = u0, u1, v1, c
+        uu, vv = np.meshgrid(np.linspace(u0, u1, 80), np.linspace(0, v1, 1200), indexing="ij")
+        self._uv = np.stack([uu.ravel(), vv.ravel()], 1)
+        self._tree = cKDTree(self.point(self._uv[:, 0], self._uv[:, 1]))
+
+    def point(self, u: FloatArray, v: FloatArray) -> FloatArray:
+        return np.stack([u * np.cos(v), u * np.sin(v), self.c * v], axis=1)
+
+    def normals(self, u: FloatArray, v: FloatArray) -> FloatArray:
+        Su = np.stack([np.cos(v), np.sin(v), np.zeros_like(v)], 1)
+        Sv = np.stack([-u * np.sin(v), u * np.cos(v), np.full_like(v, self.c)], 1)
+        n = np.cross(Su, Sv)
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    def __call__(self, X: FloatArray, steps: int = 30) -> FloatArray:
+        u, v = self._uv[self._tree.query(X)[1]].T
+        lo, hi = np.array([self.u0, 0.0]), np.array([self.u1, self.v1])
+        for _ in range(steps):
+            cv, sv = np.cos(v), np.sin(v)
+            r = self.point(u, v) - X
+            Su = np.stack([cv, sv, np.zeros_like(v)], 1)
+            Sv = np.stack([-u * sv, u * cv, np.full_like(v, self.c)], 1)
+            Suv = np.stack([-sv, cv, np.zeros_like(v)], 1)
+            Svv = np.stack([-u * cv, -u * sv, np.zeros_like(v)], 1)
+            gu, gv = np.sum(Su * r, 1), np.sum(Sv * r, 1)
+            a = np.sum(Su * Su, 1)
+            b = np.sum(Su * Sv, 1) + np.sum(r * Suv, 1)
+            d = np.sum(Sv * Sv, 1) + np.sum(r * Svv, 1)
+            det = a * d - b * b
+            ok = (det > 1e-12) & (a > 0) & (d > 0)
+            du = np.where(ok, (d * gu - b * gv) / np.where(ok, det, 1.0), gu / np.maximum(a, 1e-12))
+            dv = np.where(ok, (a * gv - b * gu) / np.where(ok, det, 1.0),
+                          gv / np.maximum(np.sum(Sv * Sv, 1), 1e-12))
+            # a coordinate pushed out of the patch stays on its bound; the other one then takes
+            # the 1-D Newton step along that boundary
+            hold_u = ((u <= lo[0]) & (du > 0)) | ((u >= hi[0]) & (du < 0))
+            hold_v = ((v <= lo[1]) & (dv > 0)) | ((v >= hi[1]) & (dv < 0))
+            du = np.where(hold_v, gu / np.maximum(a, 1e-12), du)
+            dv = np.where(hold_u, gv / np.maximum(d, 1e-12), dv)
+            du[hold_u], dv[hold_v] = 0.0, 0.0
+            uv = np.clip(np.stack([u - du, v - dv], 1), lo, hi)
+            u, v = uv[:, 0], uv[:, 1]
+        return np.linalg.norm(self.point(u, v) - X, axis=1)
+
+
+def helicoid(mu: int = 25, turns: float = 1.25, u0: float = 0.3, c: float = 0.15) -> Shape:
+    """A regular ``(u, v)`` grid on the helicoid patch (spacing along ``v`` matched to the mean
+    radius), triangulated with one diagonal: open, two straight and two helical boundaries."""
+    v1 = 2 * np.pi * turns
+    du = (1.0 - u0) / (mu - 1)
+    mv = round(v1 * 0.5 * (1.0 + u0) / du) + 1
+    field = Helicoid(u0, 1.0, v1, c)
+    U, V = np.meshgrid(np.linspace(u0, 1.0, mu), np.linspace(0.0, v1, mv), indexing="ij")
+    u, v = U.ravel(), V.ravel()
+    P = field.point(u, v)
+    i, j = np.meshgrid(np.arange(mu - 1), np.arange(mv - 1), indexing="ij")
+    a = (i * mv + j).ravel()
+    F = np.vstack([np.stack([a, a + mv, a + mv + 1], 1), np.stack([a, a + mv + 1, a + 1], 1)])
+    F = F.astype(np.int64)
+    return Shape(f"helicoid {len(P) / 1000:.1f}K", P, F, None,
+                 frame_from_normal(field.normals(u, v)), 1, field, mean_edge_length(P, F),
+                 source=f"helicoid (u cos v, u sin v, {c} v), u in [{u0}, 1], {turns} turns, "
+                 f"{mu}x{mv} grid")

@@ -9,6 +9,7 @@ from service.api.schemas import Problem, SmoothJsonRequest
 from service.io.registry import FORMATS
 
 __all__ = [
+    "CRS_QUERY_DESCRIPTION",
     "FORMAT_QUERY_DESCRIPTION",
     "JOB_SUBMIT_OPENAPI",
     "MEDIA_TYPES",
@@ -22,6 +23,13 @@ __all__ = [
 MEDIA_TYPES: dict[str, str] = {name: f.media_type for name, f in FORMATS.items()}
 
 FORMAT_QUERY_DESCRIPTION = f"Output format: {', '.join(FORMATS)} (default: the input's format)."
+CRS_QUERY_DESCRIPTION = (
+    "Geographic input (GPX, GeoJSON) written to a projected format: the output's projected "
+    "CRS, an EPSG code (``32633``, ``EPSG:32633``) or ``utm`` (the WGS84 UTM zone of the data's "
+    "centre). Default: metres in the local east/north/up frame about the data's centre, "
+    "recorded in the file. 422 (field ``crs``) for other input, a longitude/latitude output or "
+    "a CRS that is not projected."
+)
 #: ``format`` was the query's name before ``output_format`` (every surface now says which file).
 FORMAT_ALIAS_DESCRIPTION = "Deprecated: the former name of ``output_format``."
 
@@ -141,6 +149,7 @@ PARAMS_EXAMPLE = '{"lam": 1.0}'
 _MULTIPART_SCHEMA: dict[str, Any] = {
     "type": "object",
     "required": ["file", "params"],
+    "additionalProperties": False,  # any other part is refused (422 unknown form field)
     "properties": {
         "file": {
             "type": "string",
@@ -153,7 +162,9 @@ _MULTIPART_SCHEMA: dict[str, Any] = {
             "description": "SmoothingParams as a JSON object, sent as a text field or as a JSON "
             "file part. At most one of tau, rms or lam (none: tau from the estimated noise); lam "
             "(no search) is scale-free, tau and rms are in the input's units (docs/method.md, "
-            "'Choosing tau').",
+            "'Choosing tau'). Must be JSON (anything else is a 422).",
+            "contentMediaType": "application/json",
+            "contentSchema": {"$ref": "#/components/schemas/SmoothingParams"},
             "example": PARAMS_EXAMPLE,
         },
         "input_format": {
@@ -189,7 +200,10 @@ def _request_body(description: str) -> dict[str, Any]:
             "required": True,
             "description": description,
             "content": {
-                "multipart/form-data": {"schema": _MULTIPART_SCHEMA},
+                "multipart/form-data": {
+                    "schema": _MULTIPART_SCHEMA,
+                    "encoding": {"params": {"contentType": "application/json, text/plain"}},
+                },
                 "application/json": {
                     "schema": {"$ref": "#/components/schemas/SmoothJsonRequest"},
                     "example": SmoothJsonRequest.model_config["json_schema_extra"]["examples"][0],  # type: ignore[index]

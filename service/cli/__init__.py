@@ -7,8 +7,9 @@ vertex order. Every failure is one line on stderr and a documented exit status
 
 Modules: :mod:`.main` (dispatch, error handling), :mod:`.parser` (commands and their options),
 :mod:`.params` (options generated from ``SmoothingParams``), :mod:`.output` (output format,
-the file writer, the report), :mod:`.progress` (progress line, summary), and one module per
-command (:mod:`.smooth`, :mod:`.serve`, :mod:`.submit`), imported only when it runs.
+the file writer, the report), :mod:`.progress` (progress line, summary), :mod:`.batch`
+(several inputs), and one module per command (:mod:`.smooth`, :mod:`.serve`, :mod:`.submit`,
+:mod:`.worker`, :mod:`.completion`), imported only when it runs.
 ``params_from_args`` and ``read_fixed_indices`` load pydantic and numpy, so they are imported
 on first access (``geosmooth --help`` loads neither).
 """

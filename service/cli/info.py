@@ -14,7 +14,7 @@ from typing import TextIO
 from service.cli.errors import CliError
 from service.cli.output import check_format
 from service.cli.params import params_from_args
-from service.cli.smooth import read_input
+from service.cli.smooth import read_input, read_limits
 from service.exit_codes import EXIT_OK, EXIT_USAGE
 
 __all__ = ["run"]
@@ -30,11 +30,13 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     check_format(ns.input_format, "--input-format")
     if ns.xyz_dims is not None and ns.xyz_dims < 1:
         raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
-    doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+    with read_limits(ns):
+        doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
     facts = {"input": ns.input, "input_format": doc.source_format, "format": doc.source_format}
     facts.update(describe(doc.geometry, params))
     if doc.weld is not None:
         facts["welded_from"] = int(doc.weld.n_original)
+        facts["duplicates_welded"] = int(doc.weld.n_original - doc.geometry.n)  # issue 31
     json.dump(facts, sys.stdout, indent=None if ns.compact else 2, allow_nan=False)
     sys.stdout.write("\n")
     return EXIT_OK

@@ -21,16 +21,17 @@ from service.cli.errors import CliError, exit_code_of, fail, message_of
 from service.cli.parser import build_parser, command_of
 from service.exit_codes import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE
 
-__all__ = ["main"]
+__all__ = ["failure", "main"]
 
 #: command -> module with ``run(ns, err) -> int`` (imported when the command runs, so that
 #: ``smooth`` never loads the HTTP stack).
 _COMMANDS = {
-    "smooth": ".smooth",
+    "smooth": ".batch",  # several inputs, or the one file of .smooth
     "info": ".info",
     "serve": ".serve",
     "submit": ".submit",
     "worker": ".worker",
+    "completion": ".completion",
 }
 
 
@@ -84,7 +85,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except SystemExit as exc:  # --help / --version
             return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
         if ns.command in ("smooth", "info"):
-            _threads()
+            threads()
         module = importlib.import_module(_COMMANDS[ns.command], __package__)
         return int(module.run(ns, err))
     except KeyboardInterrupt:
@@ -95,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _report(exc, ns, err)
 
 
-def _threads() -> None:
+def threads() -> None:
     """The numerical libraries' thread count: ``GEOSMOOTH_THREADS``, default 1 (docs/threads.md)."""
     from service.core.linalg.threads import use_default_threads
 
@@ -105,15 +106,20 @@ def _threads() -> None:
         raise CliError(str(exc), EXIT_USAGE) from None
 
 
+def failure(exc: BaseException, ns: argparse.Namespace | None) -> tuple[int, str]:
+    """The exit status and the one line (without ``geosmooth: error:``) of a failure."""
+    code = exit_code_of(exc)
+    if code is not None:
+        return code, _typed_message(exc, ns)
+    text = message_of(exc) if str(exc) else "(no message)"
+    hint = "" if _debug() else " (set GEOSMOOTH_DEBUG=1 for the traceback)"
+    return EXIT_INTERNAL, f"internal error: {type(exc).__name__}: {text}{hint}"
+
+
 def _report(exc: Exception, ns: argparse.Namespace | None, err: TextIO) -> int:
     """Print one line for ``exc``; its exit status."""
     if _debug():
         traceback.print_exc(file=err)
-    code = exit_code_of(exc)
-    if code is not None:
-        fail(_typed_message(exc, ns), err)
-        return code
-    text = message_of(exc) if str(exc) else "(no message)"
-    hint = "" if _debug() else " (set GEOSMOOTH_DEBUG=1 for the traceback)"
-    fail(f"internal error: {type(exc).__name__}: {text}{hint}", err)
-    return EXIT_INTERNAL
+    code, line = failure(exc, ns)
+    fail(line, err)
+    return code

@@ -28,6 +28,7 @@ from service.exit_codes import EXIT_OUTPUT, EXIT_USAGE
 from service.io.atomic import is_special, real_target, write_file
 
 __all__ = [
+    "check_crs",
     "check_format",
     "check_writable",
     "given_writer_options",
@@ -81,6 +82,40 @@ def output_format(output: str, explicit: str | None) -> str | None:
             f"cannot tell the output format from {output!r}; give --output-format", EXIT_USAGE
         )
     return None
+
+
+def check_crs(value: str | None) -> str | None:
+    """The ``--crs`` value: ``utm`` or a projected CRS pyproj knows by its EPSG code.
+
+    Raises
+    ------
+    CliError
+        Exit status 2 for anything else (checked before any file is read).
+    """
+    if value is None:
+        return None
+    text = value.strip()
+    if text.lower() == "utm":
+        return "utm"
+    code = text.upper().removeprefix("EPSG:")
+    if not code.isdigit():
+        raise CliError(
+            f"--crs: must be an EPSG code (e.g. 32633 or EPSG:32633) or 'utm', got {value!r}",
+            EXIT_USAGE,
+        )
+    import pyproj
+
+    try:
+        crs = pyproj.CRS.from_user_input(f"EPSG:{int(code)}")
+    except pyproj.exceptions.CRSError:
+        raise CliError(f"--crs: EPSG:{int(code)} is not a CRS pyproj knows", EXIT_USAGE) from None
+    if not crs.is_projected:
+        raise CliError(
+            f"--crs: EPSG:{int(code)} ({crs.name}) is not a projected CRS (e.g. a UTM zone, "
+            "EPSG:326zz / 327zz)",
+            EXIT_USAGE,
+        )
+    return f"EPSG:{int(code)}"
 
 
 def writer_options() -> dict[str, tuple[tuple[str, ...], str]]:

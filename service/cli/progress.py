@@ -150,7 +150,10 @@ def _noise_lines(report: Mapping[str, Any]) -> list[str]:
     if how:
         out.append(f"  tau: {how}.")
     if report.get("outlier_count"):
-        out.append(f"  outliers: {report['outlier_count']} points treated as outliers "
+        what = {"flag": "flagged, kept in place", "drop": "dropped from the output",
+                "pull": "pulled into their ring"}.get(report.get("outlier_mode") or "",
+                                                      "treated as outliers")
+        out.append(f"  outliers: {report['outlier_count']} points {what} "
                    f"({report.get('data_weights')} weights; indices in the report).")
     return out
 
@@ -216,6 +219,10 @@ def format_summary(
         search = "  not smoothed: the input is returned unchanged (see noise and tau below)."
     else:
         search += f": phi={_g(report['phi'])} (lambda given, no search)."
+    if report.get("unchanged") == "copied":
+        search = "  not smoothed: returned unchanged: input bytes copied (see noise and tau below)."
+    elif report.get("unchanged") == "converted":
+        search = "  not smoothed: converted unchanged (see noise and tau below)."
     lines.append(search)
     lines.extend(_noise_lines(report))
     lines.append(

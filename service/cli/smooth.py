@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from service.cli.errors import CliError, os_reason
 from service.cli.output import (
+    check_crs,
     check_format,
     check_writable,
     given_writer_options,
@@ -30,7 +31,7 @@ from service.cli.output import (
     write_output,
 )
 from service.cli.params import params_from_args
-from service.cli.parser import version
+from service.cli.parser_base import version
 from service.cli.progress import ProgressDisplay, show_summary
 from service.core.params import SmoothingParams
 from service.exit_codes import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE
@@ -41,7 +42,7 @@ if TYPE_CHECKING:
     from service.io import GeometryDocument
     from service.workflows.smooth_file import Smoothed, Store
 
-__all__ = ["read_fixed_indices", "run"]
+__all__ = ["read_fixed_indices", "read_limits", "run", "smooth_one", "write_options"]
 
 
 def read_fixed_indices(path: str | os.PathLike[str]) -> list[int]:
@@ -171,15 +172,16 @@ def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]
     return params, out_fmt
 
 
-def _streamed(ns: argparse.Namespace, params: SmoothingParams, out_fmt: str | None) -> str | None:
+def _streamed(
+    ns: argparse.Namespace, params: SmoothingParams, out_fmt: str | None, options: dict[str, Any]
+) -> str | None:
     """The format of a tiled run read and written in chunks (issue 23), else ``None``: a file
-    to a file, no ``--fixed``, no writer option (:func:`service.workflows.smooth_file.
-    streamed_format_of`)."""
+    to a file, no ``--fixed``, no writer option
+    (:func:`service.workflows.smooth_file.streamed_format_of`)."""
     if ns.fixed or "-" in (ns.input, ns.output):
         return None
     from service.workflows.smooth_file import streamed_format_of
 
-    options = {**given_writer_options(ns), "ply_ascii": ns.ascii}
     return streamed_format_of(Path(ns.input), Path(ns.output), params, fmt=ns.input_format,
                               out_fmt=out_fmt, weld=ns.weld, xyz_dims=ns.xyz_dims,
                               options=options)  # fmt: skip
@@ -211,13 +213,67 @@ def _tile_map(streamed: str | None) -> contextlib.AbstractContextManager[Any]:
     return local_tiles(workers)
 
 
+def read_limits(ns: argparse.Namespace) -> contextlib.AbstractContextManager[Any]:
+    """``--max-points`` / ``--max-memory`` in force for the reads of this command (every path:
+    :mod:`service.io.limits`)."""
+    from service.io.limits import ReadLimits, limits_of, reading
+
+    given: dict[str, Any] = {}
+    for option in ("max_points", "max_memory"):
+        try:
+            given[option] = getattr(limits_of(**{option: getattr(ns, option, None)}), option)
+        except ValueError as exc:
+            raise CliError(f"--{option.replace('_', '-')}: {exc}", EXIT_USAGE) from exc
+    return reading(ReadLimits(**given))
+
+
+def write_options(ns: argparse.Namespace) -> dict[str, Any]:
+    """The writer options of the command line (:func:`service.io.write_geometry`)."""
+    options = {**given_writer_options(ns), "ply_ascii": ns.ascii}
+    if getattr(ns, "crs", None):
+        options["crs"] = check_crs(ns.crs)
+    return options
+
+
+def _check_crs_applies(doc: GeometryDocument, out_fmt: str | None, options: dict[str, Any]) -> None:
+    """``--crs`` for input that is not geographic, or a GPX/GeoJSON output: exit status 2
+    before smoothing (the writer's own check, on the input's points)."""
+    if not options.get("crs"):
+        return
+    from service.workflows.smooth_file import encode
+
+    try:
+        encode(doc, out_fmt or doc.source_format, None, **options)
+    except ValueError as exc:
+        raise CliError(f"--crs: {exc}", EXIT_USAGE) from exc
+
+
 def run(ns: argparse.Namespace, err: TextIO) -> int:
-    """Run ``geosmooth smooth``; returns the exit status (errors are raised)."""
+    """Run ``geosmooth smooth INPUT -o OUTPUT`` (one file: :func:`service.cli.batch.run` decides);
+    returns the exit status (errors are raised)."""
+    started = time.perf_counter()
+    progress = ProgressDisplay(err, enabled=not ns.quiet)
+    params, done = smooth_one(ns, progress)
+    _report(ns, params, done, started, progress)
+    return ns.exit_unchanged if done.unchanged else EXIT_OK
+
+
+def smooth_one(
+    ns: argparse.Namespace, progress: ProgressDisplay
+) -> tuple[SmoothingParams, Smoothed]:
+    """Smooth the one file ``ns.input`` into ``ns.output`` (errors are raised)."""
+    with read_limits(ns):
+        return _smooth_one(ns, progress)
+
+
+def _smooth_one(
+    ns: argparse.Namespace, progress: ProgressDisplay
+) -> tuple[SmoothingParams, Smoothed]:
     from service.workflows.smooth_file import smooth_file
 
-    started = time.perf_counter()
     params, out_fmt = _check_options(ns)
-    streamed = _streamed(ns, params, out_fmt)
+    options = write_options(ns)
+    streamed = _streamed(ns, params, out_fmt, options)
     source: Path | GeometryDocument = Path(ns.input)
     target: Path | Store = Path(ns.output)
     geometry = doc = None
@@ -226,15 +282,15 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
         source = doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
         geometry = _with_fixed(doc, fixed)
         target = lambda _result, data: write_output(ns.output, data, "output")  # noqa: E731
-    progress = ProgressDisplay(err, enabled=not ns.quiet)
-    options = {**given_writer_options(ns), "ply_ascii": ns.ascii}
     with _cli_errors(params, progress), _tile_map(streamed) as run_map:
+        if doc is not None:
+            _check_crs_applies(doc, out_fmt, options)
         done = smooth_file(source, target, params, fmt=streamed, out_fmt=out_fmt,
                            read_options={"weld": ns.weld, "xyz_dims": ns.xyz_dims},
                            write_options=options, geometry=geometry, progress=progress,
-                           run_map=run_map, stage=lambda _name: progress.finish())  # fmt: skip
-    _report(ns, params, done, started, progress)
-    return EXIT_OK
+                           run_map=run_map, stage=lambda _name: progress.finish(),
+                           original=None if ns.input == "-" else Path(ns.input))  # fmt: skip
+    return params, done
 
 
 def _report(
@@ -263,5 +319,5 @@ def _report(
         write_json_report(ns.report, report)
     doc = done.document
     details = ["streamed"] if doc is None else _details(doc)
-    notes = [] if doc is None else output_notes(doc, done.output_format)
+    notes = [] if doc is None else output_notes(doc, done.output_format, ns.crs)
     show_summary(progress, report, ns, params, started, details=details, notes=notes)

@@ -82,6 +82,15 @@ def _knee(problem: Problem, tau0: float) -> float:
     return tau0 if tau is None else frame.phi_out(tau)
 
 
+def _at_knee(noise: str, rule_tau: float, tau: float) -> str:
+    """The rule's sentence quoting the tau it suggests (``suggested_tau``): the discrepancy
+    principle's tau moved to the knee of ``phi(lambda)`` (issue 32 item 8)."""
+    said = f"tau = {rule_tau:.6g} ("
+    if f"{tau:.6g}" == f"{rule_tau:.6g}" or said not in noise:
+        return noise
+    return noise.replace(said, f"tau = {tau:.6g} at the knee of phi(lambda), from {rule_tau:.6g} (")
+
+
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
     """JSON-ready description of ``geometry`` and of the smoothing factors it admits.
 
@@ -130,6 +139,7 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
             if 0 < tau < phi0:
                 suggested_tau = tau
                 suggested_rms = tau_to_rms(tau, weight_sum)
+                noise = _at_knee(noise, auto.tau, tau)
     return {
         "n_points": geometry.n,
         "dimension": geometry.dim,

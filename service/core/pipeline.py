@@ -18,12 +18,13 @@ from service.core.checks.diagnostics import diagnostics
 from service.core.errors import TauOutOfRange
 from service.core.finish.clip import clip_points
 from service.core.finish.finished import Finished
+from service.core.finish.outliers import far_moved, place_outliers
 from service.core.finish.tangential import relax_tangential
 from service.core.finish.volume import preserve_measure
 from service.core.geometry import Geometry
 from service.core.linalg.cache import analysis_of
 from service.core.linalg.resources import choose_solver
-from service.core.noise.robust import pull_in
+from service.core.noise.estimate import codimension
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.plan import Plan, make_plan, with_problem, with_solution
@@ -232,16 +233,18 @@ def unchanged(problem: Problem, plan: Plan, aim: Target, run: Run) -> Solution:
 
 
 def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
-    """The points in the input's frame: outliers placed by eq. (4) as ``omega_i -> 0``, the
-    tangential step, volume/area kept (sections 8-9), the max-norm clip (section 9)."""
+    """The points in the input's frame: outliers pulled in by eq. (4) as ``omega_i -> 0`` or
+    kept in place (:mod:`.finish.outliers`; kept points stay bit for bit through every step),
+    the tangential step, volume/area kept (sections 8-9), the max-norm clip (section 9)."""
     if sol.U is None:
         return Finished(problem.geometry.points.copy())
     X = problem.points(sol.U)
     params = problem.params
     if params.method == "windowed-sinc":
         return Finished(X)
-    if problem.weights is not None:  # outliers with no data weight: eq. (4) places them
-        X = pull_in(X, problem.op.L, problem.weights.pulled)
+    if problem.weights is not None:  # outliers: kept (flag, drop) or pulled in, bounded
+        X = place_outliers(problem.geometry.points, X, problem.op.L, problem.weights.pulled,
+                           plan.outliers.value)
     enabled = plan.tangential.value == "auto"
     X, along = relax_tangential(
         problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
@@ -251,7 +254,16 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
         X, volume_scale = preserve_measure(problem.geometry, X)
     if group.max_deviation is not None:
         X, _ = clip_points(problem.geometry.points, X, group.max_deviation)
-    return Finished(X, volume_scale, along)
+    kept = None
+    if problem.weights is not None and plan.outliers.value != "pull":
+        P = problem.geometry.points
+        kept = problem.weights.outliers
+        if problem.geometry.kind == "cloud":  # strays the residual test left undecided
+            kept = far_moved(P, X, kept, sol.target.sigma, codimension(problem.geometry),
+                             problem.weights.tau_scale)
+        X = place_outliers(P, X, problem.op.L, kept[~problem.geometry.fixed_mask()[kept]],
+                           plan.outliers.value)
+    return Finished(X, volume_scale, along, kept)
 
 
 def report(

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+from service.core.errors import ParameterError
 from service.core.finish.tangential import applies as tangential_applies
 from service.core.geometry import Geometry
 from service.core.noise.estimate import codimension
@@ -37,6 +38,7 @@ CHOICES = (
     "boundary",
     "weights",
     "data_weights",
+    "outliers",
     "tangential",
     "tau_rule",
     "method",
@@ -65,8 +67,8 @@ class Plan:
     ----------
     params : SmoothingParams
         The caller's parameters with displacement, weights, ends and boundary resolved.
-    displacement, ends, boundary, weights, data_weights, tangential, tau_rule, method, search,
-    solver : Choice
+    displacement, ends, boundary, weights, data_weights, outliers, tangential, tau_rule, method,
+    search, solver : Choice
     """
 
     params: SmoothingParams
@@ -75,6 +77,7 @@ class Plan:
     boundary: Choice
     weights: Choice
     data_weights: Choice
+    outliers: Choice
     tangential: Choice
     tau_rule: Choice
     method: Choice
@@ -143,6 +146,34 @@ def _operator_choices(
     return weights, ends, boundary
 
 
+def _outliers(params: SmoothingParams, geometry: Geometry) -> Choice:
+    """What happens to outliers (issue 31): a cloud's stray point is usually not a noisy sample
+    of the surface, so it is flagged and kept where it was; a mesh's or curve's spike is
+    pulled back into its ring (bounded by the ring's reach). ``drop`` removes rows, which only
+    a point cloud can lose without tearing connectivity.
+
+    Raises
+    ------
+    ParameterError
+        ``outliers="drop"`` on a mesh or a curve.
+    """
+    kind = geometry.kind
+    evidence = {"kind": kind}
+    if params.outliers == "drop" and kind != "cloud":
+        raise ParameterError(
+            f"outliers 'drop' removes points, which a {kind} cannot lose without tearing its "
+            "connectivity; use 'flag' or 'pull'",
+            field="params.outliers",
+        )
+    if params.outliers != "auto":
+        return Choice(params.outliers, _given(params, "outliers"), evidence)
+    if kind == "cloud":
+        return Choice("flag", "a point cloud's stray point is not a noisy sample of the "
+                      "surface: kept in place, flagged (as PDAL filters.outlier)", evidence)
+    return Choice("pull", f"a {kind}'s spike is pulled back into its ring (eq. 4, omega -> 0), "
+                  "no further than the ring reaches", evidence)
+
+
 def _budget_choices(params: SmoothingParams) -> tuple[Choice, Choice, Choice, Choice]:
     """The tau rule (eq. 3), the method, the lambda search (section 6.3), the solver."""
     rule = params.tau_rule
@@ -175,9 +206,11 @@ def make_plan(geometry: Geometry, params: SmoothingParams) -> Plan:
     """
     resolved = resolve_displacement(params, geometry)
     weights, ends, boundary = _operator_choices(params, geometry)
-    resolved = resolved.model_copy(
-        update={"weights": weights.value, "ends": ends.value, "boundary": boundary.value}
-    )
+    outliers = _outliers(params, geometry)
+    resolved = resolved.model_copy(update={
+        "weights": weights.value, "ends": ends.value, "boundary": boundary.value,
+        "outliers": outliers.value,
+    })  # fmt: skip
     tau_rule, method, search, solver = _budget_choices(params)
     return Plan(
         params=resolved,
@@ -186,6 +219,7 @@ def make_plan(geometry: Geometry, params: SmoothingParams) -> Plan:
         boundary=boundary,
         weights=weights,
         data_weights=Choice(None, "decided when the problem is set up"),
+        outliers=outliers,
         tangential=Choice(None, "decided when the problem is set up"),
         tau_rule=tau_rule,
         method=method,
@@ -222,7 +256,11 @@ def with_problem(plan: Plan, problem: Problem) -> Plan:
         "normal displacement of a 3-D mesh with the automatic tau" if on else
         ("off" if problem.params.tangential == "off" else "does not apply to this run"),
     )  # fmt: skip
-    return replace(plan, displacement=displacement, data_weights=data, tangential=tangential)
+    outliers = plan.outliers
+    if dw is not None:
+        outliers = replace(outliers, evidence={**outliers.evidence, "count": int(dw.outliers.size)})
+    return replace(plan, displacement=displacement, data_weights=data, outliers=outliers,
+                   tangential=tangential)
 
 
 def with_solution(plan: Plan, target: Target, solver: str, notes: list[str]) -> Plan:

@@ -17,7 +17,7 @@ and the API passes it through unvalidated, so a new member never breaks a reader
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field
 
@@ -148,6 +148,13 @@ class Report(BaseModel):
         "unchanged, tau_how says why).",
         examples=[True],
     )
+    unchanged: str | None = Field(
+        default=None,
+        description="Nothing was smoothed (the points are the input's, bit for bit): 'copied' "
+        "(the output file is the input's bytes) or 'converted' (a straight conversion to "
+        "another format or with writer options); null when smoothed or not written to a file.",
+        examples=[None],
+    )
     outlier_count: int = Field(
         default=0,
         description="Points the robust data weights treated as outliers (robust).",
@@ -157,6 +164,14 @@ class Report(BaseModel):
         default_factory=list,
         description="Indices of the points treated as outliers.",
         examples=[[17, 804]],
+    )
+    outlier_mode: Literal["flag", "drop", "pull"] | None = Field(
+        default=None,
+        description="What happened to the outliers (params.outliers): 'flag' kept at their "
+        "input positions and flagged in the output where the format holds a flag (LAS "
+        "classification 7, a PLY/PCD 'outlier' attribute), 'drop' left out of the output, "
+        "'pull' pulled back into their neighbours' ring; null when there were none.",
+        examples=["flag"],
     )
     data_weights: str | None = Field(
         default=None,

@@ -113,12 +113,18 @@ class SmoothResult:
         The weights ``omega_i`` of the data term the run used when data weights were applied
         (the user's times the robust and noise weights): ``phi`` is ``sum omega_i^2
         ||x_i - p_i||^2`` with these over the points not in ``pulled``. ``None``: the user's.
+    outlier_mode : str or None
+        ``"flag"``, ``"drop"`` or ``"pull"``: what was done with the outliers (issue 31);
+        ``None`` without outliers.
     pulled : ndarray of int
         Outliers with (next to) no weight, placed after the solve by ``argmin ||L X||^2`` over
         them (eq. 4 as ``omega_i -> 0``); their displacement is not part of ``phi``.
     data_weights : str or None
         Which data weights beyond the user's were applied: ``"robust (<rule>)"``, ``"noise"``
         (``1/sigma_i``, uneven noise), both joined by ``" + "``, or ``None``.
+    unchanged : str or None
+        Nothing smoothed, the output written by :mod:`service.workflows.smooth_file`:
+        ``"copied"`` (the input's bytes) or ``"converted"`` (a straight conversion).
     """
 
     points: NDArray[np.float64]
@@ -166,9 +172,11 @@ class SmoothResult:
     data_weights: str | None = None
     omega: NDArray[np.float64] | None = None
     pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    outlier_mode: str | None = None  # issue 31: "flag", "drop" or "pull" when there are outliers
     tangential: dict[str, Any] | None = None  # issue 21: the tangential step
     output_deviation: dict[str, float] | None = None  # issue 30: what the output is
     plan: Plan | None = None  # issue 29: every automatic choice and its evidence
+    unchanged: str | None = None  # issue 32: set by service.workflows.smooth_file
 
     @property
     def rms_deviation(self) -> float:
@@ -232,8 +240,10 @@ class SmoothResult:
         out.update(
             outlier_count=int(self.outliers.size),
             outliers=[int(i) for i in self.outliers],
+            outlier_mode=self.outlier_mode,
             data_weights=self.data_weights,
             plan=None if self.plan is None else self.plan.to_dict(),
+            unchanged=self.unchanged,
         )
         if self.spectrum is not None:
             out["spectrum"] = self.spectrum.to_dict()

@@ -59,13 +59,20 @@ def _numeric(value: object) -> bool:
 
 
 def check_tau(
-    geometry: Geometry, params: SmoothingParams, exact_max_points: int, *, analyse: bool = True
+    geometry: Geometry,
+    params: SmoothingParams,
+    exact_max_points: int,
+    *,
+    analyse: bool = True,
+    exact: bool | None = None,
 ) -> None:
     """Raise :class:`TauOutOfRange` when ``tau``/``rms`` cannot be met (see module docstring).
 
     ``analyse=False`` (``POST /v1/smooth``, where the engine checks the range itself) only
     checks that ``rms`` resolves to a positive, finite ``tau`` (``rms = 5e-324`` underflows).
-    Non-numeric targets (an automatic ``tau``) have no range to check.
+    Non-numeric targets (an automatic ``tau``) have no range to check. ``exact=False``: no
+    operator is built whatever the kind (an input too large for the caller to afford it): the
+    centroid bound, or with fixed points only ``tau > 0`` (the run checks the range).
     """
     if not (_numeric(params.tau) or _numeric(params.rms)):
         return
@@ -86,8 +93,12 @@ def check_tau(
                 )
         return
     fixed = geometry.fixed is not None or params.fix_boundary
-    exact = geometry.kind != "cloud" or geometry.n <= exact_max_points or fixed
-    phi0, weight = _range(geometry, params, exact)
+    if exact is None:
+        exact = geometry.kind != "cloud" or geometry.n <= exact_max_points or fixed
+    if not exact and fixed:  # the centroid bound holds without boundary values only
+        phi0, weight = float("inf"), free_weight(geometry)
+    else:
+        phi0, weight = _range(geometry, params, exact)
     if params.tau is not None:
         value, bound, name, tau = float(params.tau), phi0, "tau", float(params.tau)
     else:  # rms: the same budget per point (service.core.search.budget)

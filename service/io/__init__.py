@@ -23,6 +23,7 @@ from service.io.document import GeometryDocument, Polyline, Precision, WeldMap
 from service.io.errors import FormatError, UnsupportedFormat
 from service.io.formats.json.codec import document_to_json_obj, geometry_from_json_obj
 from service.io.formats.json.schema import GEOMETRY_JSON_SCHEMA
+from service.io.limits import InputTooLarge, ReadLimits
 from service.io.registry import FORMATS, Format, get_format
 
 __all__ = [
@@ -31,8 +32,10 @@ __all__ = [
     "Format",
     "FormatError",
     "GeometryDocument",
+    "InputTooLarge",
     "Polyline",
     "Precision",
+    "ReadLimits",
     "UnsupportedFormat",
     "WeldMap",
     "detect_format",

@@ -23,6 +23,7 @@ from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, p
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
 from service.io.holds import dropped_kinds, input_kinds, is_geographic, output_notes, same_family
+from service.io.limits import ReadLimits, reading
 from service.io.registry import (
     FORMATS,
     Format,
@@ -36,6 +37,7 @@ from service.io.source import Source
 __all__ = [
     "FORMATS",
     "OutputRefused",
+    "check_not_empty",
     "check_output",
     "detect_format",
     "formats_for",
@@ -98,12 +100,19 @@ def _resolve(source: Source, fmt: str | None, filename: str | None) -> str:
     return sniffed
 
 
+def check_not_empty(src: Source, fmt: str) -> None:
+    """:class:`FormatError` ``the file is empty`` (no bytes, or a little whitespace)."""
+    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
+        raise FormatError("the file is empty", fmt=fmt)
+
+
 def read_geometry(
     source: SourceLike,
     fmt: str | None = None,
     *,
     filename: str | None = None,
     weld: bool | None = None,
+    limits: ReadLimits | None = None,
     **options: Any,
 ) -> GeometryDocument:
     """Read a geometry file.
@@ -121,7 +130,13 @@ def read_geometry(
     weld : bool, optional
         Merge exactly coincident vertices (see :mod:`service.io._shared.weld`); writers still write
         the
-        file's vertex count and order. Default: the format's (STL and GLB: yes, others: no).
+        file's vertex count and order. Default: the format's (STL and GLB: yes); other formats
+        weld when duplicate positions tie faces (a mesh stored one vertex per position and
+        normal would otherwise tear apart when smoothed; issue 31).
+    limits : ReadLimits, optional
+        Points a file may hold and memory its reading may take, checked from the declared
+        counts before anything is allocated (:mod:`service.io.limits`; default: the limits in
+        force, else ``ReadLimits()``: 1e9 points, 3/4 of the machine's memory).
     **options
         Reader options of the format (``xyz_dims`` for XYZ, ``geographic`` for GPX/GeoJSON);
         options given as ``None`` are ignored.
@@ -130,6 +145,8 @@ def read_geometry(
     ------
     UnsupportedFormat
         A format geosmooth does not read.
+    InputTooLarge
+        More points, or a larger memory estimate, than ``limits`` allow (a ``FormatError``).
     FormatError
         A malformed file (one-line message; the line number for text formats).
     GeometryError
@@ -142,15 +159,20 @@ def read_geometry(
     spec = FORMATS[_resolve(bare, fmt, filename)]
     if not spec.binary or spec.name in _TEXT_HEADERS:
         src = bare
-    if src.size == 0 or (src.size <= 4096 and not src.head().strip()):
-        raise FormatError("the file is empty", fmt=spec.name)
+    check_not_empty(src, spec.name)
     given = {k: v for k, v in options.items() if v is not None}
     for key in given:
         if key not in spec.options:
             users = [f.title for f in FORMATS.values() if key in f.options] or ["no"]
             raise ValueError(f"{key} applies to {' and '.join(users)} files only")
     do_weld = spec.weld_default if weld is None else bool(weld)
-    doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+    with reading(limits) as bounds:
+        doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
+        bounds.check(int(doc.geometry.n), 0, spec.name)  # formats without a declared count
+    if weld is None and not do_weld:
+        from service.io._shared.weld import weld_if_tied
+
+        doc = weld_if_tied(doc)
     return doc
 
 

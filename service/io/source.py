@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import contextlib
 import io
+import mmap
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["UTF8_BOM", "Source"]
+__all__ = ["UTF8_BOM", "Mapped", "Source", "mapped"]
 
 #: The UTF-8 byte order mark, dropped from the start of text formats (:meth:`Source.without_bom`).
 UTF8_BOM = b"\xef\xbb\xbf"
@@ -103,3 +104,49 @@ class Source:
         finally:
             with contextlib.suppress(OSError):
                 os.unlink(name)
+
+
+class Mapped:
+    """A memory-mapped file seen as read-only bytes by the text parsers (``len``, slices,
+    ``find``, ``rfind``, ``count``), so the streamed readers parse it with the ordinary readers'
+    code without reading it into memory. ``.map`` is the mmap (numpy's ``frombuffer``)."""
+
+    _STEP = 1 << 24
+
+    def __init__(self, mm: mmap.mmap | bytes) -> None:
+        self.map = mm
+
+    def __len__(self) -> int:
+        return len(self.map)
+
+    def __getitem__(self, key: slice) -> bytes:
+        return self.map[key]
+
+    def find(self, sub: bytes, start: int = 0, end: int | None = None) -> int:
+        return self.map.find(sub, start, len(self.map) if end is None else end)
+
+    def rfind(self, sub: bytes, start: int = 0, end: int | None = None) -> int:
+        return self.map.rfind(sub, start, len(self.map) if end is None else end)
+
+    def count(self, sub: bytes, start: int = 0, end: int | None = None) -> int:
+        """Occurrences of a one-byte ``sub`` (newlines), counted in 16 MiB windows."""
+        stop = len(self.map) if end is None else min(end, len(self.map))
+        return sum(
+            self.map[at : min(at + self._STEP, stop)].count(sub)
+            for at in range(max(start, 0), stop, self._STEP)
+        )
+
+
+@contextlib.contextmanager
+def mapped(path: Path) -> Iterator[Mapped]:
+    """A read-only memory map of ``path`` (an empty file: empty bytes)."""
+    with open(path, "rb") as fh:
+        if os.fstat(fh.fileno()).st_size == 0:
+            yield Mapped(b"")
+            return
+        mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        try:
+            yield Mapped(mm)
+        finally:
+            with contextlib.suppress(BufferError):  # numpy views still alive: closed when freed
+                mm.close()

@@ -16,17 +16,26 @@ coordinates and back.
 from __future__ import annotations
 
 import shutil
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from service.io.dispatch import check_not_empty
 from service.io.errors import FormatError
+from service.io.formats import xyz
+from service.io.formats.ply import read as ply_read
 from service.io.formats.ply.header import PlyHeader, parse_header
+from service.io.limits import ReadLimits, reading
+from service.io.source import UTF8_BOM, Source, mapped
 
 __all__ = [
-    "CHUNK", "STREAMED", "read_coordinates", "rewrite", "streamable", "streamed_format",
+    "CHUNK",
+    "STREAMED",
+    "read_coordinates",
+    "rewrite",
+    "streamable",
+    "streamed_format",
 ]
 
 CHUNK = 1 << 20
@@ -65,101 +74,78 @@ def _vertex_dtype(header: PlyHeader) -> np.dtype | None:
 
 
 def streamable(path: Path, fmt: str) -> bool:
-    """Whether :func:`read_coordinates` / :func:`rewrite` handle this file."""
-    if fmt in ("las", "laz", "xyz"):
+    """Whether :func:`read_coordinates` / :func:`rewrite` handle this file: LAS/LAZ; XYZ of
+    three or more columns; binary PLY whose first element is the vertex (scalar ``x y z``),
+    followed by at most a ``face`` element. Files with a byte order mark take the ordinary
+    path (which drops it)."""
+    if fmt in ("las", "laz"):
         return True
-    if fmt != "ply":
+    if fmt not in ("ply", "xyz"):
         return False
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if head.startswith(UTF8_BOM):
+        return False
+    if fmt == "xyz":
+        return xyz.columns(head) >= 3
     try:
-        header = _ply_header(path)
+        header = parse_header(head)
     except FormatError:
         return False
     if _vertex_dtype(header) is None:
         return False
     rest = header.elements[1:]
-    faces_ok = _faces_dtype(header) is not None
-    return all(e.name == "face" for e in rest) and len(rest) <= 1 and faces_ok
+    return all(e.name == "face" for e in rest) and len(rest) <= 1
 
 
-def _faces_dtype(header: PlyHeader) -> np.dtype | None:
-    """Triangles stored as one ``list uchar int`` property with count 3 (checked on read)."""
-    if len(header.elements) == 1:
-        return np.dtype([])
-    face = header.elements[1]
-    if len(face.properties) != 1 or not face.properties[0].is_list:
-        return None
-    prop = face.properties[0]
-    end = "<" if header.encoding == "binary_little_endian" else ">"
-    if prop.count_type is None:
-        return None
-    return np.dtype([("n", end + _code(prop.count_type)),
-                     ("v", end + _code(prop.type), (3,))])  # fmt: skip
-
-
-def read_coordinates(path: Path, fmt: str) -> tuple[Array, NDArray[np.int64] | None]:
+def read_coordinates(
+    path: Path, fmt: str, *, limits: ReadLimits | None = None
+) -> tuple[Array, NDArray[np.int64] | None]:
     """``(points (n, 3) float64, triangles (m, 3) or None)`` of a streamable file.
+
+    The checks are the ordinary readers' own code (:func:`service.io.formats.las.open_points`,
+    :func:`service.io.formats.ply.read.read_coordinates`, :func:`service.io.formats.xyz.
+    read_coordinates`), so a file one path refuses the other refuses with the same message;
+    ``limits`` (default: those in force, :mod:`service.io.limits`) bound the declared counts
+    before anything is allocated.
 
     Raises
     ------
     FormatError
-        A PLY face that is not a triangle; a file laspy cannot read.
+        Whatever the ordinary reader raises for this file (:class:`~service.io.limits.
+        InputTooLarge` past the limits).
+    GeometryError
+        Non-finite coordinates (as the ordinary readers).
     """
     path = Path(path)
+    with reading(limits):
+        return _coordinates(path, fmt)
+
+
+def _coordinates(path: Path, fmt: str) -> tuple[Array, NDArray[np.int64] | None]:
+    source = Source.of(path)
+    check_not_empty(source, fmt)
     if fmt in ("las", "laz"):
-        return _las_points(path), None
-    if fmt == "xyz":
-        return _xyz_points(path), None
-    header = _ply_header(path)
-    vdt = _vertex_dtype(header)
-    assert vdt is not None
-    n = header.elements[0].count
-    vertices = np.memmap(path, dtype=vdt, mode="r", offset=header.body_offset, shape=(n,))
-    P = np.empty((n, 3))
-    for at in range(0, n, CHUNK):
-        block = vertices[at : at + CHUNK]
-        for j, name in enumerate("xyz"):
-            P[at : at + CHUNK, j] = block[name]
-    faces = None
-    fdt = _faces_dtype(header)
-    if fdt is not None and len(header.elements) > 1:
-        m = header.elements[1].count
-        rec = np.memmap(path, dtype=fdt, mode="r", offset=header.body_offset + n * vdt.itemsize,
-                        shape=(m,))  # fmt: skip
-        if m and np.any(rec["n"] != 3):
-            raise FormatError("a PLY face is not a triangle: streamed tiles need triangles",
-                              fmt="ply")  # fmt: skip
-        faces = np.asarray(rec["v"], dtype=np.int64)
-    return P, faces
+        return _las_points(source, fmt), None
+    with mapped(path) as data:
+        if fmt == "xyz":
+            return xyz.read_coordinates(data), None
+        end = data.find(b"end_header")
+        header = parse_header(data[: end + 4096] if end >= 0 else data[: 1 << 16])
+        return ply_read.read_coordinates(data.map, header)
 
 
-def _las_points(path: Path) -> Array:
-    import laspy
+def _las_points(source: Source, fmt: str) -> Array:
+    from service.io.formats.las import open_points
 
-    with laspy.open(path) as reader:
-        n = int(reader.header.point_count)
-        P = np.empty((n, 3))
+    with open_points(source, fmt, attributes=False) as stream:
+        P = np.empty((stream.n, 3))
         at = 0
-        for chunk in reader.chunk_iterator(CHUNK):
+        for chunk in stream.chunks:
             k = len(chunk)
             P[at : at + k] = np.c_[chunk.x, chunk.y, chunk.z]
             at += k
-    return P[:at]
-
-
-def _data_lines(path: Path) -> Iterator[list[bytes]]:
-    """Blocks of up to :data:`CHUNK` data lines (comments and a header line skipped)."""
-    with open(path, "rb") as fh:
-        block: list[bytes] = []
-        for line in fh:
-            s = line.strip()
-            if not s or s.startswith(b"#") or not _numeric(s.split(None, 1)[0]):
-                continue
-            block.append(s)
-            if len(block) == CHUNK:
-                yield block
-                block = []
-        if block:
-            yield block
+    return P
 
 
 def _numeric(token: bytes) -> bool:
@@ -168,14 +154,6 @@ def _numeric(token: bytes) -> bool:
     except ValueError:
         return False
     return True
-
-
-def _xyz_points(path: Path) -> Array:
-    parts = []
-    for block in _data_lines(path):
-        parts.append(np.array([line.replace(b",", b" ").split()[:3] for line in block],
-                              dtype=np.float64))  # fmt: skip
-    return np.concatenate(parts) if parts else np.zeros((0, 3))
 
 
 def rewrite(src: Path, dst: Path, fmt: str, points: Array) -> None:
@@ -247,11 +225,12 @@ def _xyz_rewrite(src: Path, dst: Path, points: Array) -> None:
             if not s or s.startswith(b"#") or not _numeric(s.split(None, 1)[0]):
                 out.write(raw)
                 continue
-            tokens = s.split()
+            sep = b"," if b"," in s else b" "  # the reader's separators: commas or blanks
+            tokens = s.replace(b",", b" ").split()
             if digits is None:
                 digits = [_decimals(t) for t in tokens[:3]]
             new = [f"{points[at, j]:.{digits[j]}f}".encode() for j in range(3)]
-            out.write(b" ".join(new + tokens[3:]) + b"\n")
+            out.write(sep.join(new + tokens[3:]) + b"\n")
             at += 1
 
 

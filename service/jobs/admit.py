@@ -86,9 +86,10 @@ def request_hash(data: JobInput, fmt: str, params: dict[str, Any], **fields: Any
 
 def admit_size(job: NewJob, limit: int | None) -> SmoothingParams:
     """The job's params as the submit check decided them
-    (:func:`service.workflows.admission.decide`): refused (:class:`JobTooLarge`) when its
-    memory estimate is above ``limit`` or its time estimate above the job time limit, with
-    ``tile_points`` set when only a tiled run fits the memory limit.
+    (:func:`service.workflows.admission.decide`): refused
+    (:class:`~service.workflows.admission.JobTooLarge`) when its memory estimate is above
+    ``limit`` or its time estimate above the job time limit, with ``tile_points`` set when only
+    a tiled run fits the memory limit.
 
     The decision the job carries (:attr:`NewJob.admission <service.jobs.queue.NewJob>`) is
     taken when it was made against this queue's limits; otherwise it is made here (reading the
@@ -121,8 +122,8 @@ def check_space(directory: Path, needed: int, min_free: int) -> None:
 
 @contextlib.contextmanager
 def storage_errors() -> Iterator[None]:
-    """Turn file-system and database failures into :class:`StorageFull` /
-    :class:`StorageUnavailable` (no paths or driver text in the message)."""
+    """Turn file-system and database failures into :class:`~service.jobs.errors.StorageFull` /
+    :class:`~service.jobs.errors.StorageUnavailable` (no paths or driver text in the message)."""
     try:
         yield
     except StorageError:

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import errno
 import sqlite3
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from service.workflows.admission import JobTooLarge  # the submit check's refusal
+from service.workflows.errors import ServiceError
 
 __all__ = [
     "IdempotencyConflict",
@@ -26,7 +27,7 @@ __all__ = [
 ]
 
 
-class JobsError(Exception):
+class JobsError(ServiceError):
     """Base class of the queue's typed errors.
 
     Parameters
@@ -41,20 +42,6 @@ class JobsError(Exception):
     title: ClassVar[str] = "Job queue error"
     status: ClassVar[int] = 500
     exit_code: ClassVar[int] = 1  # see the CLI's table, service/exit_codes.py
-
-    def __init__(self, message: str, *, field: str | None = None, **extra: Any) -> None:
-        super().__init__(message)
-        self.message = message
-        self.field = field
-        self.extra = extra
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{code, message, field?, **extra}`` (JSON-ready)."""
-        out: dict[str, Any] = {"code": self.code, "message": self.message}
-        if self.field is not None:
-            out["field"] = self.field
-        out.update(self.extra)
-        return out
 
 
 class IdempotencyConflict(JobsError):

@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
 import os
@@ -169,3 +170,27 @@ def set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
         return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
     except (OSError, AttributeError):  # pragma: no cover - non-glibc oddities
         return False
+
+
+def reap_zombies(keep: int | None = None) -> list[int]:
+    """Reap this process's children that exited and nobody waited for (zombies), except
+    ``keep`` (a child someone else waits for, e.g. RQ's work horse); their pids (Linux)."""
+    me = os.getpid()
+    reaped: list[int] = []
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return reaped
+    for name in entries:
+        if not name.isdigit() or int(name) == keep:
+            continue
+        try:
+            with open(f"/proc/{name}/stat", encoding="ascii", errors="replace") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if len(fields) > 1 and fields[0] == "Z" and fields[1] == str(me):
+            with contextlib.suppress(ChildProcessError, OSError):
+                os.waitpid(int(name), os.WNOHANG)
+                reaped.append(int(name))
+    return reaped

@@ -13,7 +13,8 @@ import re
 import signal
 from typing import Any
 
-from service.jobs.errors import JobsError, storage_error
+from service.jobs.errors import storage_error
+from service.workflows.errors import ServiceError
 
 __all__ = [
     "attempts_exhausted",
@@ -52,7 +53,7 @@ def from_exception(exc: BaseException) -> dict[str, Any]:
     from service.core.errors import GeosmoothError
     from service.io.errors import FormatError
 
-    if isinstance(exc, GeosmoothError | FormatError | JobsError):
+    if isinstance(exc, GeosmoothError | FormatError | ServiceError):
         return _from_typed(exc, exc.title)
     storage = storage_error(exc)  # a full or read-only disk, an unreachable store
     if storage is not None:

@@ -6,7 +6,9 @@
    job time limit it is refused at once (:class:`JobTooLarge`, 422), before the checks below,
    which cost about as much as the job on such inputs (the exact ``phi(0)`` of 50 points in
    200-D held the ingest process until its time limit);
-2. the **smoothing factor** against ``(0, phi(0))`` (:mod:`service.core.tau_range`);
+2. the **smoothing factor** against ``(0, phi(0))`` (:mod:`service.core.tau_range`): exact
+   when it is affordable, from the centroid bound when the job is tiled or its estimate is
+   above the check process's budget (:func:`exact_tau_affordable`);
 3. the **dry run**: inputs of at most ``dry_run_points`` points are smoothed once, and what the
    engine refuses (one to three points, identical or collinear points, a LAS file whose scale
    makes every point the same, a noise level that cannot be estimated ...) is answered 422 with
@@ -29,6 +31,8 @@ import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from service.workflows.errors import ServiceError
+
 if TYPE_CHECKING:
     from service.core.geometry import Geometry
     from service.core.linalg.resources import ResourceEstimate
@@ -49,6 +53,7 @@ __all__ = [
     "check_sync",
     "decide",
     "dry_run",
+    "exact_tau_affordable",
 ]
 
 #: Estimated seconds (one core) above which a small input is not tried at submit.
@@ -86,31 +91,17 @@ class JobSize:
         )
 
 
-class JobTooLarge(Exception):
+class JobTooLarge(ServiceError):
     """The job's estimated memory or time is above the per-job limit (refused at submit).
 
     Extras: ``estimate_bytes``, ``estimate_seconds``, ``path``, ``limit_bytes`` or
-    ``limit_seconds``. Carries the typed-error surface of :class:`service.jobs.errors.JobsError`
-    (``code``, ``title``, ``status``, ``exit_code``, ``field``, ``message``, ``to_dict``).
+    ``limit_seconds``.
     """
 
     code: ClassVar[str] = "job-too-large"
     title: ClassVar[str] = "Job too large"
     status: ClassVar[int] = 422
     exit_code: ClassVar[int] = 2  # see the CLI's table, service/exit_codes.py
-
-    def __init__(self, message: str, *, field: str | None = None, **extra: Any) -> None:
-        super().__init__(message)
-        self.message = message
-        self.field = field
-        self.extra = extra
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{code, message, field?, **extra}`` (JSON-ready)."""
-        out: dict[str, Any] = {"code": self.code, "message": self.message}
-        if self.field is not None:
-            out["field"] = self.field
-        return {**out, **self.extra}
 
 
 @dataclass(frozen=True)
@@ -122,6 +113,9 @@ class Policy:
     exact_tau_max_points: int = 50_000
     dry_run_points: int = 0
     tile_workers: int = 1
+    #: The check process's own budget (memory bytes, CPU seconds): above it no operator is built.
+    check_memory_bytes: int | None = None
+    check_seconds: float | None = None
 
 
 @dataclass(frozen=True)
@@ -285,9 +279,26 @@ def dry_run(
             raise
 
 
+def exact_tau_affordable(
+    size: JobSize, est: ResourceEstimate, admission: Admission, policy: Policy
+) -> bool:
+    """Whether the exact ``phi(0)`` (the input's operator built) fits the submit check: not
+    when the job is tiled (it is above the auto-tiling threshold: its operator alone may not fit
+    one process) or its estimate is above the check process's own memory or CPU budget."""
+    if admission.params.tile_points or admission.refusal is not None:
+        return False
+    if policy.check_memory_bytes is not None and est.memory_bytes > policy.check_memory_bytes:
+        return False
+    return policy.check_seconds is None or est.seconds <= policy.check_seconds
+
+
 def check_submit(geometry: Geometry, params: SmoothingParams, policy: Policy) -> Admission:
-    """The submit check of a job (module docstring), in that order; the estimate is made once
-    (twice when the queue has a memory limit, which changes the solver path it assumes).
+    """The submit check of a job (module docstring); the estimate is made once (twice when the
+    queue has a memory limit, which changes the solver path it assumes). The queue's decision
+    is taken before the ``tau`` check: an input it tiles, or whose estimate is above the check
+    process's budget (:func:`exact_tau_affordable`), gets ``tau``/``rms`` checked from its
+    counts and coordinates (the centroid bound), never by building its operator, so every input
+    the bounds admit is admitted (and tiled) with a ``tau`` as without one.
 
     Raises
     ------
@@ -304,10 +315,15 @@ def check_submit(geometry: Geometry, params: SmoothingParams, policy: Policy) ->
     est = _estimate(size, params, None)
     if policy.time_limit:
         _refuse(size, est, None, float(policy.time_limit))
-    check_tau(geometry, params, policy.exact_tau_max_points)
-    dry_run(geometry, params, policy.dry_run_points, est)
     same = est if policy.memory_limit is None else None
-    return decide(size, params, policy.memory_limit, policy.time_limit, policy.tile_workers, same)
+    admission = decide(
+        size, params, policy.memory_limit, policy.time_limit, policy.tile_workers, same
+    )
+    exact = None if exact_tau_affordable(size, est, admission, policy) else False
+    check_tau(geometry, params, policy.exact_tau_max_points, exact=exact)
+    if exact is None:
+        dry_run(geometry, params, policy.dry_run_points, est)
+    return admission
 
 
 def check_sync(geometry: Geometry, params: SmoothingParams) -> None:

@@ -21,6 +21,14 @@ that cannot hold the smoothed points is an :class:`OutputFormatError` (a
 :class:`~service.io.errors.FormatError`, so HTTP and job answers are those of the format error;
 the CLI answers it as an output failure); every other typed error of the readers and the
 engine propagates as raised.
+
+**Unchanged is byte-identical** (issue 32): when the engine returns the input's points bit for
+bit (no noise found, every point fixed, nothing coupled, no valid budget: whatever the reason,
+:func:`returned_unchanged` compares the points), nothing is rewritten. In the input's format
+and without writer options the output is the input's bytes (a file copied, a callable target
+given those bytes): :data:`COPIED`; otherwise (another format, writer options, no input bytes
+at hand) a straight conversion: :data:`CONVERTED`. The result's ``unchanged`` member (and so
+every report) says which.
 """
 
 from __future__ import annotations
@@ -31,6 +39,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from service.io.errors import FormatError
+from service.workflows.unchanged import (
+    CONVERTED,
+    COPIED,
+    WORDS,
+    Original,
+    marked,
+    original_bytes,
+    returned_unchanged,
+)
 
 if TYPE_CHECKING:
     from service.core.geometry import Geometry
@@ -40,11 +57,14 @@ if TYPE_CHECKING:
     from service.io import GeometryDocument
 
 __all__ = [
+    "CONVERTED",
+    "COPIED",
     "Engine",
     "OutputFormatError",
     "Smoothed",
     "Store",
     "encode",
+    "returned_unchanged",
     "run_engine",
     "smooth_document",
     "smooth_file",
@@ -98,6 +118,9 @@ class Smoothed:
         Formats read and written.
     streamed : bool
         Whether the streamed path ran.
+    unchanged : str or None
+        Nothing smoothed: :data:`COPIED` (the output is the input's bytes) or
+        :data:`CONVERTED` (a straight conversion); ``None`` when smoothed.
     """
 
     result: SmoothResult
@@ -105,6 +128,12 @@ class Smoothed:
     input_format: str
     output_format: str
     streamed: bool = False
+    unchanged: str | None = None
+
+    @property
+    def summary(self) -> str | None:
+        """``"returned unchanged: input bytes copied"``, ``"converted unchanged"`` or ``None``."""
+        return WORDS.get(self.unchanged or "")
 
 
 def run_engine(
@@ -132,6 +161,8 @@ def encode(doc: GeometryDocument, fmt: str, points: Any = None, **options: Any) 
         ``fmt`` cannot hold these points (a coordinate a LAS scale cannot hold, ...).
     OutputRefused, UnsupportedFormat
         As :func:`service.io.write_geometry` raises them.
+    ParameterError
+        A ``crs`` this input or format cannot take (field ``crs``: HTTP 422, CLI status 4).
     """
     from service.io import write_geometry
 
@@ -141,6 +172,12 @@ def encode(doc: GeometryDocument, fmt: str, points: Any = None, **options: Any) 
         if type(exc) is not FormatError:  # refused or unsupported formats keep their class
             raise
         raise OutputFormatError.of(exc, fmt) from exc
+    except ValueError as exc:
+        if options.get("crs") is None or isinstance(exc, FormatError):
+            raise
+        from service.core.errors import ParameterError
+
+        raise ParameterError(str(exc), field="crs") from exc
 
 
 def write_document(
@@ -195,9 +232,17 @@ def smooth_streamed(
     P, faces = read_coordinates(src, fmt)
     result = run_engine(Geometry(P, faces=faces), params, progress, memory_limit=memory_limit,
                         run_map=run_map)  # fmt: skip
+    same = returned_unchanged(result, P)
     del P
     with atomic_path(dst) as tmp:
-        rewrite(src, tmp, fmt, result.points)
+        if same:  # nothing smoothed: the input's bytes, not a rewrite
+            import shutil
+
+            shutil.copyfile(src, tmp)
+        else:
+            rewrite(src, tmp, fmt, result.points)
+    if same:
+        return Smoothed(marked(result, COPIED), None, fmt, fmt, streamed=True, unchanged=COPIED)
     return Smoothed(result, None, fmt, fmt, streamed=True)
 
 
@@ -240,9 +285,11 @@ def smooth_file(
     run_map: Any = None,
     check: Callable[[Geometry], None] | None = None,
     stage: Callable[[str], None] | None = None,
+    original: Original | None = None,
 ) -> Smoothed:
     """Read ``source``, smooth it, write ``target``: streamed when it can be (tiles, a file to
-    a file in the same format), else in memory.
+    a file in the same format), else in memory. When nothing is smoothed the output is the
+    input's bytes (same format, no writer options) or a straight conversion (module docstring).
 
     Parameters
     ----------
@@ -271,6 +318,10 @@ def smooth_file(
         A refusal of the geometry read, before the engine runs.
     stage : callable, optional
         Told ``"reading"`` and ``"writing"`` as those stages start.
+    original : bytes or Path, optional
+        The input's bytes (or its file) when ``source`` is a document read already: copied as
+        the output when nothing is smoothed (default: ``source`` itself when it is a file; else
+        an unchanged output is converted).
     """
     reading, writing = dict(read_options or {}), dict(write_options or {})
     tell = stage or (lambda name: None)
@@ -283,17 +334,49 @@ def smooth_file(
     if not isinstance(source, Path):
         doc = source
     else:
+        original = source if original is None else original
         from service.io import read_geometry
 
         tell("reading")
         doc = read_geometry(source, fmt, **reading)
+    if writing.get("crs") is not None:  # a crs this output cannot take: refused before smoothing
+        encode(doc, out_fmt or doc.source_format, None, **writing)
     if engine is None and run_map is not None:
         engine = lambda g: run_engine(g, params, progress, run_map=run_map)  # noqa: E731
     done = smooth_document(doc, params, out_fmt, geometry=geometry, engine=engine, check=check,
                            progress=progress)  # fmt: skip
     tell("writing")
+    return _write(done, target, geometry or doc.geometry, original, writing)
+
+
+def _write(
+    done: Smoothed,
+    target: Path | Store,
+    smoothed: Geometry,
+    original: Original | None,
+    writing: Mapping[str, Any],
+) -> Smoothed:
+    """Write the in-memory path's output: the input's bytes when nothing was smoothed and they
+    can stand for the output (same format, no writer options), else the encoded document."""
+    import dataclasses
+
+    from service.io._shared.flags import with_outliers
+
+    assert done.document is not None
+    doc, points = with_outliers(done.document, done.result.points, done.result,
+                                done.output_format)  # fmt: skip
+    data = None
+    if returned_unchanged(done.result, smoothed.points) and doc is done.document:
+        if done.output_format == doc.source_format and not any(writing.values()):
+            data = original_bytes(original)
+        how = CONVERTED if data is None else COPIED
+        done = dataclasses.replace(done, result=marked(done.result, how), unchanged=how)
+    if data is None:
+        data = encode(doc, done.output_format, points, **writing)
     if isinstance(target, Path):
-        write_document(doc, target, done.output_format, done.result.points, **writing)
+        from service.io.atomic import write_file
+
+        write_file(target, data)
     else:
-        target(done.result, encode(doc, done.output_format, done.result.points, **writing))
+        target(done.result, data)
     return done

@@ -21,6 +21,8 @@ import httpx
 import numpy as np
 from numpy.typing import NDArray
 
+from tests.timing import patience
+
 ROOT = Path(__file__).resolve().parents[2]
 FINISHED = ("succeeded", "failed", "cancelled")
 
@@ -79,6 +81,7 @@ class LiveServer:
         self.data_dir = Path(data_dir)
         self.workers = workers
         self.env = dict(env or {})
+        self._free_port = port is None  # ours to choose: another one if it is taken meanwhile
         self.port = port or free_port()
         self.args = args
         self.headers = dict(headers or {})
@@ -100,10 +103,22 @@ class LiveServer:
         return self.proc
 
     def start(self, timeout: float = 60.0) -> LiveServer:
+        """Launch and wait until ``/readyz`` answers (``timeout``: a hang guard, stretched by
+        :func:`tests.timing.patience`). A free port taken by someone else between choosing and
+        binding it (parallel tests) is replaced by another one."""
+        timeout = patience(timeout)
         proc = self.launch()
         deadline = time.monotonic() + timeout
+        retries = 3
         while time.monotonic() < deadline:
             if proc.poll() is not None:
+                if self._free_port and retries and "address already in use" in self.log().lower():
+                    retries -= 1
+                    self.port = free_port()
+                    self.url = f"http://127.0.0.1:{self.port}"
+                    self.log_path = self.data_dir.parent / f"server-{self.port}.log"
+                    proc = self.launch()
+                    continue
                 raise RuntimeError(f"server exited with {proc.returncode}:\n{self.log()}")
             try:
                 if httpx.get(f"{self.url}/readyz", timeout=1.0).status_code == 200:
@@ -112,7 +127,7 @@ class LiveServer:
                 pass
             time.sleep(0.05)
         self.stop()
-        raise RuntimeError(f"server not ready after {timeout} s:\n{self.log()}")
+        raise RuntimeError(f"server not ready after {timeout:.0f} s:\n{self.log()}")
 
     def records(self) -> list[dict[str, Any]]:
         """The server's JSON log lines, parsed (other lines skipped)."""
@@ -169,14 +184,16 @@ def rss_of(pid: int) -> int:
 
 
 def wait_done(client: httpx.Client, job_id: str, timeout: float = 60.0) -> dict[str, Any]:
-    """Poll a job until it is finished; returns its last status."""
+    """Poll a job until it is finished; returns its last status (``timeout``: a hang guard,
+    stretched by :func:`tests.timing.patience` for a busy machine)."""
+    timeout = patience(timeout)
     deadline = time.monotonic() + timeout
     while True:
         job = client.get(f"/v1/jobs/{job_id}").json()
         if job["status"] in FINISHED:
             return job
         if time.monotonic() > deadline:
-            raise AssertionError(f"job {job_id} not finished after {timeout} s: {job}")
+            raise AssertionError(f"job {job_id} not finished after {timeout:.0f} s: {job}")
         time.sleep(0.05)
 
 

@@ -121,8 +121,8 @@ def test_json_body_and_format_conversion(client: httpx.Client) -> None:
         result = client.get(f"/v1/jobs/{job['id']}/result", params={"output_format": fmt})
         assert result.status_code == 200, result.text
         _check_deviation(pts, parse_points(result.content, fmt), 0.05, tol=1e-4)
-    refused = client.get(f"/v1/jobs/{job['id']}/result", params={"output_format": "xyz"})
-    assert refused.status_code == 422 and refused.json()["field"] == "format"  # no faces in XYZ
+    refused = client.get(f"/v1/jobs/{job['id']}/result", params={"output_format": "gpx"})
+    assert refused.status_code == 422 and refused.json()["field"] == "format"  # no faces in GPX
     obj = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "obj"}).text
     assert sum(line.startswith("f ") for line in obj.splitlines()) == len(faces)
 

@@ -2,12 +2,15 @@
 all phases, fixed seed, bounded examples): no 5xx, no response outside the spec, every error
 problem+json.
 
-Two checks are left out, each for a documented behaviour:
-
-* ``positive_data_acceptance``: the spec says what a request looks like, not which files are
-  geometry (a schema-valid PNG upload is rightly a 400);
-* ``use_after_free``: ``DELETE`` of a queued or running job *cancels* it and answers the
-  cancelled job (200), which stays readable; only a finished job is deleted (204, then 404).
+Every check runs but one: ``use_after_free``. ``DELETE`` of a queued or running job *cancels*
+it and answers the cancelled job (200), which stays readable (its events too); only a finished
+job is deleted (204, then 404). Schemathesis counts any 2xx ``DELETE`` followed by a readable
+resource as a use after free, so passing it needs an API decision (e.g. cancel on its own
+route), not a schema change. The document states the multipart parts the server
+accepts (no others: ``additionalProperties: false``) and that ``params`` is JSON
+(``contentMediaType``); what JSON Schema cannot express about the geometry routes (a
+schema-valid upload that is no geometry: 400; cross-field rules: 422) is stated per operation
+in ``schemathesis.toml``.
 """
 
 from __future__ import annotations
@@ -18,17 +21,22 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import pytest
+
 from tests.api.api_helpers import KEYS, ROOT, LiveServer
 
 KEY = KEYS["fuzz"]
 MAX_EXAMPLES = 25
 
 
+@pytest.mark.timeout(960)  # the run's own bound is 900 s (below); quiet: about 2 min
 def test_schemathesis_finds_nothing(keyed: LiveServer, tmp_path: Path) -> None:
     st = Path(sys.executable).with_name("st")
     reports = tmp_path / "reports"
     command = [
         str(st),
+        "--config-file",
+        str(Path(__file__).with_name("schemathesis.toml")),
         "run",
         str(ROOT / "openapi" / "openapi.json"),
         "--url",
@@ -42,11 +50,13 @@ def test_schemathesis_finds_nothing(keyed: LiveServer, tmp_path: Path) -> None:
         "--checks",
         "all",
         "--exclude-checks",
-        "positive_data_acceptance,use_after_free",
+        "use_after_free",
         "--workers",
         "2",
         "--request-timeout",
-        "60",
+        "120",
+        "--max-response-time",
+        "120",  # a bound on behaviour under load, not on latency (issue 34 item 7)
         "-H",
         f"Authorization: Bearer {KEY}",
         "--report",

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from tests.api.api_helpers import ROOT, encode, noisy_sphere, parse_points, wait_done
+from tests.shared_data import shared_data_dir
 
 PTS, FACES = noisy_sphere(1)
 SPEC = json.loads((ROOT / "openapi" / "openapi.json").read_text())
-BUNNY = ROOT.parent / "shared" / "data" / "bunny.ply"
+BUNNY = shared_data_dir() / "bunny.ply"
 SAMPLE = ROOT / "service" / "samples" / "noisy-sphere.ply"
 
 

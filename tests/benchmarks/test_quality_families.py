@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from benchmarks.quality.cases import FULL, make_case
-from benchmarks.quality.families import CASES, KIND, SPLIT, half_cases, half_of
+from benchmarks.quality.families import CASES, CASES31, KIND, SPLIT, half_cases, half_of
 from benchmarks.quality.surfaces import HeightField, hemisphere, terrain
 
 
@@ -26,7 +26,7 @@ def test_every_case_has_a_half_and_each_half_every_kind() -> None:
         shape, spec = k.split("/")
         return shape, spec.rsplit("-", 1)[0]
 
-    assert set(SPLIT) == {family(k) for k in [*CASES, *FULL]}  # no family without a case
+    assert set(SPLIT) == {family(k) for k in [*CASES, *FULL, *CASES31]}  # no family without a case
 
 
 @pytest.mark.parametrize("key", ["terrain/view-0.5", "hemisphere/laplace-0.5",

@@ -1,4 +1,5 @@
-"""Helpers for the CLI tests: run the real ``geosmooth`` command and locate the shared data."""
+"""Helpers for the CLI tests: run the real ``geosmooth`` command; ``data(name)``, one file of the
+shared data (the ``shared_data`` fixture of ``tests/conftest.py``)."""
 
 from __future__ import annotations
 
@@ -10,13 +11,11 @@ from pathlib import Path
 
 import pytest
 
+from tests.shared_data import shared_data_dir
+
+__all__ = ["REPO", "run_cli", "shared_data_dir"]  # shared_data_dir: for older imports from here
+
 REPO = Path(__file__).resolve().parents[2]
-
-
-def shared_data_dir() -> Path:
-    """``$GEOSMOOTH_SHARED_DATA`` or ``../shared/data`` next to the repository."""
-    env = os.environ.get("GEOSMOOTH_SHARED_DATA")
-    return Path(env) if env else REPO.parent / "shared" / "data"
 
 
 def run_cli(
@@ -56,15 +55,6 @@ def run_cli(
         check=False,
         **opts,
     )
-
-
-@pytest.fixture(scope="session")
-def shared_data() -> Path:
-    """The shared test data directory; skips the test when it is absent."""
-    path = shared_data_dir()
-    if not (path / "bunny.ply").is_file():
-        pytest.skip(f"shared test data not found at {path} (set GEOSMOOTH_SHARED_DATA)")
-    return path
 
 
 @pytest.fixture(scope="session")

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from service.core import Geometry, SmoothingParams, smooth
+from tests.shared_data import shared_data_dir
 
-DATA = Path(os.environ.get("GEOSMOOTH_SHARED_DATA", Path(__file__).parents[3] / "shared" / "data"))
+DATA = shared_data_dir()
 
 
 def _fandisk() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

@@ -6,18 +6,14 @@ to the requested deviation with finite output, unreferenced vertices unchanged.
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from service.core import SmoothingParams, smooth
 from service.io import read_geometry
+from tests.shared_data import shared_data_dir
 
-DATA = Path(
-    os.environ.get("GEOSMOOTH_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")
-)
+DATA = shared_data_dir()
 
 CASES = [
     ("bun_zipper_res4.ply", {}, False),

@@ -39,6 +39,7 @@ from pathlib import Path
 import pytest
 
 from tests.api.api_helpers import LiveServer, free_port
+from tests.shared_data import shared_data_dir, shared_data_missing
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -125,8 +126,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
 
 
 def _shared_data() -> Path:
-    env = os.environ.get("GEOSMOOTH_SHARED_DATA")
-    return Path(env) if env else ROOT.parent / "shared" / "data"
+    return shared_data_dir()
 
 
 _CHECKOUTS: dict[Path, Path] = {}
@@ -199,7 +199,7 @@ def test_documented_block_runs(
     block: Block, server: LiveServer, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
     if "../shared/data" in block.text and not _shared_data().is_dir():
-        pytest.skip(f"shared data not found at {_shared_data()} (set GEOSMOOTH_SHARED_DATA)")
+        pytest.skip(str(shared_data_missing()))
     base = tmp_path_factory.getbasetemp() / "docs-checkouts"
     base.mkdir(exist_ok=True)
     cwd = checkout(block.path, base)

@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from tests.shared_data import shared_data_dir
+
 HERE = Path(__file__).resolve().parent
 HASHES = {"quick": HERE / "hashes-quick.json", "full": HERE / "hashes-full.json"}
 
@@ -59,13 +61,9 @@ REPORT_KEYS = (
 
 
 def shared_data() -> Path:
-    """``../shared/data`` beside the checkout (or ``$GEOSMOOTH_SHARED_DATA``)."""
-    import os
-
-    env = os.environ.get("GEOSMOOTH_SHARED_DATA")
-    if env:
-        return Path(env)
-    return HERE.parents[2] / "shared" / "data"
+    """The shared real data (``tests/shared_data.py``: ``$GEOSMOOTH_SHARED_DATA``, else
+    ``../shared/data`` beside the checkout)."""
+    return shared_data_dir()
 
 
 @dataclass(frozen=True)

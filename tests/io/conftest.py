@@ -1,28 +1,17 @@
-"""Fixtures for the io tests: the shared real-data directory and small file builders."""
+"""Fixtures for the io tests: the shared real-data directory (``tests/shared_data.py``)."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
+from tests.shared_data import shared_data_dir
 
-def shared_data_dir() -> Path | None:
-    """``$GEOSMOOTH_SHARED_DATA`` or ``<repo>/../shared/data``, if it exists."""
-    env = os.environ.get("GEOSMOOTH_SHARED_DATA")
-    candidates = [Path(env)] if env else []
-    candidates.append(Path(__file__).resolve().parents[2] / ".." / "shared" / "data")
-    for path in candidates:
-        if path.is_dir():
-            return path.resolve()
-    return None
+__all__ = ["shared_data_dir"]  # for older imports from here
 
 
 @pytest.fixture(scope="session")
-def data_dir() -> Path:
-    """The shared data directory; skips the test when it is absent."""
-    path = shared_data_dir()
-    if path is None:
-        pytest.skip("shared test data not found (set GEOSMOOTH_SHARED_DATA)")
-    return path
+def data_dir(shared_data: Path) -> Path:
+    """The shared data directory (the root conftest's ``shared_data``: skips when absent)."""
+    return shared_data

@@ -10,7 +10,6 @@ turns its coordinates back into the input's longitude/latitude within 1e-7 degre
 from __future__ import annotations
 
 import io
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,7 +19,7 @@ from numpy.typing import NDArray
 from service.io import GeometryDocument, read_geometry, write_geometry
 from service.io._shared.georef import utm_epsg
 from service.io.dispatch import output_notes
-from tests.io.conftest import shared_data_dir
+from tests.shared_data import shared_data_dir
 
 pyproj = pytest.importorskip("pyproj")
 
@@ -31,7 +30,7 @@ def _gpx() -> tuple[GeometryDocument, NDArray[np.float64]]:
     """korita-zbevnica.gpx (871 track points with elevations) and its lon/lat/ele as gpxpy reads."""
     import gpxpy
 
-    path = (shared_data_dir() or Path("/nonexistent")) / "korita-zbevnica.gpx"
+    path = shared_data_dir() / "korita-zbevnica.gpx"
     if not path.is_file():
         pytest.skip("shared data not found")
     raw = path.read_bytes()

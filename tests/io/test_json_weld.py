@@ -125,8 +125,9 @@ def test_weld_drops_faces_that_collapse() -> None:
     doc = read_geometry(text, "obj", weld=True)
     assert doc.geometry.faces.tolist() == [[0, 1, 2], [1, 2, 0]]
     assert "dropped 1 faces that became degenerate after welding" in doc.notes
-    out = read_geometry(write_geometry(doc, "obj"), "obj")
+    out = read_geometry(write_geometry(doc, "obj"), "obj", weld=False)  # as written
     assert out.geometry.faces.tolist() == [[0, 1, 2], [1, 2, 3], [0, 1, 3]]
+    assert read_geometry(write_geometry(doc, "obj"), "obj").weld is not None  # default: welds
 
 
 def test_weld_treats_signed_zeros_alike() -> None:

@@ -164,9 +164,9 @@ def test_large_skipped_ascii_element_is_fast() -> None:
         SQUARE,
         extra_elements=[("range_grid", "list uchar int vertex_indices", grid)],
     )
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: what the reader costs, whatever the load
     doc = read_geometry(data, "ply")
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
     assert doc.geometry.n == 5
 
 
@@ -180,7 +180,7 @@ def test_large_variable_binary_list_element() -> None:
         faces,
         extra_elements=[("range_grid", "list uchar int vertex_indices", grid)],
     )
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: what the reader costs, whatever the load
     doc = read_geometry(data, "ply")
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
     assert len(doc.geometry.faces) == 21

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import io
 import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,11 +25,11 @@ import pytest
 from service.io import FORMATS, GeometryDocument, read_geometry, write_geometry
 from service.io.dispatch import OutputRefused, check_output
 from service.io.holds import dropped_kinds
-from tests.io.conftest import shared_data_dir
 from tests.io.cross_readers import READERS, _ours
 from tests.io.test_cross_format import _corners
+from tests.shared_data import shared_data_dir
 
-DATA = shared_data_dir() or Path("shared-data-not-found")
+DATA = shared_data_dir()
 UTM = np.array([665000.0, 5648000.0, 240.0])
 
 

@@ -33,7 +33,7 @@ MANIFEST = {
 @pytest.mark.parametrize("name", sorted(MANIFEST))
 def test_manifest_counts(data_dir: Path, name: str) -> None:
     n, m = MANIFEST[name]
-    doc = read_geometry(data_dir / name)
+    doc = read_geometry(data_dir / name, weld=False)  # as the file declares them
     g = doc.geometry
     assert g.n == n
     assert g.dim == 3
@@ -84,8 +84,45 @@ def test_featuretype_welds_to_1722(data_dir: Path) -> None:
     assert doc.geometry.faces is not None and len(doc.geometry.faces) == 3476
     assert np.array_equal(
         doc.geometry.points[doc.weld.index],
-        read_geometry(data_dir / "featuretype.ply").geometry.points,
+        read_geometry(data_dir / "featuretype.ply", weld=False).geometry.points,
     )
+
+
+def test_featuretype_welds_by_default_and_its_copies_stay_together(
+    data_dir: Path, tmp_path: Path
+) -> None:
+    """Issue 31: duplicate positions that tie faces are welded by default (any format); with
+    rms 0.01 the copies of each vertex end identical, the file's 5096 vertices in order."""
+    from service.core.params import SmoothingParams
+    from service.io._shared.weld import weld_index
+    from service.workflows.smooth_file import smooth_file
+
+    src = data_dir / "featuretype.ply"
+    doc = read_geometry(src)
+    assert doc.weld is not None and doc.geometry.n == 1722 and doc.n_output == 5096
+    assert any("3374 duplicate positions tie faces" in n for n in doc.notes)
+    smooth_file(src, tmp_path / "out.ply", SmoothingParams(rms=0.01))
+    raw = read_geometry(src, weld=False)
+    out = read_geometry(tmp_path / "out.ply", weld=False)
+    assert out.geometry.n == 5096 and np.array_equal(out.geometry.faces, raw.geometry.faces)
+    index, _ = weld_index(raw.geometry.points)  # copies grouped from the input, independently
+    P = out.geometry.points
+    for group in np.unique(index)[:: 50]:
+        members = np.flatnonzero(index == group)
+        assert np.all(P[members] == P[members[0]])
+    assert not np.array_equal(P, raw.geometry.points)  # it was smoothed
+    apart = smooth_file(src, tmp_path / "apart.ply", SmoothingParams(rms=0.01),
+                        read_options={"weld": False})
+    Q = read_geometry(tmp_path / "apart.ply", weld=False).geometry.points
+    gaps = [np.ptp(Q[index == g], axis=0).max() for g in np.unique(index)]
+    assert max(gaps) > 0.05 and apart.document is not None and apart.document.weld is None
+
+
+def test_duplicates_without_faces_are_not_welded() -> None:
+    P = np.array([[0.0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0]])
+    text = "\n".join(" ".join(map(str, p)) for p in P).encode()
+    doc = read_geometry(text, "xyz")
+    assert doc.weld is None and doc.geometry.n == 4
 
 
 def test_points_agisoft_keeps_full_coordinates(data_dir: Path) -> None:
@@ -107,9 +144,9 @@ def test_vertices_match_trimesh(data_dir: Path, name: str) -> None:
 def test_binary_ply_is_fast(data_dir: Path, name: str) -> None:
     data = (data_dir / name).read_bytes()
     read_geometry(data, "ply")  # warm-up (imports, page cache)
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: what the reader costs, whatever the load
     read_geometry(data, "ply")
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
 
 
 def test_spot_ignores_texture_coordinates(data_dir: Path) -> None:

@@ -14,6 +14,7 @@ import pytest
 
 from service.core.params import SmoothingParams
 from service.jobs import JobRecord, LocalQueue
+from tests.timing import patience
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -25,14 +26,16 @@ if str(HERE) not in sys.path:  # the worker processes import the fake job functi
 
 
 def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, interval: float = 0.02) -> Any:
-    """Poll ``predicate`` until it returns something truthy; fail the test after ``timeout``."""
+    """Poll ``predicate`` until it returns something truthy; fail the test after ``timeout``
+    (a hang guard: stretched by :func:`tests.timing.patience` for a busy machine)."""
+    timeout = patience(timeout)
     deadline = time.monotonic() + timeout
     while True:
         value = predicate()
         if value:
             return value
         if time.monotonic() > deadline:
-            pytest.fail(f"condition not met within {timeout} s")
+            pytest.fail(f"condition not met within {timeout:.0f} s")
         time.sleep(interval)
 
 

@@ -17,6 +17,7 @@ from typing import Any
 
 from service.settings import Settings
 from tests.jobs.jobs_helpers import HERE, REPO, wait_for
+from tests.timing import load_factor
 
 PYTHON = sys.executable
 WEBHOOK_SECRET = "whsec-rq-7d2e"
@@ -50,14 +51,28 @@ class RedisServer:
     def url(self) -> str:
         return f"redis://127.0.0.1:{self.port}/0"
 
-    def start(self) -> RedisServer:
+    def start(self, retries: int = 3) -> RedisServer:
         self.dir.mkdir(parents=True, exist_ok=True)
         args = ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1", "--dir",
                 str(self.dir), "--appendonly", "yes", "--appendfsync", "always", "--save", "",
                 "--logfile", str(self.dir / "redis.log")]  # fmt: skip
         self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        wait_for(lambda: _ping(self.port), timeout=15)
+        # ours, not another test's server on a port taken since it was chosen (parallel tests):
+        # a redis-server that cannot bind exits
+        proc = self.proc
+        wait_for(lambda: proc.poll() is not None or _ping(self.port), timeout=15)
+        if proc.poll() is not None:
+            if retries and "Address already in use" in self._log():
+                self.port = free_port()
+                return self.start(retries - 1)
+            raise RuntimeError(f"redis-server exited with {proc.returncode}: {self._log()}")
         return self
+
+    def _log(self) -> str:
+        try:
+            return (self.dir / "redis.log").read_text(errors="replace")[-2000:]
+        except OSError:
+            return ""
 
     def kill(self) -> None:
         """SIGKILL (no shutdown save: only what the append-only file holds survives)."""
@@ -81,7 +96,9 @@ def rq_settings(redis_url: str, data_dir: Path, **overrides: Any) -> Settings:
         "redis_url": redis_url,
         "data_dir": data_dir,
         "rq_queue_name": "geosmooth-test",
-        "worker_lease": 3.0,
+        # short, so that a dead worker's job moves on quickly; long enough that a busy machine
+        # delaying a heartbeat does not take a live worker for a dead one
+        "worker_lease": 4.0 * load_factor(),
         "retry_backoff": 0.2,
         "job_timeout": 30.0,
         "result_ttl": 3600.0,

@@ -112,7 +112,7 @@ def test_cancel_running_job_kills_its_process(make_queue: MakeQueue) -> None:
     assert not pid_gone(pid)
     t0 = time.monotonic()
     cancelled = queue.cancel(rec.id)
-    assert time.monotonic() - t0 < 5.0  # SIGTERM, not the 30 s of the job
+    assert time.monotonic() - t0 < 15.0  # SIGTERM, not the 30 s of the job (any load)
     assert cancelled is not None and cancelled.status is JobStatus.CANCELLED
     wait_for(lambda: pid_gone(pid), timeout=3.0)
     assert not queue.files.report(rec.id).exists()

@@ -26,7 +26,7 @@ from tests.jobs.rq_harness import RedisServer, WorkerProcess, rq_settings
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     root = tmp_path_factory.mktemp("rq-tiles")
     redis = RedisServer(root / "redis").start()
-    settings = rq_settings(redis.url, root / "data", job_timeout=300.0, worker_lease=3.0)
+    settings = rq_settings(redis.url, root / "data", job_timeout=300.0)
     workers = [WorkerProcess(settings, f"t{i}", root / f"t{i}.log").start() for i in (1, 2)]
     queue = RQQueue(RQConfig(settings, sweep_interval=0.2))
     queue.start()

@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from tests.timing import patience
 from tests.web.web_helpers import (
     CHROMIUM,
     CHROMIUM_ARGS,
@@ -72,7 +73,7 @@ def browsing(browser: Any, screenshot_dir: Path) -> Iterator[Browsing]:
     """A fresh browser context; every request is logged, non-local ones are also blocked."""
     context = browser.new_context(viewport={"width": 1400, "height": 1500}, accept_downloads=True)
     page = context.new_page()
-    page.set_default_timeout(30_000)
+    page.set_default_timeout(patience(30) * 1000)  # a hang guard: 30 s, stretched for load
     log = Browsing(page=page, shots=screenshot_dir)
 
     def route(r: Any) -> None:

@@ -15,7 +15,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.cli.conftest import shared_data_dir
+from tests.shared_data import shared_data_dir, shared_data_missing
 from tests.web.conftest import SERVER_ENV
 from tests.web.web_helpers import Browsing, WebServer
 
@@ -74,7 +74,7 @@ def test_too_large_file_refused_by_the_page(browsing: Browsing, small_server: We
     assert not [u for u in browsing.requests if "/v1/info" in u]  # never sent
 
 
-@pytest.mark.skipif(not MUG.exists(), reason="shared data not found (set GEOSMOOTH_SHARED_DATA)")
+@pytest.mark.skipif(not MUG.exists(), reason=str(shared_data_missing(MUG.name)))
 def test_mug_scan_from_the_page(browsing: Browsing, web_server: WebServer) -> None:
     page = _open(browsing, web_server)
     page.set_default_timeout(600_000)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from tests.timing import load_factor
 from tests.web.web_helpers import Browsing, WebServer, nonblank_fraction
 
 PANE_BACKGROUND = (0xEC, 0xEE, 0xF3)
@@ -66,7 +67,9 @@ def show(page: Any, n: int, mesh: bool) -> dict[str, Any]:
     assert out["decimated"], out
     assert out["shown"] <= out["budget"][0] and out["faces"] <= out["budget"][1]
     assert "Decimated for display only" in out["note"] and f"of {out['n']:,} points" in out["note"]
-    assert out["seconds"] < 20, out
+    # a hang guard (the decimation is what keeps the page responsive, checked above): 20 s on
+    # a quiet machine, per unit of the load on a busy one
+    assert out["seconds"] < 20 * load_factor(), out
     page.wait_for_timeout(100)
     fraction = nonblank_fraction(page.locator("#pane-before canvas").screenshot(), PANE_BACKGROUND)
     assert fraction > 0.05, fraction

@@ -20,6 +20,8 @@ import httpx
 import numpy as np
 from numpy.typing import NDArray
 
+from tests.timing import patience
+
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "service" / "samples"
 CHROMIUM = os.environ.get("GEOSMOOTH_CHROMIUM", "/usr/bin/chromium")
@@ -89,16 +91,31 @@ class WebServer:
         self.log_path = data_dir.parent / f"web-server-{self.port}.log"
         self.proc: subprocess.Popen[bytes] | None = None
 
-    def start(self, timeout: float = 60.0) -> WebServer:
+    def _launch(self) -> subprocess.Popen[bytes]:
         cmd = [sys.executable, "-m", "service.api.server", "--host", "127.0.0.1"]
         cmd += ["--port", str(self.port), "--workers", str(self.workers)]
         cmd += ["--data-dir", str(self.data_dir)]
         env = {**os.environ, **self.env, "PYTHONUNBUFFERED": "1"}
         with self.log_path.open("ab") as log:
             self.proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=log)
+        return self.proc
+
+    def start(self, timeout: float = 60.0) -> WebServer:
+        """Launch and wait for ``/readyz`` (``timeout``: a hang guard, stretched for a busy
+        machine); a port taken meanwhile by a parallel test is replaced by another one."""
+        timeout = patience(timeout)
+        self.proc = self._launch()
         deadline = time.monotonic() + timeout
+        retries = 3
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
+                if retries and "address already in use" in self.log().lower():
+                    retries -= 1
+                    self.port = free_port()
+                    self.url = f"http://127.0.0.1:{self.port}"
+                    self.log_path = self.data_dir.parent / f"web-server-{self.port}.log"
+                    self.proc = self._launch()
+                    continue
                 raise RuntimeError(f"server exited with {self.proc.returncode}: {self.log()}")
             try:
                 if httpx.get(f"{self.url}/readyz", timeout=1.0).status_code == 200:
@@ -107,7 +124,7 @@ class WebServer:
                 pass
             time.sleep(0.05)
         self.stop()
-        raise RuntimeError(f"server not ready after {timeout} s: {self.log()}")
+        raise RuntimeError(f"server not ready after {timeout:.0f} s: {self.log()}")
 
     def log(self) -> str:
         try:

@@ -106,3 +106,68 @@ def test_sync_check_only_resolves_rms() -> None:
     admission.check_sync(_cloud(100), SmoothingParams(tau=1e9))  # the engine checks the range
     with pytest.raises(TauOutOfRange):
         admission.check_sync(_cloud(100), SmoothingParams(rms=5e-324))
+
+
+def _grid_mesh(side: int) -> Geometry:
+    """A ``side x side`` vertex grid, two triangles per cell (a wavy sheet)."""
+    u, v = np.meshgrid(np.linspace(0, 1, side), np.linspace(0, 1, side), indexing="ij")
+    pts = np.c_[u.ravel(), v.ravel(), 0.05 * np.sin(8 * u.ravel()) * np.cos(8 * v.ravel())]
+    idx = np.arange(side * side).reshape(side, side)
+    a, b, c, d = (
+        idx[:-1, :-1].ravel(),
+        idx[1:, :-1].ravel(),
+        idx[:-1, 1:].ravel(),
+        idx[1:, 1:].ravel(),
+    )
+    faces = np.r_[np.c_[a, b, d], np.c_[a, d, c]]
+    return Geometry(pts, faces=faces)
+
+
+def _no_operator(monkeypatch: Any) -> None:
+    from service.core import info
+
+    def refuse(*args: Any, **kwargs: Any) -> Any:
+        raise AssertionError("the submit check built the operator of a tiled input")
+
+    monkeypatch.setattr(info, "valid_range", refuse)
+
+
+@pytest.mark.parametrize("budget", [{"tau": 0.001}, {"rms": 0.001}, {}])
+def test_a_million_vertex_mesh_with_a_budget_is_tiled_not_analysed(
+    monkeypatch: Any, budget: dict[str, float]
+) -> None:
+    """Issue 34 item 2: a 1M-vertex mesh inside every bound, with ``tau``/``rms`` as with
+    ``{}``: admitted and auto-tiled, its ``tau`` checked from the centroid bound (no operator,
+    which did not fit the parse process: 413 too-large-to-process / ingest-time-limit)."""
+    _no_operator(monkeypatch)
+    mesh = _grid_mesh(1000)
+    policy = Policy(memory_limit=GIB // 2, time_limit=3600.0, check_memory_bytes=450 * 2**20,
+                    check_seconds=22.5, dry_run_points=5000)  # fmt: skip
+    checked = admission.check_submit(mesh, SmoothingParams(**budget), policy)
+    assert checked.refusal is None
+    assert checked.accepted().tile_points, checked
+    # a tau above the centroid bound is still refused at once
+    with pytest.raises(TauOutOfRange):
+        admission.check_submit(mesh, SmoothingParams(tau=1e12), policy)
+
+
+def test_above_the_check_budget_no_operator_is_built(monkeypatch: Any) -> None:
+    """An untiled input whose estimate is above the check process's budget: centroid bound."""
+    _no_operator(monkeypatch)
+    mesh = _grid_mesh(60)
+    tight = Policy(check_memory_bytes=1, check_seconds=1e-9)
+    admission.check_submit(mesh, SmoothingParams(tau=0.001), tight)
+    with pytest.raises(TauOutOfRange):
+        admission.check_submit(mesh, SmoothingParams(tau=1e9), tight)
+    # with fixed boundary values only tau > 0 can be checked without the operator
+    admission.check_submit(mesh, SmoothingParams(tau=1e9, fix_boundary=True), tight)
+
+
+def test_within_the_check_budget_the_mesh_gets_the_exact_range() -> None:
+    mesh = _grid_mesh(60)
+    from service.core.info import valid_range
+
+    phi0, _ = valid_range(mesh, SmoothingParams())
+    roomy = Policy(check_memory_bytes=8 * GIB, check_seconds=600.0)
+    with pytest.raises(TauOutOfRange):
+        admission.check_submit(mesh, SmoothingParams(tau=phi0 * 1.01), roomy)

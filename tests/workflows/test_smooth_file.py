@@ -111,14 +111,14 @@ def test_a_failed_encoding_writes_nothing(tmp_path: Path, monkeypatch: Any) -> N
 def test_refused_output_formats_keep_their_class_and_cost_no_solve(
     tmp_path: Path, monkeypatch: Any
 ) -> None:
-    """A mesh cannot be written as XYZ: refused before the engine runs (OutputRefused)."""
+    """A mesh cannot be written as GPX: refused before the engine runs (OutputRefused)."""
     src = tmp_path / "in.obj"
     src.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.2\nf 1 2 3\nf 2 4 3\n")
     calls: list[int] = []
     monkeypatch.setattr(wf, "run_engine", lambda *a, **k: calls.append(1))
     with pytest.raises(OutputRefused):
-        wf.smooth_file(src, tmp_path / "out.xyz", SmoothingParams(tau=0.01), out_fmt="xyz")
-    assert calls == [] and not (tmp_path / "out.xyz").exists()
+        wf.smooth_file(src, tmp_path / "out.gpx", SmoothingParams(tau=0.01), out_fmt="gpx")
+    assert calls == [] and not (tmp_path / "out.gpx").exists()
 
 
 def test_stages_and_check_in_order(tmp_path: Path) -> None:

@@ -5,12 +5,15 @@ function of :mod:`service.api.intake.smoothing` or :mod:`service.api.intake.inge
 The body is streamed to the spool directory (:mod:`service.api.intake.uploads`), then parsed
 and checked in a worker process (:mod:`service.api.intake.isolation`) with
 
-* a time limit (``parse_timeout``, at most ``ingest_timeout``; ``sync_timeout`` for
-  ``POST /v1/smooth``); the process is killed at its deadline and when the client disconnects,
+* a CPU-time limit (``parse_timeout``, at most ``ingest_timeout``; ``sync_timeout`` for
+  ``POST /v1/smooth``: 413 past it), and a wall-clock safety net ten times as long (503 +
+  ``Retry-After``: the server is busy); the process is killed at either and when the client
+  disconnects,
 * an address-space budget: ``INGEST_BASE_BYTES + INGEST_FACTOR x body`` for parsing (the io
   readers keep their peak near 3x the file), ``sync_memory_bytes`` for a synchronous solve,
 * at most ``max(2, workers)`` of them at once (``workers`` solves for ``/v1/smooth``), of which
-  one key (or client address) holds at most ``parse_share`` (:meth:`Intake.fair_slot`).
+  one key (or client address) holds at most ``parse_share`` (:meth:`Intake.fair_slot`); a
+  request that gets no slot within the wall-clock safety net is answered 503 + ``Retry-After``.
 
 Inline JSON bodies are parsed with the standard library's ``json`` (about 10-15x the body in
 Python objects), so they are bounded separately by ``MAX_JSON_BODY_BYTES``; larger inputs are
@@ -31,7 +34,7 @@ from fastapi import Request
 from service.api.errors import ApiProblem
 from service.api.http.auth import Principal
 from service.api.intake.ingest import IngestRequest
-from service.api.intake.isolation import Isolation
+from service.api.intake.isolation import Isolation, busy_problem, wall_limit
 from service.api.intake.uploads import Upload, receive_upload
 from service.settings import Settings
 
@@ -85,6 +88,21 @@ def clean_spool(settings: Settings, max_age: float | None = None) -> int:
     return removed
 
 
+@asynccontextmanager
+async def _acquire(limiter: anyio.CapacityLimiter, wait: float | None) -> AsyncIterator[None]:
+    """Hold a token of ``limiter``; 503 ``server-busy`` when none is free within ``wait`` s."""
+    got = False
+    with anyio.move_on_after(wait):
+        await limiter.acquire()
+        got = True
+    if not got:
+        raise busy_problem("upload", wait or 0.0)
+    try:
+        yield
+    finally:
+        limiter.release()
+
+
 class Intake:
     """Receives geometry requests for one app (see the module docstring).
 
@@ -107,17 +125,21 @@ class Intake:
         self._shares: dict[str, anyio.CapacityLimiter] = {}
 
     @asynccontextmanager
-    async def fair_slot(self, bucket: str, limiter: anyio.CapacityLimiter) -> AsyncIterator[None]:
+    async def fair_slot(
+        self, bucket: str, limiter: anyio.CapacityLimiter, wait: float | None = None
+    ) -> AsyncIterator[None]:
         """A slot of ``limiter`` once ``bucket`` has fewer than its share of them in use.
 
         A key's uploads beyond its share wait on the key's own limiter, not in the shared
-        queue, so one key's slow parses leave the other slots to the other keys.
+        queue, so one key's slow parses leave the other slots to the other keys. No slot after
+        ``wait`` seconds: 503 ``server-busy`` + ``Retry-After`` (the server cannot take the
+        work now; the request was fine).
         """
         share = self._shares.get(bucket)
         if share is None:
             share = self._shares[bucket] = anyio.CapacityLimiter(self.parse_share)
         try:
-            async with share, limiter:
+            async with _acquire(share, wait), _acquire(limiter, wait):
                 yield
         finally:
             stats = share.statistics()
@@ -172,6 +194,16 @@ class Intake:
     ) -> T | None:
         """``func`` on the spooled upload in a worker process (``None``: the client left)."""
         assert upload.path is not None
+        shown = upload.filename or "the upload"
+        redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
+        redact[str(Path(self.settings.data_dir).resolve())] = "data"
+        if mode == "sync":
+            limiter, timeout = self.sync_limiter, self.settings.sync_timeout
+            budget: int = self.settings.sync_memory_bytes
+        else:
+            limiter = self.ingest_limiter
+            timeout = min(self.settings.ingest_timeout, self.settings.parse_timeout)
+            budget = INGEST_BASE_BYTES + INGEST_FACTOR * upload.size
         req = IngestRequest(
             kind=upload.kind,
             path=str(upload.path),
@@ -186,20 +218,14 @@ class Intake:
             options={
                 "dry_run_points": self.settings.submit_dry_run_points,
                 "job_timeout": self.settings.job_timeout,
+                # what the submit check may spend on its own analysis (half the process's
+                # budget: the parsed input holds the rest)
+                "check_memory_bytes": budget // 2,
+                "check_seconds": timeout / 2,
                 **(options or {}),
             },
         )
-        shown = upload.filename or "the upload"
-        redact = {str(upload.path): shown, str(upload.path.parent): "spool"}
-        redact[str(Path(self.settings.data_dir).resolve())] = "data"
-        if mode == "sync":
-            limiter, timeout = self.sync_limiter, self.settings.sync_timeout
-            budget: int = self.settings.sync_memory_bytes
-        else:
-            limiter = self.ingest_limiter
-            timeout = min(self.settings.ingest_timeout, self.settings.parse_timeout)
-            budget = INGEST_BASE_BYTES + INGEST_FACTOR * upload.size
-        async with self.fair_slot(principal.bucket, limiter):
+        async with self.fair_slot(principal.bucket, limiter, wait=wall_limit(timeout)):
             answer = await self.isolation.run(
                 func,
                 req,

@@ -23,9 +23,10 @@ __all__ = ["check_job", "smooth_input"]
 def check_job(req: IngestRequest) -> NewJob:
     """``POST /v1/jobs``: the parsed, checked job (format, parameters, file, the key's bounds,
     then the submit check of :func:`service.workflows.admission.check_submit`: estimate, ``tau``,
-    dry run, tiles), typed and carrying the check's :class:`~service.workflows.admission.
-    Admission`; the router adds tenant and idempotency key. An inline geometry becomes a JSON
-    file next to the spooled body, written once every check passed."""
+    dry run, tiles), typed and carrying the check's
+    :class:`~service.workflows.admission.Admission`; the router adds tenant and idempotency
+    key. An inline geometry becomes a JSON file next to the spooled body, written once every
+    check passed."""
     from service.workflows.admission import Policy, check_submit
 
     parsed = parse_request(req, req.limits.max_points)
@@ -36,6 +37,8 @@ def check_job(req: IngestRequest) -> NewJob:
         exact_tau_max_points=req.exact_tau_max_points,
         dry_run_points=int(options.get("dry_run_points", 0)),
         tile_workers=int(options.get("tile_workers", 1)),
+        check_memory_bytes=options.get("check_memory_bytes"),
+        check_seconds=options.get("check_seconds"),
     )
     admission = check_submit(parsed.document.geometry, parsed.params, policy)  # 422: refused
     if "geometry" in parsed.extra:
@@ -70,6 +73,9 @@ def smooth_input(req: IngestRequest) -> dict[str, Any]:
             data = b'{"geometry":' + data.strip() + b',"report":' + text.encode() + b"}"
         write_file(out, data)
 
-    smooth_file(parsed.document, store, parsed.params, out_fmt=fmt,
+    original = None if req.kind == "json" else Path(parsed.input_path)  # the upload's bytes
+    crs = req.options.get("crs")  # the crs query: a projected output of geographic input
+    smooth_file(parsed.document, store, parsed.params, out_fmt=fmt, original=original,
+                write_options={"crs": crs} if crs else None,
                 check=lambda geometry: check_sync(geometry, parsed.params))  # fmt: skip
     return {**answer, "input_fmt": parsed.fmt}

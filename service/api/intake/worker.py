@@ -97,19 +97,37 @@ def _outcome(func: Callable[[Any], Any], arg: Any, budget: int | None) -> tuple[
         return "internal", f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
 
 
+def _limit_cpu(seconds: float) -> None:
+    """``RLIMIT_CPU``, the backstop of the parent's CPU count: SIGXCPU a little after the limit
+    (the parent kills the process at the limit itself), SIGKILL a little after that."""
+    soft = int(seconds) + 2
+    _, hard = resource.getrlimit(resource.RLIMIT_CPU)
+    want = soft + 5
+    resource.setrlimit(resource.RLIMIT_CPU, (soft, want if hard < 0 else min(want, hard)))
+
+
 def child_main(
-    conn: Any, func: Callable[[Any], Any], arg: Any, budget: int | None, redact: Mapping[str, str]
+    conn: Any,
+    func: Callable[[Any], Any],
+    arg: Any,
+    budget: int | None,
+    redact: Mapping[str, str],
+    cpu_limit: float | None = None,
 ) -> None:
     _arm_child()
     rss_start, started = _status("VmRSS"), time.perf_counter()
     if budget:
         with contextlib.suppress(OSError, ValueError):
             _limit_memory(budget)
+    if cpu_limit:
+        with contextlib.suppress(OSError, ValueError):
+            _limit_cpu(cpu_limit)
     kind, value = _outcome(func, arg, budget)
     if kind == "problem":
         value = _redact(value, redact)
     stats = {
         "seconds": time.perf_counter() - started,
+        "cpu_seconds": time.process_time(),
         "rss_start": rss_start,
         "rss_peak": _status("VmHWM"),
     }

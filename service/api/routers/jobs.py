@@ -26,6 +26,7 @@ from service.api.deps import (
     job_not_found,
 )
 from service.api.docs import (
+    CRS_QUERY_DESCRIPTION,
     FORMAT_ALIAS_DESCRIPTION,
     FORMAT_QUERY_DESCRIPTION,
     JOB_SUBMIT_OPENAPI,
@@ -252,10 +253,13 @@ async def get_result(
     format: Annotated[
         OutputFormat | None, Query(description=FORMAT_ALIAS_DESCRIPTION, deprecated=True)
     ] = None,
+    crs: Annotated[str | None, Query(description=CRS_QUERY_DESCRIPTION, max_length=64)] = None,
 ) -> Response:
     _require_succeeded(job)
     fmt = output_format_of(output_format, format) or job.fmt
     name = f"{result_name(job.filename, job.id)}.{fmt}"
+    if crs:  # written for this request (the stored files are in the default frame)
+        return await _result_in_crs(job, queue, fmt, crs)
     url = await run_in_threadpool(queue.result_url, job.id, fmt)
     if url is not None:
         return RedirectResponse(url, status_code=307)
@@ -268,6 +272,19 @@ async def get_result(
     if document is None:  # purged or deleted meanwhile
         raise ApiProblem(404, f"the result of job {job.id} is gone", code="result-not-found")
     return await render_geometry(document, fmt, stem=result_name(job.filename, job.id))
+
+
+async def _result_in_crs(job: JobRecord, queue: JobQueue, fmt: str, crs: str) -> Response:
+    """The result written in ``fmt`` with the ``crs`` option (422, field ``crs``, if refused)."""
+    from service.workflows.smooth_file import encode
+
+    document = await run_in_threadpool(queue.result, job.id)
+    if document is None:
+        raise ApiProblem(404, f"the result of job {job.id} is gone", code="result-not-found")
+    body = await run_in_threadpool(lambda: encode(document, fmt, None, crs=crs))  # typed errors
+    stem = result_name(job.filename, job.id)
+    disposition = {"Content-Disposition": f'attachment; filename="{stem}.{fmt}"'}
+    return Response(content=body, media_type=MEDIA_TYPES[fmt], headers=disposition)
 
 
 @router.get(

@@ -12,6 +12,7 @@ from starlette.background import BackgroundTask
 
 from service.api.deps import IntakeDep, MetricsDep, PrincipalDep
 from service.api.docs import (
+    CRS_QUERY_DESCRIPTION,
     FORMAT_ALIAS_DESCRIPTION,
     FORMAT_QUERY_DESCRIPTION,
     MEDIA_TYPES,
@@ -79,6 +80,7 @@ async def smooth_now(
     format: Annotated[
         OutputFormat | None, Query(description=FORMAT_ALIAS_DESCRIPTION, deprecated=True)
     ] = None,
+    crs: Annotated[str | None, Query(description=CRS_QUERY_DESCRIPTION, max_length=64)] = None,
 ) -> Response:
     out_format = output_format_of(output_format, format)
     with intake.sync_slot(principal.bucket, principal.limits.max_sync_per_key):
@@ -92,6 +94,7 @@ async def smooth_now(
                 smooth_input,
                 mode="sync",
                 out_format=out_format,
+                options={"crs": crs} if crs else None,
             )
         finally:
             upload.discard()

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -72,7 +73,10 @@ def diagnostics(
         )
     stats = dev.stats if dev is not None else None
     rms = float(np.sqrt(np.mean(dev_pt**2)))
-    checks, shape_warnings, sigma = _shape(geometry, params, target, X, rms, run.notes)
+    weights = _kept(weights, fin, run.notes)
+    checks, shape_warnings, sigma = _shape(
+        geometry, params, target, X, _bulk_rms(dev_pt, weights), run.notes
+    )
     timings = _timings(op, sol, run)
     tau = target.tau
     spectrum = None
@@ -113,12 +117,33 @@ def diagnostics(
         bound=sol.bound,
         shape_warnings=shape_warnings,
         noise_found=None if params.tau_rule != "auto" else bool(target.sigma),
-        **_data_weights(weights),
+        **_data_weights(weights, params.outliers),
         tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
         output_deviation=(
             None if dev is None else _output_deviation(geometry, moved, phi, fin, frame)
         ),
     )
+
+
+def _kept(dw: DataWeights | None, fin: Finished, notes: list[str]) -> DataWeights | None:
+    """The data weights with the outliers the finish stage kept in place (issue 31: a cloud's
+    points the solve moved far are kept and flagged too), with a note when it added some."""
+    kept = fin.outliers
+    if dw is None or kept is None or kept.size <= dw.outliers.size:
+        return dw
+    notes.append(f"{kept.size - dw.outliers.size} more points the solve moved far from their "
+                 "input (beyond twice the outliers' threshold) were kept in place as outliers too")
+    return replace(dw, outliers=kept)
+
+
+def _bulk_rms(dev_pt: Array, dw: DataWeights | None) -> float:
+    """The RMS move of the points that are not outliers: an outlier pulled in moves by its
+    offset, which says nothing about whether the shape itself was smoothed (issue 31)."""
+    if dw is None or dw.outliers.size == 0 or dw.outliers.size >= dev_pt.size:
+        return float(np.sqrt(np.mean(dev_pt**2)))
+    keep = np.ones(dev_pt.size, dtype=bool)
+    keep[dw.outliers] = False
+    return float(np.sqrt(np.mean(dev_pt[keep] ** 2)))
 
 
 def _output_deviation(
@@ -181,8 +206,10 @@ def _timings(op: SmoothingOperator, sol: Solution, run: Run) -> dict[str, float]
     return timings
 
 
-def _data_weights(dw: DataWeights | None) -> dict[str, Any]:
-    """The outliers and data weights of the run (issue 21), as :class:`SmoothResult` fields."""
+def _data_weights(dw: DataWeights | None, mode: str) -> dict[str, Any]:
+    """The outliers, what was done with them (issue 31) and the data weights of the run
+    (issue 21), as
+    :class:`~service.core.result.SmoothResult` fields."""
     if dw is None:
         return {}
     kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
@@ -192,6 +219,7 @@ def _data_weights(dw: DataWeights | None) -> dict[str, Any]:
         "data_weights": " + ".join(kinds) or None,
         "omega": dw.omega if kinds else None,
         "pulled": dw.pulled,
+        "outlier_mode": mode if dw.outliers.size else None,
     }
 
 

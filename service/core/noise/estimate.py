@@ -22,8 +22,9 @@ clean mesh): both leave residuals. They differ across scales: the residual varia
 does not depend on the neighbourhood size (``v_i`` is unbiased for ``sigma^2`` at any ``k``),
 that of shape grows with it (like ``k^3`` on a smooth surface, ``k^5`` on a smooth curve,
 ``k^(2H)`` on a fractal one). So the points whose ``v_i`` made the mode are fitted again with
-``2k`` neighbours and the median of ``v_i(2k) / v_i(k)`` over them (:data:`SCALE_RATIO`) decides:
-up to :data:`NOISE_RATIO` the residual is noise, above it the shape's own detail and the estimate
+``2k`` neighbours and the median of ``v_i(2k) / v_i(k)`` over them
+(``NoiseEstimate.scale_ratio``) decides: up to :data:`NOISE_RATIO` the residual is noise,
+above it the shape's own detail and the estimate
 is ``sigma = 0`` ("no noise found"; the local roughness is kept in
 :attr:`NoiseEstimate.roughness`). Measured on noisy and noise-free benchmark shapes and real
 files (``service/core/README.md``, "Noise or shape").

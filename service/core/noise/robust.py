@@ -45,8 +45,22 @@ from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.params import SmoothingParams
 
-__all__ = ["ALPHA", "OMEGA_MIN", "SPREAD", "DataWeights", "data_weights", "flag_outliers",
-           "isolated", "local_sigma", "pull_in", "robust_weights", "row_quantile"]
+__all__ = [
+    "ALPHA",
+    "OMEGA_MIN",
+    "SPREAD",
+    "DataWeights",
+    "crease_factor",
+    "data_weights",
+    "flag_outliers",
+    "isolated",
+    "local_sigma",
+    "on_grid",
+    "outlier_note",
+    "pull_in",
+    "robust_weights",
+    "row_quantile",
+]
 
 Array = NDArray[np.float64]
 
@@ -96,9 +110,19 @@ PULLED = 0.1
 ISOLATION = 4.0
 #: ``"auto"`` noise weights only where the residuals are clearly noise: the estimate's scale
 #: ratio ``v(2k) / v(k)`` (:mod:`.noise`) at most this (calibration: smooth shapes with
-#: constant or varying noise <= 1.05; a CAD part with creases at low noise 1.62, where the
-#: residuals vary with the shape: spread 1.21, and the weights would smooth its creases away).
-SHAPE_FREE = 1.15
+#: constant or varying noise <= 1.05, the issue-31 varying cloud 1.00; CAD parts with creases
+#: under uniform noise 1.07 (6K cube at 0.05 and 0.1 h) - 1.62 (fandisk 0.1 h), where the crease
+#: band's fits make the spread 0.8 - 1.3 and the weights smoothed the creases away: 1.15 let
+#: the cube through, 1.96x worse than its input).
+SHAPE_FREE = 1.05
+#: Bounds of ``sigma_i / sigma`` (the spread cap): a point's share of the automatic budget
+#: ``(omega_i sigma_i / sigma)^2 = sigma_i / sigma`` is at most this many times the mean's, so
+#: one region cannot take the budget (issue 31).
+RATIO_CAP = 4.0
+#: ``median(sigma_i) / sigma`` below this: the estimate's mode came from crease-straddling
+#: fits (calibration half: the step block's 3.4x over-estimates 0.49 - 0.52; every other case,
+#: uniform, varying, quantized or 1 h noise, 0.85 - 2.16).
+CREASE_MEDIAN = 0.67
 HUBER, TUKEY = 1.345, 4.685
 #: Quantile of the neighbourhood's ``v_j`` that estimates ``sigma_i^2``.
 QUANTILE = 0.25
@@ -163,6 +187,9 @@ def data_weights(
     if got is None:
         return geometry, None
     rho, ratio, outliers, applied, use_uneven, spread = got
+    if params.outliers in ("flag", "drop") and outliers.size:  # no part in tau (issue 31)
+        rho = rho.copy()
+        rho[outliers] = OMEGA_MIN
     omega = geometry.omega() * rho / ratio**UNEVEN_POWER
     weights = omega if geometry.weights is None else np.where(
         np.isfinite(geometry.weights), omega, geometry.weights)
@@ -171,10 +198,26 @@ def data_weights(
         said.append(f"noise varies across the input (spread of log sigma_i {spread:.2f}): "
                      "weights 1/sigma_i")
     if outliers.size:
-        said.append(f"{outliers.size} points treated as outliers ({applied} weights)")
+        said.append(outlier_note(int(outliers.size), params.outliers, applied))
     pulled = outliers[(rho[outliers] <= PULLED) & ~geometry.fixed_mask()[outliers]]
     dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said), pulled)
     return replace(geometry, weights=weights), dw
+
+
+def outlier_note(count: int, mode: str, applied: str) -> str:
+    """The warning that names the outliers and what happened to them (never tau advice)."""
+    if mode == "flag":
+        return (f"{count} points far from the surface flagged as outliers ({applied} weights): "
+                "kept at their input positions and left out of tau; listed in the report "
+                "(outliers) and flagged in the output where the format holds a flag (LAS "
+                "classification 7, PLY/PCD vertex attribute 'outlier'); outliers='drop' "
+                "removes them")
+    if mode == "drop":
+        return (f"{count} points far from the surface dropped as outliers ({applied} weights): "
+                "the output is written without them; their indices are in the report "
+                "(outliers)")
+    return (f"{count} points far from the surface treated as outliers ({applied} weights): "
+            "pulled back into their neighbours' ring")
 
 
 def _factors(
@@ -230,16 +273,47 @@ def _from_neighbours(
     finite = np.isfinite(sig) & (sig > 0)
     spread = float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() \
         else 0.0
-    clean = est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE
+    clean = (est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE) and not on_grid(P, est.sigma)
     use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
-    ratio = np.clip(ratio, 0.05, 20.0)
+    ratio = np.clip(ratio, 1.0 / RATIO_CAP, RATIO_CAP)
     s2 = (est.sigma * ratio) ** 2
     far = isolated(geometry, nbr, np.sqrt(s2), compiled)
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
-    return rho, ratio, outliers, applied, use_uneven, spread
+    return rho, ratio * crease_factor(sig, est.sigma), outliers, applied, use_uneven, spread
+
+
+def crease_factor(sig: Array, sigma: float) -> float:
+    """The budget's correction when the global estimate was taken from fits that straddle
+    creases (issue 31): ``median(sigma_i) / sigma`` below :data:`CREASE_MEDIAN` says the mode
+    of the residual variances sits on the crease band, not on the faces; the budget then uses
+    the lower quartile of ``sigma_i`` (the least crease-affected level), else 1."""
+    with np.errstate(all="ignore"):
+        med = float(np.nanmedian(sig)) / sigma if sigma > 0 else np.nan
+        low = float(np.nanquantile(sig, 0.25)) / sigma if sigma > 0 else np.nan
+    if not (np.isfinite(med) and np.isfinite(low)) or med >= CREASE_MEDIAN:
+        return 1.0
+    return float(np.clip(low, 1.0 / RATIO_CAP, 1.0))
+
+
+def on_grid(P: Array, sigma: float, share: float = 0.5) -> bool:
+    """Whether the coordinates are quantized at a step of at least ``sigma``: on some axis the
+    points take fewer than ``share * n`` distinct values, all on multiples of one step (a
+    scan stored at 1 mm with 5 cm noise is not: no terraces form). Quantization leaves exactly
+    flat terraces where the surface runs along the grid (zero fit residuals, a spread of
+    ``log sigma_i`` of 5 - 18) while its noise is one level everywhere (issue 31)."""
+    n = P.shape[0]
+    for col in P.T:
+        u = np.unique(col)
+        if u.size < 3 or u.size >= share * n:
+            continue
+        gaps = np.diff(u)
+        step = float(gaps.min())
+        if step >= sigma and np.all(np.abs(gaps / step - np.round(gaps / step)) < 1e-3):
+            return True
+    return False
 
 
 def _calibration(r: Array, s2: Array | float, c: int) -> float:
@@ -257,8 +331,9 @@ def local_sigma(v: Array, nbr: NDArray[np.int64], nu: int) -> Array:
     with np.errstate(all="ignore"):
         s2 = row_quantile(v[nbr], QUANTILE) / (chi2.ppf(QUANTILE, nu) / nu)
         logs = np.log(np.where(s2 > 0, s2, np.nan))
-        for _ in range(2):
-            logs = np.nanmean(logs[nbr], axis=1)
+        for _ in range(2):  # nanmean's sum / count, without its warning for all-NaN rows
+            rows = logs[nbr]
+            logs = np.where(np.isnan(rows), 0.0, rows).sum(axis=1) / (~np.isnan(rows)).sum(axis=1)
     return np.sqrt(np.exp(logs))
 
 

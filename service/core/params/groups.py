@@ -68,6 +68,7 @@ class DataParams:
 
     robust: str
     noise_weights: str
+    outliers: str
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ class ScaleParams:
 
 
 def field_names(group: type[Any]) -> tuple[str, ...]:
-    """The :class:`SmoothingParams` fields a group holds, in order."""
+    """The :class:`~service.core.params.model.SmoothingParams` fields a group holds, in order."""
     return tuple(f.name for f in dataclasses.fields(group))
 
 

@@ -32,6 +32,7 @@ from service.core.params.names import (
     MethodName,
     NeighborhoodKind,
     NoiseWeights,
+    OutlierMode,
     Preset,
     RobustRule,
     SearchName,
@@ -152,6 +153,10 @@ class SmoothingParams(BaseModel):
             "'local': always; 'none': never."
         ),
     )
+    outliers: OutlierMode = Field(default="auto", description=(
+        "Outliers found by the robust weights: 'flag' keeps them in place, flagged in the output "
+        "(LAS class 7, PLY/PCD 'outlier'); 'drop' writes a cloud without them; 'pull' moves them "
+        "into their ring (eq. 4, omega_i -> 0). 'auto': flag for clouds, pull otherwise."))
     tolerance: float = Field(
         default=TOLERANCE,
         gt=0,

@@ -21,6 +21,7 @@ __all__ = [
     "MethodName",
     "NeighborhoodKind",
     "NoiseWeights",
+    "OutlierMode",
     "Preset",
     "RobustRule",
     "SearchName",
@@ -41,6 +42,7 @@ MethodName = Literal["tikhonov", "windowed-sinc"]
 TauRule = Literal["auto", "gcv"]
 RobustRule = Literal["auto", "none", "huber", "tukey"]
 NoiseWeights = Literal["auto", "none", "local"]
+OutlierMode = Literal["auto", "flag", "drop", "pull"]
 Displacement = Literal["auto", "free", "normal"]
 Tangential = Literal["auto", "off"]
 Preset = Literal["report"]

@@ -10,7 +10,8 @@ pulls that point towards its input position, so
 2. for every point with ``||x_i - p_i|| > delta`` multiply ``omega_i^2`` by
    ``(||x_i - p_i|| / delta)^2 (1 + margin)`` (a larger weight makes a smaller deviation);
 3. repeat until no point violates the bound, at most ``max_rounds`` times (every round is one
-   :meth:`Deviation.reweighted` system: same sparsity pattern, no new symbolic analysis);
+   :meth:`~service.core.system.deviation.Deviation.reweighted` system: same sparsity
+   pattern, no new symbolic analysis);
 4. if violators remain after the last round, each is moved back radially onto the sphere of
    radius ``delta`` around its input position.
 

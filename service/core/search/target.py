@@ -1,6 +1,6 @@
 """The target and lambda of a run: ``tau`` resolved once (given, from ``rms``, automatic or by
 GCV), its valid range ``(0, phi(0))`` (eqs. 13-14) and the lambda search that meets it
-(section 6; :mod:`.tau` holds the search algorithms themselves).
+(section 6; :mod:`service.core.search.roots` holds the search algorithms themselves).
 """
 
 from __future__ import annotations

@@ -19,11 +19,32 @@ from service.io._shared.weld import weld_document
 from service.io.document import GeometryDocument, Polyline
 from service.io.errors import FormatError
 
-__all__ = ["assemble"]
+__all__ = ["assemble", "require_points", "triangles"]
 
 
 def _plural(k: int, word: str) -> str:
     return f"{k} {word}" if k == 1 else f"{k} {word}s"
+
+
+def require_points(points: NDArray[np.float64], fmt: str) -> None:
+    """:class:`FormatError` for a file without points (every reader, both paths)."""
+    if points.ndim != 2 or points.shape[0] == 0:
+        raise FormatError("the file holds no points", fmt=fmt)
+
+
+def triangles(
+    polygons: tuple[NDArray[np.int64], NDArray[np.int64]],
+) -> tuple[NDArray[np.int64], list[str]]:
+    """Polygons (flat indices, counts) fan-triangulated, triangles repeating a vertex dropped;
+    and the notes saying what was dropped (the ordinary and the streamed readers)."""
+    notes = []
+    faces, n_small = fan_triangulate(*polygons)
+    if n_small:
+        notes.append(f"dropped {_plural(n_small, 'face')} with fewer than 3 vertices")
+    faces, n_rep = drop_repeating(faces)
+    if n_rep:
+        notes.append(f"dropped {_plural(n_rep, 'triangle')} that repeat a vertex")
+    return faces, notes
 
 
 def assemble(
@@ -71,16 +92,11 @@ def assemble(
     """
     notes = list(notes or [])
     pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[0] == 0:
-        raise FormatError("the file holds no points", fmt=fmt)
+    require_points(pts, fmt)
     faces = None
     if polygons is not None:
-        faces, n_small = fan_triangulate(*polygons)
-        if n_small:
-            notes.append(f"dropped {_plural(n_small, 'face')} with fewer than 3 vertices")
-        faces, n_rep = drop_repeating(faces)
-        if n_rep:
-            notes.append(f"dropped {_plural(n_rep, 'triangle')} that repeat a vertex")
+        faces, dropped = triangles(polygons)
+        notes.extend(dropped)
     standalone = None
     if edges is not None and len(edges):
         standalone, n_rep = drop_repeating(np.asarray(edges, dtype=np.int64).reshape(-1, 2))

@@ -24,7 +24,7 @@ from service.core.geometry import Geometry
 from service.io._shared.elements import drop_repeating, normalize_polyline
 from service.io.document import GeometryDocument, Polyline, WeldMap
 
-__all__ = ["weld_document", "weld_index"]
+__all__ = ["weld_document", "weld_if_tied", "weld_index"]
 
 
 _NEG_ZERO = np.uint64(1 << 63)
@@ -83,6 +83,28 @@ def weld_index(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[
     index = np.empty(n, dtype=np.int64)
     index[order] = rank[group]
     return index, first[by_first].astype(np.int64)
+
+
+def weld_if_tied(doc: GeometryDocument) -> GeometryDocument:
+    """``doc`` welded when faces use two vertices at one position (issue 31): smoothed apart,
+    the copies of one vertex tear the surface open (``featuretype.ply`` with ``rms 0.01``:
+    copies 0.207 apart). Clouds, curves and meshes without such duplicates stay as read."""
+    g = doc.geometry
+    if doc.weld is not None or g.faces is None:
+        return doc
+    index, first = weld_index(g.points)
+    if first.size == g.n:
+        return doc
+    used = np.zeros(g.n, dtype=bool)
+    used[g.faces.ravel()] = True
+    tied = np.bincount(index[used], minlength=first.size) > 1
+    if not tied.any():
+        return doc
+    out = weld_document(doc)
+    note = (f"{g.n - first.size} duplicate positions tie faces: welded by default (the output "
+            "keeps the file's vertex count and order; copies of a vertex stay identical; "
+            "weld=False keeps them apart)")
+    return out.with_extras(notes=[*out.notes, note])
 
 
 def weld_document(doc: GeometryDocument) -> GeometryDocument:

@@ -36,6 +36,7 @@ from service.io._shared.assemble import assemble
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.limits import InputTooLarge, ReadLimits, check_points, current
 from service.io.source import Source
 
 __all__ = ["DxfLayout", "read_dxf", "write_dxf"]
@@ -48,6 +49,8 @@ _KINDS = ("LWPOLYLINE", "POLYLINE", "LINE", "ARC", "CIRCLE", "ELLIPSE", "SPLINE"
 MAX_VALUE = 1e12
 #: Points of all flattened entities together: a bound on the work of the flattening loop.
 MAX_POINTS = 5_000_000
+#: SPLINEs with more fit points (and no control points) are interpolated by :func:`_fit_spline`.
+FIT_DENSE = 500
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +75,6 @@ def _load(data: bytes) -> Any:
 
 def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, bool]], float]:
     """(handle, points, closed, simple) of every supported entity, and the drawing's extent."""
-    from ezdxf import path as ezpath
 
     entities = [e for e in doc.modelspace() if e.dxftype() in _KINDS]
     entities = [e for e in entities if not (e.dxftype() == "POLYLINE" and not _plain_polyline(e))]
@@ -81,7 +83,9 @@ def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, boo
     paths = []
     for e in entities:
         try:
-            paths.append((e, ezpath.make_path(e)))
+            paths.append((e, _path(e)))
+        except FormatError:  # the reader limits (a ValueError too)
+            raise
         except (TypeError, ValueError):
             continue
     corners = np.array([v for _, p in paths for v in p.control_vertices()], dtype=np.float64)
@@ -91,9 +95,10 @@ def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, boo
     if not (np.isfinite(corners).all() and np.isfinite(extent)):
         raise FormatError("DXF: an entity's geometry is not finite", fmt="dxf")
     out = []
-    budget = MAX_POINTS
+    bound = current().max_points
+    budget = start = MAX_POINTS if bound is None else min(MAX_POINTS, bound)
     for e, p in paths:
-        pts = _flatten(e, p, 1e-3 * extent, budget)
+        pts = _flatten(e, p, 1e-3 * extent, budget, start - budget)
         budget -= len(pts)
         closed = _closed(e, p)
         if closed and len(pts) > 2 and np.allclose(pts[0], pts[-1], atol=1e-9 * extent):
@@ -101,6 +106,53 @@ def _sequences(doc: Any) -> tuple[list[tuple[str, NDArray[np.float64], bool, boo
         simple = e.dxftype() in ("LWPOLYLINE", "POLYLINE") and not _has_arcs(e)
         out.append((e.dxf.handle, pts, closed, simple))
     return out, extent
+
+
+def _path(e: Any) -> Any:
+    """``ezdxf.path.make_path``, except for SPLINEs given by many fit points only: ezdxf
+    interpolates those with a dense (n+2) x (n+2) system (an 8.8 MB DXF with one 200,000-point
+    SPLINE grew past 11.7 GB before it was killed); :func:`_fit_spline` solves the same
+    interpolation as a banded system."""
+    from ezdxf import path as ezpath
+    from ezdxf.path import tools
+
+    if e.dxftype() == "SPLINE" and not e.control_point_count():
+        n = e.fit_point_count()
+        check_points(n, 400, "dxf", "spline fit points")
+        if n > FIT_DENSE:
+            path = ezpath.Path()
+            tools.add_spline(path, _fit_spline(e), level=4, reset=True)
+            return path
+    return ezpath.make_path(e)
+
+
+def _fit_spline(e: Any) -> Any:
+    """The cubic B-spline through a SPLINE's fit points as AutoCAD and ezdxf build it (chord
+    length parameters on [0, 1], knots at the parameters, natural ends or the entity's end
+    tangents scaled to the polygon's length: ``ezdxf.math.fit_points_to_cad_cv``), from
+    scipy's banded solver: O(n) memory instead of ezdxf's O(n**2)."""
+    from ezdxf.math import BSpline
+    from scipy.interpolate import make_interp_spline
+
+    pts = np.asarray([tuple(v) for v in e.fit_points], dtype=np.float64)
+    keep = np.r_[True, np.any(pts[1:] != pts[:-1], axis=1)]
+    pts = pts[keep]
+    if len(pts) < 2:
+        raise ValueError("a SPLINE needs two distinct fit points")
+    steps = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    total = float(steps.sum())
+    t = np.r_[0.0, np.cumsum(steps)] / total
+    t[-1] = 1.0
+    bc: Any = "natural"
+    if e.dxf.hasattr("start_tangent") and e.dxf.hasattr("end_tangent"):
+        names = ("start_tangent", "end_tangent")
+        ends = [np.asarray(tuple(e.dxf.get(k)), dtype=np.float64) for k in names]
+        norms = [float(np.linalg.norm(d)) for d in ends]
+        if all(norms):
+            d0, d1 = (total * d / m for d, m in zip(ends, norms, strict=True))
+            bc = ([(1, d0)], [(1, d1)])
+    curve = make_interp_spline(t, pts, k=3, bc_type=bc)
+    return BSpline([tuple(c) for c in curve.c], order=4, knots=list(curve.t))
 
 
 def _numbers(e: Any) -> list[float]:
@@ -140,12 +192,20 @@ def _check_values(e: Any) -> None:
         )
 
 
-def _flatten(e: Any, p: Any, sagitta: float, budget: int) -> NDArray[np.float64]:
-    """The entity's path as points, stopping at ``budget`` points (then a FormatError)."""
+def _flatten(e: Any, p: Any, sagitta: float, budget: int, done: int) -> NDArray[np.float64]:
+    """The entity's path as points, stopping at ``budget`` points (then a FormatError: the
+    reader limits' if ``done`` points before these exceed them)."""
     pts = []
     for v in p.flattening(sagitta):
         pts.append(tuple(v))
         if len(pts) > budget:
+            if budget < MAX_POINTS - done:  # the reader limits' bound, not ours
+                raise InputTooLarge(
+                    f"DXF: the entities flatten to more than {done + budget} points (at "
+                    f"{e.dxftype()} handle {e.dxf.get('handle', '?')}), the limit; "
+                    f"{ReadLimits.HINT}",
+                    fmt="dxf",
+                )
             raise FormatError(
                 f"DXF: the entities flatten to more than {MAX_POINTS} points "
                 f"(at {e.dxftype()} handle {e.dxf.get('handle', '?')})",

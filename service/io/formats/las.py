@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import math
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -38,9 +39,12 @@ from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.limits import check_points
 from service.io.source import Source
 
-__all__ = ["LasLayout", "read_las", "read_laz", "write_las", "write_laz"]
+__all__ = [
+    "LasLayout", "LasPoints", "open_points", "read_las", "read_laz", "write_las", "write_laz",
+]  # fmt: skip
 
 CHUNK = 1 << 20
 _COORDS = ("X", "Y", "Z")
@@ -111,9 +115,21 @@ def _check_count(header: Any, n: int, size: int, fmt: str) -> None:
         )
 
 
-def _read(source: Source, fmt: str, weld: bool) -> GeometryDocument:
+@contextlib.contextmanager
+def open_points(source: Source, fmt: str, *, attributes: bool = True) -> Iterator[LasPoints]:
+    """The checked point stream of a LAS/LAZ file, for the ordinary reader and the streamed one.
+
+    Before anything is allocated: the file is long enough for a header, the header's sizes,
+    VLR counts, scales and offsets are sane (:func:`_precheck`), it holds points, the declared
+    count fits the file (:func:`_check_count`) and the reader limits
+    (:func:`service.io.limits.check_points`; ``attributes``: the other dimensions are kept
+    too). While iterating: no more and no fewer points than declared. Every laspy/lazrs error is
+    one :class:`FormatError` line.
+    """
     import laspy
 
+    if source.size == 0:
+        raise FormatError("the file is empty", fmt=fmt)
     if source.size < 227:
         raise FormatError(f"{fmt.upper()}: the file is too short for a LAS header", fmt=fmt)
     _precheck(source.head(375), source.size, fmt)
@@ -123,14 +139,42 @@ def _read(source: Source, fmt: str, weld: bool) -> GeometryDocument:
         if n == 0:
             raise FormatError("the file holds no points", fmt=fmt)
         _check_count(header, n, source.size, fmt)
+        record = int(header.point_format.size)
+        check_points(n, 24 + (2 * record if attributes else 0), fmt)
+        yield LasPoints(header, n, _checked_chunks(reader, n, fmt))
+
+
+@dataclass(frozen=True)
+class LasPoints:
+    """A LAS/LAZ file's header, declared point count and checked chunks (:func:`open_points`)."""
+
+    header: Any
+    n: int
+    chunks: Iterator[Any]
+
+
+def _checked_chunks(reader: Any, n: int, fmt: str) -> Iterator[Any]:
+    at = 0
+    for chunk in reader.chunk_iterator(CHUNK):
+        at += len(chunk)
+        if at > n:
+            raise FormatError(f"{fmt.upper()}: more points than the header declares", fmt=fmt)
+        yield chunk
+    if at != n:
+        raise FormatError(
+            f"{fmt.upper()}: the header declares {n} points but the file holds {at}", fmt=fmt
+        )
+
+
+def _read(source: Source, fmt: str, weld: bool) -> GeometryDocument:
+    with open_points(source, fmt) as stream:
+        header, n = stream.header, stream.n
         names = [d for d in header.point_format.dimension_names if d not in _COORDS]
         points = np.empty((n, 3))
         attrs: dict[str, NDArray[Any]] = {}
         at = 0
-        for chunk in reader.chunk_iterator(CHUNK):
+        for chunk in stream.chunks:
             k = len(chunk)
-            if at + k > n:
-                raise FormatError(f"{fmt.upper()}: more points than the header declares", fmt=fmt)
             points[at : at + k, 0] = chunk.x
             points[at : at + k, 1] = chunk.y
             points[at : at + k, 2] = chunk.z
@@ -140,11 +184,6 @@ def _read(source: Source, fmt: str, weld: bool) -> GeometryDocument:
                     attrs[name] = np.empty((n, *col.shape[1:]), dtype=col.dtype)
                 attrs[name][at : at + k] = col
             at += k
-        if at != n:
-            raise FormatError(
-                f"{fmt.upper()}: the header declares {n} points but the file holds {at}", fmt=fmt
-            )
-        header = reader.header
     decimals = [_decimals(float(s)) for s in header.scales]
     text = tuple(f"%.{d}f" for d in decimals) if None not in decimals else None
     layout = LasLayout(header, source, fmt == "laz" or header.are_points_compressed)
@@ -195,6 +234,8 @@ def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: 
         at = 0
         for chunk in reader.chunk_iterator(CHUNK):
             k = len(chunk)
+            if "classification" in plain.attributes:  # outliers flagged as class 7 (issue 31)
+                chunk["classification"] = plain.attributes["classification"][at : at + k]
             if plain.moved:
                 for j, name in enumerate(_COORDS):
                     scale, offset = float(header.scales[j]), float(header.offsets[j])

@@ -42,6 +42,7 @@ from service.io._shared.plain import PlainDocument
 from service.io._shared.text import LineBlock, line_blocks, table_rows
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.limits import check_points
 from service.io.source import Source
 
 __all__ = ["PcdLayout", "read_pcd", "write_pcd"]
@@ -189,6 +190,7 @@ def read_pcd(source: Source, *, weld: bool = False) -> GeometryDocument:
         raise FormatError("the file holds no points", fmt="pcd")
     if fields["DATA"][0] != "ascii" and n * dt.itemsize > 64 * len(data) + 2**20:
         raise _fail(f"{n} points cannot come from a file of {len(data)} bytes")
+    check_points(n, 24 + 2 * dt.itemsize, "pcd")  # coordinates + the record table (+ LZF)
     encoding = fields["DATA"][0] if fields["DATA"] else ""
     rec, digits = _body(data, pos, encoding, dt, n)
     names = list(dt.names or ())

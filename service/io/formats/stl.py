@@ -37,6 +37,7 @@ from service.io._shared.plain import PlainDocument
 from service.io._shared.text import WRITTEN_BY, line_blocks
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.limits import check_points
 from service.io.source import Source
 
 __all__ = ["StlLayout", "read_stl", "write_stl"]
@@ -81,6 +82,7 @@ def _binary(data: bytes) -> tuple[NDArray[np.float64], StlLayout, Precision]:
         )
     if count == 0:
         raise FormatError("the file holds no triangles", fmt="stl")
+    check_points(3 * count, 24 + 24, "stl", "triangle corners")  # + welding's sort keys
     rec = np.frombuffer(data, dtype=RECORD, count=count, offset=84)
     points = rec["v"].reshape(-1, 3).astype(np.float64)
     layout = StlLayout(False, data[:80], rec["attr"], rec["normal"], [])

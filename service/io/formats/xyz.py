@@ -28,15 +28,16 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from service.io._shared.assemble import assemble
+from service.io._shared.assemble import assemble, require_points
 from service.io._shared.numfmt import Digits, default_spec, write_rows
 from service.io._shared.plain import PlainDocument
 from service.io._shared.text import LineBlock, line_blocks, table_rows
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.limits import check_points
 from service.io.source import Source
 
-__all__ = ["XyzLayout", "read_xyz", "write_xyz"]
+__all__ = ["XyzLayout", "columns", "read_coordinates", "read_xyz", "write_xyz"]
 
 _COMMENT = re.compile(rb"(?m)^[ \t]*#[^\n]*")
 NORMALS = ("nx", "ny", "nz")
@@ -59,7 +60,7 @@ def _is_number(token: bytes) -> bool:
     return True
 
 
-def _start(data: bytes) -> tuple[int, list[str], list[bytes] | None, int, str | None]:
+def _start(data: Any) -> tuple[int, list[str], list[bytes] | None, int, str | None]:
     """First data line's offset, leading comments, header words, line number, header text."""
     comments: list[str] = []
     pos = 0
@@ -97,8 +98,15 @@ def _names(table: NDArray[np.float64], dims: int, header: list[bytes] | None) ->
     return (*base, *(f"col{j}" for j in range(dims, width)))
 
 
-def _table(data: bytes, pos: int, width: int, digits: Digits) -> NDArray[np.float64]:
-    out = np.empty((data.count(b"\n", pos) + 1, width))
+def _table(
+    data: Any, pos: int, width: int, digits: Digits | None, keep: int | None = None, held: int = 0
+) -> NDArray[np.float64]:
+    """The rows from ``pos`` (the first ``keep`` columns), checked against the reader limits
+    first (``held``: bytes of the file held in memory besides the table)."""
+    lines = data.count(b"\n", pos) + 1
+    cols = width if keep is None else keep
+    check_points(lines, (held + 16 * cols * lines) / lines, "xyz", "lines")
+    out = np.empty((lines, cols))
     n = 0
     for block in line_blocks(data, pos):
         text = block.data
@@ -108,10 +116,49 @@ def _table(data: bytes, pos: int, width: int, digits: Digits) -> NDArray[np.floa
             text = _COMMENT.sub(lambda m: b" " * len(m[0]), text)
         clean = LineBlock(text, block.offset, block.rows)
         rows = table_rows(clean, data, width, fmt="xyz", what="a point")
-        out[n : n + len(rows)] = rows
+        out[n : n + len(rows)] = rows[:, :cols]
         n += len(rows)
-        digits.update(text, rows)
+        if digits is not None:
+            digits.update(text, rows)
     return out[:n]
+
+
+def _width(data: Any, pos: int, line_no: int) -> tuple[bytes, int]:
+    """The first data line and its number of columns (at least 2)."""
+    nl = data.find(b"\n", pos)
+    first = bytes(data[pos : nl if nl >= 0 else len(data)])
+    width = len(first.replace(b",", b" ").split())
+    if width == 0:
+        raise FormatError("the file holds no points", fmt="xyz")
+    if width < 2:
+        raise FormatError(
+            f"line {line_no}: XYZ needs at least 2 columns per line, found {width}",
+            fmt="xyz",
+            line=line_no,
+        )
+    return first, width
+
+
+def columns(data: Any) -> int:
+    """Columns of the first data line of ``data`` (0: none found)."""
+    pos, _, _, line_no, _ = _start(data)
+    try:
+        return _width(data, pos, line_no)[1]
+    except FormatError:
+        return 0
+
+
+def read_coordinates(data: Any) -> NDArray[np.float64]:
+    """The ``x y z`` columns of an XYZ file of 3 or more columns (``data``: bytes or a mapped
+    file), checked exactly as :func:`read_xyz` checks it; the streamed reader's
+    (:mod:`service.io.stream`)."""
+    pos, _, _, line_no, _ = _start(data)
+    _, width = _width(data, pos, line_no)
+    if width < 3:
+        raise FormatError(f"line {line_no}: expected 3 columns, found {width}", fmt="xyz")
+    points = _table(data, pos, width, None, keep=3)
+    require_points(points, "xyz")
+    return points
 
 
 def read_xyz(
@@ -130,18 +177,9 @@ def read_xyz(
     notes = []
     if header is not None:
         notes.append(f"read header line {line_no}: {header_text!r}")
-    first = data[pos : data.find(b"\n", pos) if b"\n" in data[pos:] else len(data)]
-    width = len(first.replace(b",", b" ").split())
-    if width == 0:
-        raise FormatError("the file holds no points", fmt="xyz")
-    if width < 2:
-        raise FormatError(
-            f"line {line_no}: XYZ needs at least 2 columns per line, found {width}",
-            fmt="xyz",
-            line=line_no,
-        )
+    first, width = _width(data, pos, line_no)
     digits = Digits(width)
-    table = _table(data, pos, width, digits)
+    table = _table(data, pos, width, digits, held=len(data))
     dims = xyz_dims if xyz_dims is not None else (2 if width == 2 else 3)
     if not 1 <= dims <= width:
         raise FormatError(f"xyz_dims={dims} but the file has {width} columns per line", fmt="xyz")

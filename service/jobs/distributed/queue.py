@@ -224,6 +224,7 @@ class RQQueue(QueueBase[RedisJobStore]):
         if time.monotonic() - self._last_prune >= _PRUNE_INTERVAL:  # a walk of the blob tree
             self._last_prune = time.monotonic()
             self.blobs.prune_cache(_CACHE_AGE)
+            backend.remove_orphans()  # a lost job's blobs (Redis came back empty), 10 min old
 
     def _sweep_loop(self) -> None:
         while not self._stop.wait(self.config.sweep_interval):

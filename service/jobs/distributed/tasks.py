@@ -38,11 +38,19 @@ if TYPE_CHECKING:
 __all__ = ["run_job"]
 
 
+#: Redis refusing writes for its own reasons (out of memory, a failed save on a full disk, no
+#: replica, a read-only replica): the platform's failure, not the job's.
+_REDIS_REFUSALS = ("OOM", "MISCONF", "NOREPLICAS", "READONLY")
+
+
 def _infrastructure(exc: BaseException) -> bool:
     """Whether a failure is the platform's, not the job's (the job is run again)."""
     from redis.exceptions import ConnectionError as RedisConnectionError
+    from redis.exceptions import ResponseError
     from redis.exceptions import TimeoutError as RedisTimeoutError
 
+    if isinstance(exc, ResponseError):
+        return str(exc).split(" ", 1)[0] in _REDIS_REFUSALS
     return isinstance(exc, StorageUnavailable | RedisConnectionError | RedisTimeoutError)
 
 
@@ -79,7 +87,12 @@ def _run(config: WorkerConfig, job_id: str, owner: str, attempt: int) -> None:
     options = RunOptions(config.runner, config.memory_limit, 0.2, rq_tiles)
 
     def report_progress(progress: dict[str, Any]) -> bool:
-        return store.run_update(job_id, owner, attempt, progress=progress)
+        try:
+            return store.run_update(job_id, owner, attempt, progress=progress)
+        except Exception as exc:  # progress is advice: Redis refusing a write ends no run here
+            if not _infrastructure(exc):
+                raise
+            return True  # the outcome's write, or the sweep once the lease expired, settles it
 
     try:
         rec = store.get(job_id)

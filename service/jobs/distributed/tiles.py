@@ -49,6 +49,9 @@ T = TypeVar("T")
 TILE_TASK = "service.jobs.distributed.tiles.run_tile"
 #: Seconds between two checks for tiles nobody holds (claims expired, or never taken).
 SCAN_INTERVAL = 0.5
+#: Lifetime of a tile's keys (done flag, run count, completion list): a key written for a job
+#: that no longer exists (Redis came back empty while a tile ran) expires by itself.
+_KEY_TTL = 24 * 3600
 
 
 def _backend() -> Backend:
@@ -99,6 +102,10 @@ def _run_one(backend: Backend, job_id: str, name: str, owner: str,
     base = _key(backend, job_id, name)
     if backend.redis.exists(f"{base}:done") or not _claim(backend, f"{base}:claim", owner):
         return False
+    pipe = backend.redis.pipeline()  # every run of the tile counted (tiles.retried)
+    pipe.incr(f"{base}:runs")
+    pipe.expire(f"{base}:runs", _KEY_TTL)
+    pipe.execute()
     with _held(backend, f"{base}:claim", owner):
         fn, args = task if task is not None else pickle.loads(backend.blobs.read(job_id,
                                                                                  f"{name}.in"))
@@ -106,9 +113,13 @@ def _run_one(backend: Backend, job_id: str, name: str, owner: str,
         if dataclasses.is_dataclass(out) and hasattr(out, "worker"):
             out = dataclasses.replace(out, worker=owner)  # type: ignore[type-var]
         _put(backend, job_id, f"{name}.out", pickle.dumps(out, protocol=5))
-        backend.redis.set(f"{base}:done", "1", ex=24 * 3600)
         round_id, _, index = name.rpartition("-")
-        backend.redis.rpush(_key(backend, job_id, f"{round_id}:finished"), index)
+        finished = _key(backend, job_id, f"{round_id}:finished")
+        pipe = backend.redis.pipeline()  # every key a TTL: the job may be gone (Redis emptied)
+        pipe.set(f"{base}:done", "1", ex=_KEY_TTL)
+        pipe.rpush(finished, index)
+        pipe.expire(finished, _KEY_TTL)
+        pipe.execute()
     return True
 
 
@@ -150,7 +161,6 @@ def rq_tiles(
         count.done, count.total, count.rounds = 0, len(args), count.rounds + 1
         results: dict[int, T] = {}
         finished = _key(backend, job_id, f"tile-{rnd}:finished")
-        held_by_others: set[int] = set()
         last_scan = 0.0
         while len(results) < len(args):
             popped = backend.redis.blpop([finished], timeout=SCAN_INTERVAL)
@@ -160,6 +170,8 @@ def rq_tiles(
                     data = backend.blobs.read(job_id, f"{names[i]}.out")
                     results[i] = pickle.loads(data)
                     count.done += 1
+                    runs = backend.redis.get(f"{_key(backend, job_id, names[i])}:runs")
+                    count.retried += max(0, int(runs or 1) - 1)  # every re-run, whoever ran it
                     if on_tile is not None:
                         on_tile()
                 continue
@@ -171,13 +183,10 @@ def rq_tiles(
                     continue
                 base = _key(backend, job_id, name)
                 if backend.redis.exists(f"{base}:claim"):
-                    held_by_others.add(i)
                     continue
                 if _run_one(backend, job_id, name, owner, (fn, args[i])):
-                    if i in held_by_others:
-                        count.retried += 1  # its worker died: re-run here, alone
-                    break
-        backend.redis.delete(finished)
+                    break  # its worker died (or it was never taken): run here, alone
+        backend.redis.delete(finished, *(f"{_key(backend, job_id, n)}:runs" for n in names))
         return [results[i] for i in range(len(args))]
 
     yield run_map

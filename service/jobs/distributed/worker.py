@@ -44,6 +44,7 @@ from service.jobs.distributed.backend import (
     configure_worker,
 )
 from service.jobs.distributed.tiles import TILE_TASK
+from service.jobs.limits import reap_zombies
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobStatus
 from service.jobs.runner import DEFAULT_RUNNER
@@ -104,8 +105,12 @@ class GeosmoothWorker(Worker):  # type: ignore[misc]
                 self.kill_horse()
 
     def execute_job(self, job: Job, queue: Queue) -> None:
-        """RQ's run of a job, then its webhook (in the background)."""
-        super().execute_job(job, queue)
+        """RQ's run of a job, then its webhook (in the background); children nobody waited
+        for are reaped."""
+        try:
+            super().execute_job(job, queue)
+        finally:
+            reap_zombies(keep=self.horse_pid or None)
         if job.func_name == TILE_TASK:
             return
         rec = self.backend.store.get(self._job_id(job))

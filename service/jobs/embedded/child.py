@@ -27,6 +27,7 @@ import multiprocessing
 import multiprocessing.connection
 import os
 import signal
+import sqlite3
 import threading
 import time
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from typing import Any
 
 from service.jobs import problems
 from service.jobs.embedded.store import JobStore
+from service.jobs.errors import storage_error
 from service.jobs.execute import RunOptions, run_function, write_report
 from service.jobs.files import JobFiles
 from service.jobs.limits import limit_memory, set_parent_death_signal
@@ -46,7 +48,11 @@ from service.jobs.tiles.local import local_tile_map
 #: tried again after this many seconds, until space comes back (the job is not failed).
 STORAGE_RETRY_SECONDS = float(os.environ.get("GEOSMOOTH_STORAGE_RETRY_SECONDS") or 30.0)
 
-__all__ = ["RunSpec", "main"]
+#: Exit status of a run that could not record its outcome (the store's disk full or failing):
+#: the server requeues it (EX_TEMPFAIL).
+EXIT_UNRECORDED = 75
+
+__all__ = ["EXIT_UNRECORDED", "RunSpec", "main"]
 
 
 @dataclass(frozen=True)
@@ -133,7 +139,12 @@ def _run(spec: RunSpec, store: JobStore) -> None:
     files = JobFiles(Path(spec.data_dir))
 
     def report_progress(progress: dict[str, Any]) -> bool:
-        return store.progress(spec.job_id, spec.owner, spec.attempt, progress)
+        try:
+            return store.progress(spec.job_id, spec.owner, spec.attempt, progress)
+        except Exception as exc:  # progress is advice: a full disk must not end the run here
+            if storage_error(exc) is None:
+                raise
+            return True  # the outcome's write (with the reserve) or the server settles it
 
     started = time.perf_counter()
     options = RunOptions(spec.runner, spec.memory_limit, spec.progress_interval, local_tile_map)
@@ -153,10 +164,21 @@ def _run(spec: RunSpec, store: JobStore) -> None:
     except RunLost:
         return
     except BaseException as exc:
-        problem = problems.from_exception(exc)
+        _record_failure(spec, store, exc)
+
+
+def _record_failure(spec: RunSpec, store: JobStore, exc: BaseException) -> None:
+    """Fail the run with ``exc``'s problem, or requeue it when the disk is full; if even that
+    cannot be written (the store's disk is full or failing), exit with
+    :data:`EXIT_UNRECORDED`: the server settles the run (requeued, retried until recorded)."""
+    problem = problems.from_exception(exc)
+    try:
         if problem["code"] == "storage-full":  # retried (not failed) until space is back
-            with contextlib.suppress(Exception):
-                again = time.time() + STORAGE_RETRY_SECONDS
-                if store.requeue(spec.job_id, spec.owner, spec.attempt, False, again):
-                    return
+            again = time.time() + STORAGE_RETRY_SECONDS
+            if store.requeue(spec.job_id, spec.owner, spec.attempt, False, again):
+                return
         store.fail(spec.job_id, spec.owner, spec.attempt, problem)
+    except Exception as failed:
+        if storage_error(failed) is None and not isinstance(failed, sqlite3.Error):
+            raise
+        os._exit(EXIT_UNRECORDED)

@@ -97,7 +97,8 @@ class Maintenance:
 
     # -- maintenance ---------------------------------------------------------------------
     def recover(self) -> tuple[builtins.list[str], builtins.list[str]]:
-        """Requeue the runs of dead servers (or fail them after ``max_attempts`` runs).
+        """Requeue the runs of dead servers, and this server's runs that no slot holds once
+        their lease expired (or fail them after ``max_attempts`` runs).
 
         A requeued job waits ``retry_backoff * 2**(attempts-1)`` seconds before it runs again.
 
@@ -108,8 +109,14 @@ class Maintenance:
         """
         now = time.time()
         requeued, failed = [], []
+        ours = self.pool.running_ids()
         for row in self.store.running():
-            if row.owner == self.owner or not self._stale(row, now):
+            if row.owner == self.owner:
+                # a run of this server that no slot holds any more (its outcome could not be
+                # written: a full or failing disk) once its lease expired: the owner is gone
+                if row.job_id in ours or (row.lease_until or 0.0) >= now:
+                    continue
+            elif not self._stale(row, now):
                 continue
             if row.attempts >= row.max_attempts:
                 problem = problems.attempts_exhausted(row.attempts)
@@ -186,6 +193,7 @@ class Maintenance:
         self._last_strays = time.monotonic()
         for tmp in self.files.stray_temporaries(ORPHAN_AGE):
             tmp.unlink(missing_ok=True)
+        self._remove_orphans(ORPHAN_AGE)  # job directories whose record is gone, not only at start
 
     def _migrate_v0_files(self) -> None:
         for job_id in self.store.ids():

@@ -52,6 +52,8 @@ _CRASH_SIGNALS = frozenset(
                       signal.SIGSYS, signal.SIGTRAP)
 )  # fmt: skip
 _MAX_BACKOFF = 300.0
+#: Seconds a slot keeps trying to record a run's outcome before leaving it to the sweep.
+SETTLE_SECONDS = 50.0
 
 
 def main_module_imports() -> list[str]:
@@ -259,9 +261,10 @@ class WorkerPool:
         with self._lock:
             self._runs[claim.job_id] = run
         try:
-            self.store.set_pid(claim.job_id, self.owner, claim.attempt, process.pid or 0)
+            with contextlib.suppress(Exception):  # advice only (a full disk: the run goes on)
+                self.store.set_pid(claim.job_id, self.owner, claim.attempt, process.pid or 0)
             self._watch(run)
-            self._settle(run)
+            self._settle_until_recorded(run)
         finally:
             with self._lock:
                 self._runs.pop(claim.job_id, None)
@@ -327,6 +330,29 @@ class WorkerPool:
             if process.exitcode is not None:
                 return
 
+    def running_ids(self) -> set[str]:
+        """Jobs a slot of this pool runs (or settles) now."""
+        with self._lock:
+            return set(self._runs)
+
+    def _settle_until_recorded(self, run: _Run) -> None:
+        """:meth:`_settle`, tried again every second for :data:`SETTLE_SECONDS` while the store
+        cannot be written (a full or failing disk: the reserve may come back, space may be
+        freed); then the run is left to the sweep, which requeues a run no slot holds once its
+        lease expired (:meth:`~service.jobs.embedded.maintenance.Maintenance.recover`)."""
+        deadline = time.monotonic() + SETTLE_SECONDS
+        while True:
+            try:
+                self._settle(run)
+                return
+            except Exception as exc:
+                if time.monotonic() >= deadline or self._stopping.is_set():
+                    log.error("job %s: outcome not recorded (%s); left to the sweep",
+                              run.claim.job_id, exc)  # fmt: skip
+                    return
+                log.warning("job %s: outcome not recorded yet: %s", run.claim.job_id, exc)
+                self._stopping.wait(1.0)
+
     def _settle(self, run: _Run) -> None:
         claim, store = run.claim, self.store
         job_id, attempt, owner = claim.job_id, claim.attempt, self.owner
@@ -338,7 +364,10 @@ class WorkerPool:
         elif run.reason is None and store.owns(job_id, owner, attempt):
             # the process ended without recording an outcome
             code = run.process.exitcode
-            if code is not None and code < 0 and code not in _CRASH_SIGNALS:
+            if code == child.EXIT_UNRECORDED:  # its store write failed (disk full, I/O error)
+                store.requeue(job_id, owner, attempt, False,
+                              time.time() + child.STORAGE_RETRY_SECONDS)  # fmt: skip
+            elif code is not None and code < 0 and code not in _CRASH_SIGNALS:
                 self._interrupted(job_id, attempt, code)  # e.g. the OOM killer's SIGKILL
             else:
                 store.fail(job_id, owner, attempt, problems.crashed(code))

@@ -1,9 +1,10 @@
 """Tiled jobs (issue 23): automatic tiling at admission, and the tiles on local processes.
 
-* :func:`auto_tile_points`: when a job's memory estimate is above the per-job limit, the largest
-  tile size (``n / 2^m``) whose tiles fit: the job process keeps the input and the stitched
-  output (:data:`PARENT_BYTES_PER_POINT`), and each of its tile processes one tile with its halo
-  (:data:`HALO_FACTOR` times the core, measured 1.3-2.0 on the tests' terrains).
+* :func:`~service.jobs.limits.auto_tile_points`: when a job's memory estimate is above the
+  per-job limit, the largest tile size (``n / 2^m``) whose tiles fit: the job process keeps the
+  input and the stitched output (:data:`~service.jobs.limits.PARENT_BYTES_PER_POINT`), and each
+  of its tile processes one tile with its halo (:data:`~service.jobs.limits.HALO_FACTOR` times
+  the core, measured 1.3-2.0 on the tests' terrains).
 * :func:`local_tiles`: a ``run_map`` for :func:`service.core.entry.smooth` on a process
   pool of the job's worker share (one BLAS thread each). A tile whose process dies is re-run on
   its own in a new pool (the finished tiles are kept); every finished tile reports progress

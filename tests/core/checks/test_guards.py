@@ -3,17 +3,15 @@ sensible smoothing."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.checks.guards import guard_warnings, shape_checks
 from tests.core.core_fixtures import grid_mesh, noisy_icosphere, polyline_edges
+from tests.shared_data import shared_data_dir
 
-DATA = Path(os.environ.get("GEOSMOOTH_SHARED_DATA", Path(__file__).parents[4] / "shared" / "data"))
+DATA = shared_data_dir()
 
 
 def test_checks_against_closed_forms() -> None:

@@ -70,7 +70,7 @@ def test_a_single_huge_outlier_gets_weight_near_zero_and_leaves_the_budget() -> 
     P = _sheet(40, seed=3, sigma=sigma)
     P[555, 2] += 50 * sigma
     g = Geometry(P)
-    params = SmoothingParams(displacement="normal")
+    params = SmoothingParams(displacement="normal", outliers="pull")
     g2, dw = data_weights(g, params)
     assert dw is not None
     assert dw.outliers.tolist() == [555]

@@ -30,6 +30,7 @@ from tests.jobs.rq_harness import (
     runs,
     settings_env,
 )
+from tests.timing import patience
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +123,8 @@ def test_timeout_kills_a_run_stuck_anywhere(cluster: dict[str, Any]) -> None:
     running = wait_for(lambda: (r := queue.get(rec.id)) and r.pid and r, timeout=30)
     done = wait_finished(queue, rec.id, timeout=20)
     assert done.status is JobStatus.FAILED and done.problem["code"] == "timeout"  # type: ignore[index]
-    assert 4.0 <= done.finished_at - done.started_at < 8.0  # type: ignore[operator]
+    # stopped at its 4 s timeout, not after the 60 s it sleeps (a busy machine stops it later)
+    assert 4.0 <= done.finished_at - done.started_at < 30.0  # type: ignore[operator]
     assert done.attempts == 1 and pid_gone(running.pid)
 
 
@@ -181,7 +183,7 @@ def test_api_killed_and_restarted_loses_nothing(cluster: dict[str, Any]) -> None
             body = "\n".join(" ".join(f"{v:.6f}" for v in p) for p in points).encode()
             files = {"file": (f"cloud{i}.xyz", body, "text/plain")}
             r = httpx.post(f"{url}/v1/jobs", files=files, data={"params": '{"rms": 0.05}'},
-                           timeout=10)  # fmt: skip
+                           timeout=patience(10))  # fmt: skip
             assert r.status_code == 202, r.text
             ids.append(r.json()["id"])
         os.kill(api.pid, signal.SIGKILL)  # while jobs are queued and running
@@ -189,12 +191,12 @@ def test_api_killed_and_restarted_loses_nothing(cluster: dict[str, Any]) -> None
         api = _api(env, port, log)
         for job_id in ids:
             def finished(job_id: str = job_id) -> dict[str, Any] | None:
-                job = httpx.get(f"{url}/v1/jobs/{job_id}", timeout=5).json()
+                job = httpx.get(f"{url}/v1/jobs/{job_id}", timeout=patience(5)).json()
                 return job if job["status"] in ("succeeded", "failed", "cancelled") else None
 
             job = wait_for(finished, timeout=40, interval=0.1)
             assert job["status"] == "succeeded" and job["attempts"] == 1, job
-            result = httpx.get(f"{url}/v1/jobs/{job_id}/result", timeout=10)
+            result = httpx.get(f"{url}/v1/jobs/{job_id}/result", timeout=patience(10))
             assert result.status_code == 200
     finally:
         if api.poll() is None:

@@ -155,7 +155,7 @@ def test_cancel_kills_the_remote_run(cluster: dict[str, Any]) -> None:
     assert not pid_gone(pid)
     t0 = time.monotonic()
     cancelled = queue.cancel(rec.id)
-    assert time.monotonic() - t0 < 10
+    assert time.monotonic() - t0 < 15  # a kill, not the 30 s of the job (any load)
     assert cancelled is not None and cancelled.status is JobStatus.CANCELLED
     assert pid_gone(pid)  # the work horse is gone when cancel returns
     follow = queue.submit(

@@ -11,6 +11,7 @@ from service.jobs import JobStatus, LocalQueue
 from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, pid_gone, start_server, wait_finished, wait_for
+from tests.timing import patience
 
 MakeQueue = Callable[..., LocalQueue]
 
@@ -81,7 +82,7 @@ def test_poison_job_gives_up_after_max_attempts(make_queue: MakeQueue, tmp_path:
     for attempt in range(1, 3):
         server = start_server(data_dir, workers=1, max_attempts=2)
         try:
-            assert server.wait(30) == -signal.SIGKILL  # the job killed its server
+            assert server.wait(patience(30)) == -signal.SIGKILL  # the job killed its server
         finally:
             if server.poll() is None:
                 _kill(server)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from service.io._shared.assemble import assemble
+from service.io._shared.assemble import assemble, triangles
 from service.io._shared.elements import as_indices, check_indices
 from service.io._shared.numfmt import Digits
 from service.io.document import GeometryDocument, Precision
@@ -33,9 +33,12 @@ from service.io.formats.ply.ascii import read_ascii_body
 from service.io.formats.ply.binary import read_binary_body
 from service.io.formats.ply.header import PlyElement, PlyHeader, parse_header
 from service.io.formats.ply.model import ElementData
+from service.io.limits import check_points
 from service.io.source import Source
 
-__all__ = ["NORMAL_NAMES", "PlyLayout", "read_ply"]
+__all__ = ["NORMAL_NAMES", "PlyLayout", "checked_body", "read_coordinates", "read_ply"]
+
+Array = NDArray[np.float64]
 
 _FACE_LISTS = ("vertex_indices", "vertex_index")
 NORMAL_NAMES = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
@@ -151,6 +154,48 @@ def _edges(header: PlyHeader, elements: list[ElementData], n: int) -> NDArray[np
     return edges
 
 
+def _face_count(header: PlyHeader) -> int:
+    return sum(el.count for el in header.elements if el.name == "face")
+
+
+def checked_body(
+    data: Any, header: PlyHeader, *, held: int = 0
+) -> tuple[int, PlyElement, list[ElementData], Digits | None]:
+    """The body of a PLY file after every check of the ordinary reader, shared with the
+    streamed reader (:func:`read_coordinates`): counts that fit the file, a vertex element with
+    coordinates, the reader limits (``held``: bytes of the file held in memory besides the
+    arrays), then the elements (truncation, list lengths, trailing bytes)."""
+    _check_counts(header, len(data))
+    vi, vertex = _vertex_checks(header)
+    n, m = vertex.count, _face_count(header)
+    check_points(n, (held + 24 * n + 48 * m) / n, "ply")
+    digits = Digits(len(vertex.properties)) if header.encoding == "ascii" else None
+    if header.encoding == "ascii":
+        elements = read_ascii_body(data, header, digits)
+    else:
+        elements = read_binary_body(data, header)
+    return vi, vertex, elements, digits
+
+
+def _points(vertex: PlyElement, vdata: ElementData, coords: tuple[str, ...]) -> Array:
+    points = np.empty((vertex.count, len(coords)))
+    for j, c in enumerate(coords):  # column by column: no float64 temporaries
+        points[:, j] = vdata[c]
+    return points
+
+
+def read_coordinates(data: Any, header: PlyHeader) -> tuple[Array, NDArray[np.int64] | None]:
+    """``(points, triangles or None)`` of a PLY file (``data``: bytes or a memory map), checked
+    exactly as :func:`read_ply` checks it; the streamed reader's (:mod:`service.io.stream`)."""
+    vi, vertex, elements, _ = checked_body(data, header)
+    coords = ("x", "y", "z") if vertex.find("z") is not None else ("x", "y")
+    points = _points(vertex, elements[vi], coords)
+    _edges(header, elements, len(points))
+    polygons = _faces(header, elements, len(points))
+    faces = None if polygons is None else np.array(triangles(polygons)[0], dtype=np.int64)
+    return points, faces
+
+
 def read_ply(source: Source, *, weld: bool = False) -> GeometryDocument:
     """Read a PLY file.
 
@@ -161,18 +206,10 @@ def read_ply(source: Source, *, weld: bool = False) -> GeometryDocument:
     """
     data = source.data()
     header = parse_header(data)
-    _check_counts(header, len(data))
-    vi, vertex = _vertex_checks(header)
-    digits = Digits(len(vertex.properties)) if header.encoding == "ascii" else None
-    if header.encoding == "ascii":
-        elements = read_ascii_body(data, header, digits)
-    else:
-        elements = read_binary_body(data, header)
+    vi, vertex, elements, digits = checked_body(data, header, held=len(data))
     vdata = elements[vi]
     coords = ("x", "y", "z") if vertex.find("z") is not None else ("x", "y")
-    points = np.empty((vertex.count, len(coords)))
-    for j, c in enumerate(coords):  # column by column: no float64 temporaries
-        points[:, j] = vdata[c]
+    points = _points(vertex, vdata, coords)
     normal_names = _normal_names(vertex)
     normals = None
     if normal_names is not None:

@@ -41,10 +41,46 @@ export function showInputView(info) {
 }
 
 function showLegend(scale, vmax) {
-  $("#legend").hidden = false;
+  const legend = $("#legend");
+  legend.hidden = false;
+  legend.dataset.unchanged = "false";
+  $("#legend-unchanged").hidden = true;
   $("#legend-min").textContent = "0";
   $("#legend-mid").textContent = fmt(scale / 2, 3);
   $("#legend-max").textContent = scale < vmax ? `≥ ${fmt(scale, 3)}` : fmt(scale, 3);
+}
+
+/** The legend of a result that is the input: "unchanged" and why, no colour bar. */
+function showUnchanged(why) {
+  const legend = $("#legend");
+  legend.hidden = false;
+  legend.dataset.unchanged = "true";
+  const text = $("#legend-unchanged");
+  text.hidden = false;
+  text.textContent = `unchanged — ${why}`;
+}
+
+/** Unit roundoff of float32, the display copy's precision. */
+const FLOAT32_ROUNDING = 2 ** -24;
+
+/**
+ * Why the result counts as unchanged, or null: the report says so (nothing smoothed), or the
+ * largest deviation is below float32 rounding of the coordinates' scale (a colour map of it
+ * would paint rounding as "everything moved").
+ */
+export function unchangedReason(report, vmax, positions) {
+  if (report?.unchanged === "copied") return "returned unchanged: the result file is the input's bytes";
+  if (report?.unchanged === "converted") return "converted unchanged: the input's points, in another format";
+  if (report && report.max_displacement === 0) return "no point moved";
+  let scale = 0;
+  for (let i = 0; i < positions.length; i++) {
+    const a = Math.abs(positions[i]);
+    if (a > scale) scale = a;
+  }
+  if (vmax <= 8 * FLOAT32_ROUNDING * scale) {
+    return `largest deviation ${fmt(vmax, 2)} is float32 rounding of coordinates of size ${fmt(scale, 3)}`;
+  }
+  return null;
 }
 
 /** The colour scale's top: the 99th percentile, so that a few outliers do not darken the rest. */
@@ -87,19 +123,28 @@ export async function loadResultView(job, input) {
       faces: plan.faces, segments: plan.segments, deviation: null, vmax: 0 });
     $("#viewer-note").textContent = "The input of this job is not loaded in this page: both panes show the result.";
     $("#legend").hidden = true;
+    const same = unchangedReason(job.report, Infinity, []);
+    if (same) showUnchanged(same);
+    $("#pane-after").dataset.unchanged = String(Boolean(same));
   } else {
     const { geom, plan } = input;
     const after = resultPositions(json, geom.origin);
     const dev = deviations(geom.positions, after);
     const vmax = dev.reduce((m, x) => (x > m ? x : m), 0);
     const scale = colourScale(dev, vmax);
+    const same = unchangedReason(job.report, vmax, geom.positions);
     v.show({ kind: input.info.kind, dimension: geom.dimension, before: take(geom.positions, plan.keep),
       after: take(after, plan.keep), faces: plan.faces, segments: plan.segments,
-      deviation: takeMax(dev, plan.of, plan.keep.length), vmax: scale }, { refit: false });
-    showLegend(scale, vmax);
+      deviation: same ? null : takeMax(dev, plan.of, plan.keep.length), vmax: same ? 0 : scale },
+    { refit: false });
+    if (same) showUnchanged(same); else showLegend(scale, vmax);
+    $("#pane-after").dataset.unchanged = String(Boolean(same));
     const rms = Math.sqrt(dev.reduce((s, x) => s + x * x, 0) / Math.max(1, dev.length));
     const note = $("#viewer-note");
-    note.textContent = `${decimationNote(geom, plan)} Deviation per point: RMS ${fmt(rms)}, max ${fmt(vmax)} (data units).`.trim();
+    const measured = same
+      ? `Nothing was smoothed; the page's own deviations (RMS ${fmt(rms)}, max ${fmt(vmax)}) are float32 rounding of its display copy.`
+      : `Deviation per point: RMS ${fmt(rms)}, max ${fmt(vmax)} (data units).`;
+    note.textContent = `${decimationNote(geom, plan)} ${measured}`.trim();
     note.dataset.vmax = String(vmax);
     note.dataset.rms = String(rms);
   }

@@ -93,6 +93,7 @@ export class PhiPlot {
     this.points = []; // {iteration, lam, phi}
     this.tau = null;
     this.final = false;
+    this.empty = null;
     this.draw();
   }
 
@@ -106,11 +107,15 @@ export class PhiPlot {
     this.draw();
   }
 
-  /** The report's complete history (every lambda tried): the final picture. */
-  finish(history, tau) {
+  /**
+   * The report's complete history (every lambda tried): the final picture. `empty` is what a
+   * finished job with no lambda to draw says instead (e.g. returned unchanged).
+   */
+  finish(history, tau, empty = "this job tried no λ") {
     history.forEach((h, i) => this.add(i + 1, h.lambda, h.phi));
     if (tau > 0) this.tau = tau;
     this.final = true;
+    this.empty = empty;
     this.draw();
   }
 
@@ -141,12 +146,14 @@ export class PhiPlot {
     }
     if (!this.points.length) {
       ctx.fillStyle = COLORS.axis; ctx.textAlign = "center";
-      ctx.fillText(this.tau ? "waiting for the first λ…" : "submit a job to see φ(λ) converge to τ", (box.l + box.r) / 2, (box.t + box.b) / 2);
+      const idle = this.tau ? "waiting for the first λ…" : "submit a job to see φ(λ) converge to τ";
+      ctx.fillText(this.final ? this.empty : idle, (box.l + box.r) / 2, (box.t + box.b) / 2);
     }
     const c = this.canvas.dataset;
     c.iterations = String(this.points.length);
     c.lastIteration = last ? String(last.iteration) : "0";
     c.final = String(this.final);
+    c.message = this.points.length ? "" : (this.final ? this.empty : "");
   }
 }
 

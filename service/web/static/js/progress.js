@@ -24,6 +24,14 @@ function percent(progress, tolerance) {
   return stage >= 0 ? (100 * stage) / (STAGES.length - 1) : 0;
 }
 
+/** What the φ(λ) panel of a finished job with no λ tried says. */
+function emptyHistory(r) {
+  if (r.unchanged || r.noise_found === false) {
+    return r.noise_found === false ? "no noise found: returned unchanged, no λ tried" : "nothing to smooth: returned unchanged";
+  }
+  return Number.isFinite(r.lambda) ? `λ = ${fmt(r.lambda, 4)} given: no search` : "this job tried no λ";
+}
+
 export class ProgressView {
   constructor(plot) {
     this.plot = plot;
@@ -58,7 +66,7 @@ export class ProgressView {
     if (job.status === "running" && job.progress) this.showProgress(job.progress, job);
     if (job.status === "succeeded" && job.report) {
       const r = job.report;
-      this.plot.finish(r.history || [], r.tau);
+      this.plot.finish(r.history || [], r.tau, emptyHistory(r));
       this.showProgress({ stage: "done", iteration: r.iterations, lambda: r.lambda, phi: r.phi, tau: r.tau,
         relative_error: r.relative_error, elapsed_seconds: job.run_seconds, percent: 100 }, job);
     }

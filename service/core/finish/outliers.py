@@ -1,0 +1,88 @@
+"""Outliers after the solve (issue 31): kept in place (flag, drop) or pulled in, bounded.
+
+The robust data weights (:mod:`service.core.noise.robust`) give an outlier (next to) no weight,
+so eq. (4) leaves it where the smoothness term alone wants it. What the output does with it is
+``params.outliers`` (decided per kind in :mod:`service.core.plan`):
+
+* ``"flag"`` and ``"drop"``: the point keeps its exact input position (bit for bit); the report
+  lists it, the writers flag it (LAS classification 7, a PLY/PCD ``outlier`` attribute) or the
+  workflow removes its row (``drop``). A cloud's stray point is usually not a noisy sample of the
+  surface: relocating it by metres invents a surface point.
+* ``"pull"``: :func:`service.core.noise.robust.pull_in` (``argmin ||L X||^2`` over the
+  outliers), then each pulled point is clipped to its ring's reach: no further from its
+  neighbours' centroid than the farthest neighbour (:func:`bound_to_ring`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from service.core.noise.robust import pull_in
+
+__all__ = ["FAR_MOVE", "bound_to_ring", "far_moved", "place_outliers"]
+
+#: After the solve, a cloud point the solution moved more than this many ``sigma sqrt(c)`` is
+#: one the surface does not pass near (twice the Gaussian extreme ``z0`` of the outlier test,
+#: as :func:`service.core.noise.robust.isolated`): a stray the residual test left undecided
+#: (its neighbours are strays too). Only where that test found outliers already.
+FAR_MOVE = 2.0 * 3.89
+
+Array = NDArray[np.float64]
+
+
+def place_outliers(
+    P: Array, X: Array, L: sp.spmatrix, idx: NDArray[np.int64], mode: str
+) -> Array:
+    """``X`` with the outliers ``idx`` placed by ``mode`` (module docstring); ``P`` the input."""
+    if idx.size == 0:
+        return X
+    if mode in ("flag", "drop"):
+        out = X.copy()
+        out[idx] = P[idx]
+        return out
+    return bound_to_ring(pull_in(X, L, idx), L, idx)
+
+
+def far_moved(
+    P: Array, X: Array, known: NDArray[np.int64], sigma: float | None, codim: int,
+    scale: Array | None = None,
+) -> NDArray[np.int64]:
+    """``known`` with the points ``X`` moved more than :data:`FAR_MOVE` ``sigma_i sqrt(codim)``
+    from ``P`` added (sorted; ``sigma_i = sigma scale_i``, the per-point noise level where the
+    noise varies); ``known`` alone without a noise level or known outliers."""
+    if not sigma or known.size == 0:
+        return known
+    moved = np.linalg.norm(X - P, axis=1)
+    level = sigma * (1.0 if scale is None else scale)
+    far = np.flatnonzero(moved > FAR_MOVE * level * np.sqrt(max(codim, 1)))
+    return np.union1d(known, far).astype(np.int64)
+
+
+def bound_to_ring(X: Array, L: sp.spmatrix, idx: NDArray[np.int64]) -> Array:
+    """``X`` with each point of ``idx`` moved, if needed, onto the ball about its neighbours'
+    centroid whose radius is the farthest neighbour's distance from it (its ring's reach).
+
+    Neighbours are the other points of its row and column of ``L`` that are not outliers
+    themselves (all of them when every neighbour is one); a point without any is left alone.
+    """
+    S = sp.csr_matrix(abs(sp.csr_matrix(L)) + abs(sp.csr_matrix(L)).T)
+    outlier = np.zeros(X.shape[0], dtype=bool)
+    outlier[idx] = True
+    out = X.copy()
+    for i in idx:
+        row = S.indices[S.indptr[i] : S.indptr[i + 1]]
+        row = row[row != i]
+        keep = row[~outlier[row]]
+        nbrs = keep if keep.size else row
+        if nbrs.size == 0:
+            continue
+        Q = X[nbrs]
+        c = Q.mean(axis=0)
+        reach = float(np.max(np.linalg.norm(Q - c, axis=1)))
+        off = X[i] - c
+        dist = float(np.linalg.norm(off))
+        if dist > reach:
+            out[i] = c + off * (reach / dist)
+    return out
