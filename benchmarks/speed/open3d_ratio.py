@@ -77,6 +77,13 @@ def _load() -> list[float]:
     return [round(x, 2) for x in os.getloadavg()]
 
 
+def _peak_mib() -> float:
+    """Peak resident memory of this process so far (MiB; input, engine and imports)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def _rms(A: np.ndarray) -> float:
     return float(np.sqrt(np.mean(A**2)))
 
@@ -159,7 +166,7 @@ def run_case(name: str, profile: bool = False) -> dict[str, Any]:
         if prof is not None:
             prof.disable()
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-        out.update(cpu=cpu, wall=wall, load=[load0, _load()])
+        out.update(cpu=cpu, wall=wall, load=[load0, _load()], peak_rss_mib=_peak_mib())
         peer = _open3d(g.points, g.faces)
     report = res.report()
     out.update(
