@@ -31,18 +31,17 @@ The automatic tau sums ``(omega_i sigma_i / sigma)^2`` (eq. 3's expectation unde
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy import special
 from scipy.sparse.linalg import spsolve
 
 from service.core.geometry import Geometry
 from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
 from service.core.noise.pointfits import leave_one_out, point_neighbours
+from service.core.noise.quantiles import chi2, poisson_ppf
 from service.core.params import SmoothingParams
 
 __all__ = [
@@ -65,36 +64,6 @@ __all__ = [
 Array = NDArray[np.float64]
 
 
-class _Chi2:
-    """``scipy.stats.chi2``'s ``isf``, ``ppf``, ``median`` and ``sf`` through the special
-    functions it calls (the same numbers: ``tests/core/noise/test_stats_free.py``); importing
-    ``scipy.stats`` took 0.2-0.6 s of every run's start (issue 30)."""
-
-    @staticmethod
-    def isf(q: float, df: float) -> float:
-        return float(special.chdtri(df, q))
-
-    @staticmethod
-    def ppf(q: float, df: float) -> float:
-        return float(2 * special.gammaincinv(df / 2, q))
-
-    @staticmethod
-    def median(df: float) -> float:
-        return float(2 * special.gammaincinv(df / 2, 0.5))
-
-    @staticmethod
-    def sf(x: float, df: float) -> float:
-        return float(special.chdtrc(df, x))
-
-
-chi2 = _Chi2()
-
-
-def _poisson_ppf(q: float, mu: float) -> float:
-    """``scipy.stats.poisson.ppf(q, mu)`` (its ``_ppf``: the same numbers)."""
-    vals = math.ceil(special.pdtrik(q, mu))
-    below = max(vals - 1, 0)
-    return float(below if special.pdtr(below, mu) >= q else vals)
 #: Per-point probability of a Gaussian residual beyond the outlier threshold ``z0``.
 ALPHA = 1e-4
 #: Upper quantile of ``chi^2_nu / nu`` up to which a neighbours' fit is "consistent with the
@@ -441,7 +410,7 @@ def robust_weights(
     if rule == "auto":
         top = float(np.max(z, initial=0.0))
         extreme = 0.0 if np.isinf(top) else n * chi2.sf(top**2, c)  # Bonferroni
-        if outliers.size <= _poisson_ppf(0.999, n * ALPHA) and extreme > 1e-3:
+        if outliers.size <= poisson_ppf(0.999, n * ALPHA) and extreme > 1e-3:
             return ones, np.zeros(0, np.int64), "none"
         t = np.clip((z - z0) / z0, 0.0, 1.0)
         rho = 1.0 - t**2
