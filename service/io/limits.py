@@ -8,8 +8,9 @@ claims 2**32 points is refused before anything is allocated, on every path: the 
 library and the server's parse process.
 
 The limits in force are a context variable (:func:`reading`): ``read_geometry(...,
-limits=ReadLimits(max_points=..., max_memory=...))`` and :func:`service.io.stream.
-read_coordinates` set them for the duration of the read; the CLI takes ``--max-points`` and
+limits=ReadLimits(max_points=..., max_memory=...))`` and
+:func:`service.io.stream.read_coordinates` set them for the duration of the read; the CLI
+takes ``--max-points`` and
 ``--max-memory``. Defaults need no settings: :data:`DEFAULT_MAX_POINTS` points and 3/4 of the
 machine's memory (or of the address-space limit, if lower).
 """

@@ -104,16 +104,17 @@ def read_coordinates(
     """``(points (n, 3) float64, triangles (m, 3) or None)`` of a streamable file.
 
     The checks are the ordinary readers' own code (:func:`service.io.formats.las.open_points`,
-    :func:`service.io.formats.ply.read.read_coordinates`, :func:`service.io.formats.xyz.
-    read_coordinates`), so a file one path refuses the other refuses with the same message;
+    :func:`service.io.formats.ply.read.read_coordinates`,
+    :func:`service.io.formats.xyz.read_coordinates`), so a file one path refuses the other
+    refuses with the same message;
     ``limits`` (default: those in force, :mod:`service.io.limits`) bound the declared counts
     before anything is allocated.
 
     Raises
     ------
     FormatError
-        Whatever the ordinary reader raises for this file (:class:`~service.io.limits.
-        InputTooLarge` past the limits).
+        Whatever the ordinary reader raises for this file
+        (:class:`~service.io.limits.InputTooLarge` past the limits).
     GeometryError
         Non-finite coordinates (as the ordinary readers).
     """

@@ -55,7 +55,8 @@ def test_options_map_to_fields():
     assert params.model_dump() == {
         "lam": 0.05, "tau": None, "rms": None, "laplacian": "feature",
         "weights": "cotangent", "neighborhood": "knn", "k": 8, "sigma_h": 1e-6,
-        "sigma_f": 0.3, "robust": "auto", "noise_weights": "auto", "tolerance": 1e-4,
+        "sigma_f": 0.3, "robust": "auto", "noise_weights": "auto", "outliers": "auto",
+        "tolerance": 1e-4,
         "max_iterations": 20, "fix_boundary": True,
         "preserve_volume": True, "solver": "superlu", "spectrum": True,
         "search": "auto", "method": "tikhonov", "order": 2,

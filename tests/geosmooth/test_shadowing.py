@@ -52,8 +52,10 @@ def test_a_checkout_named_geosmooth_beside_a_script_does_not_shadow_the_package(
                         ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))  # fmt: skip
     prefix = tmp_path / "prefix"
     install = subprocess.run(
+        # --ignore-installed: pip would otherwise uninstall the project from this venv first
         [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-input",
-         "--disable-pip-version-check", "-e", str(checkout), "--prefix", str(prefix)],
+         "--disable-pip-version-check", "--ignore-installed", "-e", str(checkout),
+         "--prefix", str(prefix)],
         capture_output=True, text=True, timeout=240, check=False,
     )  # fmt: skip
     if install.returncode != 0:

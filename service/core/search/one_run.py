@@ -137,6 +137,7 @@ def one_run(
     budget: int | None = None,
     keep_bytes: int = BASIS_BYTES,
     basis_dtype: type = np.float32,
+    report: Callable[[float, float, int], None] | None = None,
 ) -> OneRun:
     """Knee (when ``knee``), lambda and ``E_k`` from one Lanczos run (module docstring).
 
@@ -159,6 +160,9 @@ def one_run(
     budget : int, optional
         Products after the target is set beyond which the solve is left to the caller
         (module docstring; :func:`direct_cost` estimates a factorized solve's).
+    report : callable, optional
+        ``report(lambda, phi, checkpoint)`` at every checkpoint once the target is set (the
+        model's root and its Gauss-rule phi: progress only, nothing is decided from it).
     """
     run = LanczosRun(apply_mt, c, keep_bytes, basis_dtype)
     if ceiling is None:
@@ -187,6 +191,8 @@ def one_run(
         size = math.sqrt(max(float(model.phi(lam_g)), 1e-300))
         err = model.error_bound(lam_g) / size
         trail.append((run.steps, err))
+        if report is not None:
+            report(lam_g, size * size, len(trail))
         if err <= rtol:  # the Radau rule (a second eigendecomposition) only when needed
             lam_r = model.root(target, lo, top(target), radau=True)
             if abs(lam_r / lam_g - 1) <= LAMBDA_RTOL:

@@ -65,6 +65,7 @@ def knee_and_solve(
         knee=automatic,
         ceiling=system.lambda_ceiling,
         budget=direct_cost(system.size),
+        report=dev.listener,
     )
     if automatic:
         aim = _knee_target(aim, res, frame)

@@ -25,6 +25,7 @@ bytes.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import struct
 from collections.abc import Iterator
@@ -57,6 +58,11 @@ class LasLayout:
     header: Any  # laspy.LasHeader
     source: Source
     compressed: bool
+
+
+#: laspy logs a read error before raising it; the raised error becomes one FormatError line
+#: (:func:`_laspy_errors`), so its log record would only repeat it on the user's stderr.
+logging.getLogger("laspy").setLevel(logging.CRITICAL)
 
 
 @contextlib.contextmanager
