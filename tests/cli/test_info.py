@@ -75,7 +75,7 @@ def test_local_sigma_warns_nothing_on_rows_without_an_estimate() -> None:
     none of which had a noise estimate: they are NaN now, silently, as before."""
     import warnings
 
-    from service.core.noise.robust import local_sigma
+    from service.core.noise.uneven import local_sigma
 
     rng = np.random.default_rng(0)
     v = rng.random(50)

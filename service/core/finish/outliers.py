@@ -8,7 +8,7 @@ so eq. (4) leaves it where the smoothness term alone wants it. What the output d
   lists it, the writers flag it (LAS classification 7, a PLY/PCD ``outlier`` attribute) or the
   workflow removes its row (``drop``). A cloud's stray point is usually not a noisy sample of the
   surface: relocating it by metres invents a surface point.
-* ``"pull"``: :func:`service.core.noise.robust.pull_in` (``argmin ||L X||^2`` over the
+* ``"pull"``: :func:`pull_in` (``argmin ||L X||^2`` over the
   outliers), then each pulled point is clipped to its ring's reach: no further from its
   neighbours' centroid than the farthest neighbour (:func:`bound_to_ring`).
 """
@@ -18,8 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-
-from service.core.noise.robust import pull_in
+from scipy.sparse.linalg import spsolve
 
 __all__ = ["FAR_MOVE", "bound_to_ring", "far_moved", "place_outliers"]
 
@@ -85,4 +84,27 @@ def bound_to_ring(X: Array, L: sp.spmatrix, idx: NDArray[np.int64]) -> Array:
         dist = float(np.linalg.norm(off))
         if dist > reach:
             out[i] = c + off * (reach / dist)
+    return out
+
+
+def pull_in(X: Array, L: sp.spmatrix, idx: NDArray[np.int64]) -> Array:
+    """``X`` with the points ``idx`` moved to ``argmin ||L X||_F^2`` over them, the others held.
+
+    Eq. (4) with ``omega_i -> 0`` at these points: their data term vanishes, so whatever the
+    displacement mode of the rest, the minimiser places them where the smoothness term alone
+    wants them (``L_O^T L_O X_O = -L_O^T L_R X_R``; a point moving along its normal only
+    could not come back from far along the surface or from inside a closed shape).
+    """
+    if idx.size == 0:
+        return X
+    L = sp.csc_matrix(L)
+    rest = np.setdiff1d(np.arange(X.shape[0]), idx)
+    Lo, Lr = L[:, idx], L[:, rest]
+    A = sp.csc_matrix(Lo.T @ Lo)
+    b = -(Lo.T @ (Lr @ X[rest]))
+    ridge = 1e-10 * max(float(A.diagonal().max()), 1e-300)
+    A = A + ridge * sp.identity(idx.size, format="csc")
+    b = b + ridge * X[idx]
+    out = X.copy()
+    out[idx] = np.asarray(spsolve(A, b)).reshape(idx.size, -1)
     return out

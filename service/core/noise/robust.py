@@ -36,12 +36,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.sparse.linalg import spsolve
 
 from service.core.geometry import Geometry
 from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.noise.quantiles import chi2, poisson_ppf
+from service.core.noise.uneven import RATIO_CAP, crease_factor, local_sigma, on_grid, row_quantile
 from service.core.params import SmoothingParams
 
 __all__ = [
@@ -49,16 +49,11 @@ __all__ = [
     "OMEGA_MIN",
     "SPREAD",
     "DataWeights",
-    "crease_factor",
     "data_weights",
     "flag_outliers",
     "isolated",
-    "local_sigma",
-    "on_grid",
     "outlier_note",
-    "pull_in",
     "robust_weights",
-    "row_quantile",
 ]
 
 Array = NDArray[np.float64]
@@ -73,7 +68,8 @@ V_QUANTILE = 1e-3
 OMEGA_MIN = 1e-3
 #: ``q90 - q10`` of ``log sigma_i`` above which the noise varies (constant noise stays below).
 SPREAD = 0.7
-#: Outliers with a robust weight up to this are placed by :func:`pull_in`.
+#: Outliers with a robust weight up to this are placed by
+#: :func:`~service.core.finish.outliers.pull_in`.
 PULLED = 0.1
 #: A point further than this many local spacings from its neighbours' centroid is isolated.
 ISOLATION = 4.0
@@ -84,17 +80,7 @@ ISOLATION = 4.0
 #: band's fits make the spread 0.8 - 1.3 and the weights smoothed the creases away: 1.15 let
 #: the cube through, 1.96x worse than its input).
 SHAPE_FREE = 1.05
-#: Bounds of ``sigma_i / sigma`` (the spread cap): a point's share of the automatic budget
-#: ``(omega_i sigma_i / sigma)^2 = sigma_i / sigma`` is at most this many times the mean's, so
-#: one region cannot take the budget (issue 31).
-RATIO_CAP = 4.0
-#: ``median(sigma_i) / sigma`` below this: the estimate's mode came from crease-straddling
-#: fits (calibration half: the step block's 3.4x over-estimates 0.49 - 0.52; every other case,
-#: uniform, varying, quantized or 1 h noise, 0.85 - 2.16).
-CREASE_MEDIAN = 0.67
 HUBER, TUKEY = 1.345, 4.685
-#: Quantile of the neighbourhood's ``v_j`` that estimates ``sigma_i^2``.
-QUANTILE = 0.25
 #: ``s_i = (sigma / sigma_i)^UNEVEN_POWER``: 1 is eq. (3)'s ``D = 1/sigma``; 0.5 measured better
 #: (calibration: sphere, circle, cloud sphere with noise 1 -> 5x; ``service/core/README.md``).
 UNEVEN_POWER = 0.5
@@ -120,7 +106,8 @@ class DataWeights:
         ``q90 - q10`` of ``log sigma_i``.
     notes : tuple of str
     pulled : ndarray of int
-        Outliers whose weight is (next to) zero: :func:`pull_in` places them.
+        Outliers whose weight is (next to) zero:
+        :func:`~service.core.finish.outliers.pull_in` places them.
     """
 
     omega: Array
@@ -254,56 +241,12 @@ def _from_neighbours(
     return rho, ratio * crease_factor(sig, est.sigma), outliers, applied, use_uneven, spread
 
 
-def crease_factor(sig: Array, sigma: float) -> float:
-    """The budget's correction when the global estimate was taken from fits that straddle
-    creases (issue 31): ``median(sigma_i) / sigma`` below :data:`CREASE_MEDIAN` says the mode
-    of the residual variances sits on the crease band, not on the faces; the budget then uses
-    the lower quartile of ``sigma_i`` (the least crease-affected level), else 1."""
-    with np.errstate(all="ignore"):
-        med = float(np.nanmedian(sig)) / sigma if sigma > 0 else np.nan
-        low = float(np.nanquantile(sig, 0.25)) / sigma if sigma > 0 else np.nan
-    if not (np.isfinite(med) and np.isfinite(low)) or med >= CREASE_MEDIAN:
-        return 1.0
-    return float(np.clip(low, 1.0 / RATIO_CAP, 1.0))
-
-
-def on_grid(P: Array, sigma: float, share: float = 0.5) -> bool:
-    """Whether the coordinates are quantized at a step of at least ``sigma``: on some axis the
-    points take fewer than ``share * n`` distinct values, all on multiples of one step (a
-    scan stored at 1 mm with 5 cm noise is not: no terraces form). Quantization leaves exactly
-    flat terraces where the surface runs along the grid (zero fit residuals, a spread of
-    ``log sigma_i`` of 5 - 18) while its noise is one level everywhere (issue 31)."""
-    n = P.shape[0]
-    for col in P.T:
-        u = np.unique(col)
-        if u.size < 3 or u.size >= share * n:
-            continue
-        gaps = np.diff(u)
-        step = float(gaps.min())
-        if step >= sigma and np.all(np.abs(gaps / step - np.round(gaps / step)) < 1e-3):
-            return True
-    return False
-
-
 def _calibration(r: Array, s2: Array | float, c: int) -> float:
     """``median(r / s2)`` over that of ``chi^2_c``: the scale that makes the leave-one-out
     residuals' bulk ``chi^2_c`` (the global estimate is the mode of differently made fits)."""
     with np.errstate(all="ignore"):
         q = np.nanmedian(r / s2)
     return float(np.clip(q / chi2.median(c), 0.25, 4.0)) if np.isfinite(q) and q > 0 else 1.0
-
-
-def local_sigma(v: Array, nbr: NDArray[np.int64], nu: int) -> Array:
-    """``sigma_i``: the lower quartile of ``v`` over each row of ``nbr`` over that of
-    ``chi^2_nu / nu`` (a crease or an outlier raises the fits that straddle it, not the
-    quartile), then the mean of its logarithm over the row, twice (robust, then smooth)."""
-    with np.errstate(all="ignore"):
-        s2 = row_quantile(v[nbr], QUANTILE) / (chi2.ppf(QUANTILE, nu) / nu)
-        logs = np.log(np.where(s2 > 0, s2, np.nan))
-        for _ in range(2):  # nanmean's sum / count, without its warning for all-NaN rows
-            rows = logs[nbr]
-            logs = np.where(np.isnan(rows), 0.0, rows).sum(axis=1) / (~np.isnan(rows)).sum(axis=1)
-    return np.sqrt(np.exp(logs))
 
 
 def flag_outliers(
@@ -359,20 +302,6 @@ def isolated(
     return (delta > ISOLATION * spacing) & (delta > 2 * z0 * sigma)
 
 
-def row_quantile(A: Array, q: float) -> Array:
-    """The ``q`` quantile (linear interpolation) of each row's finite values (``nan`` for a
-    row without any): ``np.nanquantile(A, q, axis=1)`` without its per-row loop."""
-    B = np.sort(np.where(np.isfinite(A), A, np.inf), axis=1)
-    m = np.sum(np.isfinite(A), axis=1)
-    pos = q * np.maximum(m - 1, 0)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, np.maximum(m - 1, 0))
-    rows = np.arange(A.shape[0])
-    with np.errstate(invalid="ignore"):
-        out = B[rows, lo] + (pos - lo) * (B[rows, hi] - B[rows, lo])
-    return np.where(m > 0, out, np.nan)
-
-
 def _graph_neighbours(E: NDArray[np.int64], n: int, most: int = 32) -> NDArray[np.int64]:
     """Each vertex's neighbours over the elements ``E`` (up to ``most``), ``-1`` padded."""
     pairs = np.concatenate([E[:, [a, b]] for a in range(E.shape[1])
@@ -419,26 +348,3 @@ def robust_weights(
     else:
         rho = 1.0 - (z / TUKEY) ** 2
     return np.maximum(rho, OMEGA_MIN), outliers, rule
-
-
-def pull_in(X: Array, L: sp.spmatrix, idx: NDArray[np.int64]) -> Array:
-    """``X`` with the points ``idx`` moved to ``argmin ||L X||_F^2`` over them, the others held.
-
-    Eq. (4) with ``omega_i -> 0`` at these points: their data term vanishes, so whatever the
-    displacement mode of the rest, the minimiser places them where the smoothness term alone
-    wants them (``L_O^T L_O X_O = -L_O^T L_R X_R``; a point moving along its normal only
-    could not come back from far along the surface or from inside a closed shape).
-    """
-    if idx.size == 0:
-        return X
-    L = sp.csc_matrix(L)
-    rest = np.setdiff1d(np.arange(X.shape[0]), idx)
-    Lo, Lr = L[:, idx], L[:, rest]
-    A = sp.csc_matrix(Lo.T @ Lo)
-    b = -(Lo.T @ (Lr @ X[rest]))
-    ridge = 1e-10 * max(float(A.diagonal().max()), 1e-300)
-    A = A + ridge * sp.identity(idx.size, format="csc")
-    b = b + ridge * X[idx]
-    out = X.copy()
-    out[idx] = np.asarray(spsolve(A, b)).reshape(idx.size, -1)
-    return out

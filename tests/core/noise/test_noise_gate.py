@@ -8,7 +8,8 @@ import pytest
 
 from service.core.finish.outliers import FAR_MOVE, far_moved
 from service.core.geometry import Geometry
-from service.core.noise.robust import RATIO_CAP, data_weights, on_grid
+from service.core.noise.robust import data_weights
+from service.core.noise.uneven import RATIO_CAP, on_grid
 from service.core.params import SmoothingParams
 
 cases = pytest.importorskip("benchmarks.quality.cases")
@@ -56,7 +57,7 @@ def test_far_moved_adds_points_moved_beyond_twice_the_outlier_threshold() -> Non
 
 
 def test_crease_factor_lowers_the_budget_only_when_the_mode_sat_on_the_creases() -> None:
-    from service.core.noise.robust import CREASE_MEDIAN, crease_factor
+    from service.core.noise.uneven import CREASE_MEDIAN, crease_factor
 
     sig = np.linspace(0.2, 0.8, 101)  # median 0.5, lower quartile 0.35 (of sigma = 1)
     assert CREASE_MEDIAN > 0.5 and crease_factor(sig, 1.0) == pytest.approx(0.35)

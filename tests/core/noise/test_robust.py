@@ -208,7 +208,7 @@ def test_point_neighbours_put_the_point_first_also_with_duplicates() -> None:
 
 def test_pull_in_minimises_the_smoothness_over_the_outliers_alone() -> None:
     """argmin ||L X||^2 over two rows of X, the others held: against dense least squares."""
-    from service.core.noise.robust import pull_in
+    from service.core.finish.outliers import pull_in
 
     rng = np.random.default_rng(10)
     n = 30
@@ -245,7 +245,7 @@ def test_a_vertex_thrown_inside_a_sphere_mesh_is_found_and_pulled_back() -> None
 
 
 def test_row_quantile_is_nanquantile() -> None:
-    from service.core.noise.robust import row_quantile
+    from service.core.noise.uneven import row_quantile
 
     rng = np.random.default_rng(12)
     A = rng.normal(size=(200, 13))
