@@ -109,7 +109,7 @@ import geosmooth, geosmooth_client  # noqa: F401
 import numpy as np
 from service.core.geometry import Geometry
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth
+from service.core import smooth
 
 rng = np.random.default_rng(0)
 t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
