@@ -18,6 +18,7 @@ results stay those of the factorized search (1e-10 accuracy).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -65,7 +66,7 @@ def knee_and_solve(
         knee=automatic,
         ceiling=system.lambda_ceiling,
         budget=direct_cost(system.size),
-        report=dev.listener,
+        report=_progress(dev),
     )
     if automatic:
         aim = _knee_target(aim, res, frame)
@@ -89,3 +90,16 @@ def _knee_target(aim: Target, res: OneRun, frame: Frame) -> Target:
         f"({moved:.3g} x)"
     )
     return replace(noted, tau=frame.phi_out(res.knee), knee=moved)
+
+
+def _progress(dev: Deviation) -> Callable[[float, float, int], None]:
+    """The run's checkpoints as the lambda search's iterations: each model root and its
+    Gauss-rule phi is recorded in ``dev.history`` (the report's ``history`` and
+    ``iterations``) and reported to its listener, as a root finder's trial lambdas are."""
+
+    def record(lam: float, phi: float, _checkpoint: int) -> None:
+        dev.history.append((float(lam), float(phi)))
+        if dev.listener is not None:
+            dev.listener(float(lam), float(phi), len(dev.history))
+
+    return record
