@@ -26,7 +26,7 @@ from service.core.params import SmoothingParams
 from service.core.pipeline import smooth_one as smooth
 from service.io import GeometryDocument, read_geometry, write_geometry
 
-__all__ = ["apply_thread_limit", "warm_up"]
+__all__ = ["apply_thread_limit", "warm_compiled", "warm_up"]
 
 
 def warm_up() -> None:
@@ -55,6 +55,30 @@ def warm_up() -> None:
     # memory-aware solver choice: loaded here, before any job's RLIMIT_AS, not under it.
     pattern = sp.csr_matrix(np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1))
     factor_size(pattern, None)
+    warm_compiled(rng)
+
+
+def warm_compiled(rng: np.random.Generator) -> None:
+    """Call the compiled kernels that only inputs of 50,000 points or more reach (the grid
+    ``k``-NN, the data weights' fits and isolation pass, the closed-form frames) on a tiny
+    surface: without this, the first large job or upload of each process compiled them (a few
+    CPU seconds each; more than a minute on a loaded machine with no numba cache yet)."""
+    from service.core.noise.fast_fits import leave_one_out
+    from service.core.noise.fast_weights import isolation_distances
+    from service.core.operator.knn import grid_knn
+    from service.core.system.fast_frames import surface_normals
+
+    side = 12
+    u, v = np.meshgrid(np.arange(side, dtype=float), np.arange(side, dtype=float))
+    sheet = np.c_[u.ravel(), v.ravel(), rng.normal(0, 0.01, side * side)]
+    _, nbr = grid_knn(sheet, 10)
+    leave_one_out(sheet, nbr, 2)
+    leave_one_out(sheet, nbr, 2, np.ones((nbr.shape[0], nbr.shape[1] - 1), dtype=bool))
+    quad = np.arange(side * side).reshape(side, side)[:-1, :-1].ravel()
+    faces = np.r_[np.c_[quad, quad + 1, quad + side], np.c_[quad + 1, quad + side + 1, quad + side]]
+    isolation_distances(Geometry(sheet), nbr)
+    isolation_distances(Geometry(sheet, faces=faces), nbr)
+    surface_normals(sheet, 10)
 
 
 def apply_thread_limit() -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterator
 
 import pytest
 
@@ -24,10 +25,19 @@ PARAMS = [
 
 
 @pytest.fixture(scope="module", autouse=True)
-def _one_thread() -> None:
-    from service.core.linalg.threads import use_default_threads
+def _one_thread() -> Iterator[None]:
+    """One thread in every BLAS of the engine (numpy's, scipy's, CHOLMOD's), as the hashes were
+    recorded (``cases.main``), whatever an earlier test of this process left: a sum in two
+    threads rounds differently, and a case at a decision boundary (an outlier flag) then takes
+    the other branch. The variables are restored after the module."""
+    from service.core.linalg.threads import limit_threads
 
-    use_default_threads({})
+    with pytest.MonkeyPatch.context() as mp:
+        for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            mp.setenv(name, "1")
+        limiter = limit_threads(1)  # loads the libraries first, then caps every loaded pool
+        yield
+        limiter.restore_original_limits()
 
 
 def test_hashes_cover_every_case() -> None:

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["GRID_FROM", "knn"]
+__all__ = ["GRID_FROM", "grid_knn", "knn"]
 
 Array = NDArray[np.float64]
 #: Below this many points the k-d tree is as fast (and the grid's set-up is not worth it).
@@ -34,6 +34,12 @@ def knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
     k = min(k, n)
     if n < GRID_FROM or s != 3 or k < 2:
         return _tree(P, k, np.arange(n))
+    return grid_knn(P, k)
+
+
+def grid_knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
+    """:func:`knn` on the uniform grid whatever the size (3-D points, ``2 <= k <= n``)."""
+    n = P.shape[0]
     P = np.ascontiguousarray(P, dtype=np.float64)
     lo = P.min(axis=0)
     span = float(np.max(P.max(axis=0) - lo))
