@@ -106,6 +106,16 @@ def _limit_cpu(seconds: float) -> None:
     resource.setrlimit(resource.RLIMIT_CPU, (soft, want if hard < 0 else min(want, hard)))
 
 
+def _one_thread() -> None:
+    """One BLAS/OpenMP thread in a request process (inherited pools have the jobs' count): a
+    parse or check gains nothing from more, and an idle pool thread spinning for work on a busy
+    machine was CPU time counted against the request's limit (~10 ms)."""
+    with contextlib.suppress(Exception):
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1)
+
+
 def child_main(
     conn: Any,
     func: Callable[[Any], Any],
@@ -115,6 +125,7 @@ def child_main(
     cpu_limit: float | None = None,
 ) -> None:
     _arm_child()
+    _one_thread()
     rss_start, started = _status("VmRSS"), time.perf_counter()
     if budget:
         with contextlib.suppress(OSError, ValueError):
