@@ -15,10 +15,11 @@ ones only. The library facade ``geosmooth`` stands on ``service.core``, ``servic
 (``geosmooth_client``) imports nothing of the server. ``service.settings`` (configuration) is
 for jobs and above; ``service.exit_codes`` (the CLI's table of exit statuses) for the CLI and
 the server it starts (``service.api.server``): error classes below carry their exit status as a
-plain ``int``. Those two import nothing of the service but the core (the engine's bounds that
-settings default to).
+plain ``int``. Those two (and the modules of the ``service.settings`` package) import nothing
+of the service but the core (the engine's bounds that settings default to) and themselves.
 
-Inside a package the same rule holds between its *rooms* (:data:`ROOMS`): a room is the first
+Inside a package (``service.core``, ``io``, ``jobs``, ``api``, ``cli``) the same rule holds
+between its *rooms* (:data:`ROOMS`): a room is the first
 name under the package (``service.core.search.roots`` is in room ``search``), the rooms are
 listed on floors, lowest first, and a module imports modules of its own floor or lower ones
 only. The package's ``__init__`` is its front door, above every room. A module in a room the
@@ -41,6 +42,8 @@ from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = {
@@ -114,10 +117,58 @@ BACKENDS = ("embedded", "distributed")
 #: The one module outside the backends that imports them (``make_queue``, lazily).
 JOBS_COMPOSITION = "service.jobs"
 
+#: The rooms of the file layer, lowest first: errors and the byte-level helpers, the document
+#: record, the shared parsing/welding/normals/frames code, the formats' readers and writers,
+#: the registry that names them, then what works on whole documents (what a format holds,
+#: read/write dispatch, the streamed coordinate readers).
+IO_ROOMS: tuple[tuple[str, ...], ...] = (
+    ("errors",),
+    ("limits", "source", "atomic"),  # read limits, byte sources, the atomic file writer
+    ("document",),  # GeometryDocument: the geometry plus what writes the file back
+    ("_shared",),  # text, numbers, welding, normals, geographic frames, plain documents
+    ("formats",),  # one room per format (readers, writers, content tests)
+    ("registry",),  # FORMATS: names the formats' modules (imported on first use)
+    ("holds",),  # what an output format holds of a document; the georeference of an output
+    ("dispatch",),  # read_geometry / write_geometry / check_output
+    ("stream",),  # coordinates only, streamed (the tiled path)
+)
+
+#: The rooms of the HTTP API, lowest first: errors and problem documents, the wire schemas and
+#: their docs, the HTTP plumbing (middleware, limits, logs), the intake of uploads, the
+#: dependencies, the routers, the app that mounts them, then the processes that run the app.
+API_ROOMS: tuple[tuple[str, ...], ...] = (
+    ("errors", "examples"),
+    ("problems", "schemas"),  # RFC 9457 problem documents; the request/response models
+    ("docs", "http"),  # OpenAPI response docs; middleware, auth, limits, logs, metrics
+    ("results", "intake", "job_events"),  # result downloads; uploads and their checks; job logs
+    ("deps",),  # the routers' Annotated dependencies
+    ("routers",),
+    ("app",),  # create_app(): mounts the routers and middleware
+    ("server", "openapi_export"),  # serve(); the openapi.json export
+)
+
+#: The rooms of the command line, lowest first: errors, the options, output and progress, the
+#: parsers, the commands (a batch runs the single-file ``smooth``), and the entry point that
+#: imports a command's module when it runs (``main``), then ``python -m``.
+CLI_ROOMS: tuple[tuple[str, ...], ...] = (
+    ("errors",),  # CliError, failure(): exit status and one line of any failure
+    ("params", "parser_base", "progress"),  # smoothing options; what every parser shares
+    ("output",),  # output format, the file writer, the report
+    ("file_commands",),  # the options of the commands that read and write files
+    ("parser",),  # build_parser()
+    ("smooth", "serve", "submit", "worker", "completion"),  # one command each
+    ("info", "batch"),  # info and batches reuse the smooth command's reader and run
+    ("main",),  # parse, dispatch (importlib), report a failure
+    ("__main__",),
+)
+
 #: Packages whose inside is ordered, with their rooms' floors.
 ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
     "service.core": CORE_ROOMS,
+    "service.io": IO_ROOMS,
     "service.jobs": JOBS_ROOMS,
+    "service.api": API_ROOMS,
+    "service.cli": CLI_ROOMS,
 }
 
 
@@ -296,12 +347,19 @@ def _breaks_rule(source: str, target: str) -> bool:
     facade = top == "geosmooth" and source != "geosmooth.__main__"
     if facade and target.startswith(FACADE_MAY_NOT):
         return True
-    if source in LEAVES and target.startswith("service.") and there != 0:
-        return True  # the leaves import only the core (e.g. the engine's bounds)
-    if target in LEAVES and source not in EXIT_CODES_USERS:
-        lowest = layer(LEAVES[target])
+    mine, theirs = leaf(source), leaf(target)
+    if mine and target.startswith("service.") and there != 0 and theirs != mine:
+        return True  # the leaves import only the core (e.g. the engine's bounds) and themselves
+    if theirs and theirs != mine and source not in EXIT_CODES_USERS:
+        lowest = layer(LEAVES[theirs])
         return facade or (here is not None and lowest is not None and here < lowest)
     return False
+
+
+def leaf(module: str) -> str | None:
+    """The leaf of :data:`LEAVES` that ``module`` is or lies in (``service.settings.http`` is in
+    ``service.settings``), else ``None``."""
+    return next((name for name in LEAVES if module == name or module.startswith(name + ".")), None)
 
 
 def upward_edges(graph: dict[str, dict[str, Edge]]) -> list[Edge]:
@@ -516,22 +574,22 @@ def test_no_import_points_up_the_layers() -> None:
     assert not upward, _listing("imports up the layers", map(Edge.describe, upward))
 
 
-def test_every_module_of_core_and_jobs_sits_in_a_placed_room() -> None:
-    """A new room of ``service.core`` or ``service.jobs`` is placed in :data:`ROOMS` (and in
-    ``../shared/ARCHITECTURE.md``) before it is used: its floor says what it may import."""
+def test_every_module_of_an_ordered_package_sits_in_a_placed_room() -> None:
+    """A new room of ``service.core``, ``io``, ``jobs``, ``api`` or ``cli`` is placed in
+    :data:`ROOMS` (and in ``../shared/ARCHITECTURE.md``) before it is used: its floor says what
+    it may import."""
     unplaced = [m for package in ROOMS for m in unplaced_modules(package)]
     title = "modules whose room is not placed: place the room in ROOMS (lowest first) or move it"
     assert not unplaced, _listing(title, (f"{m} ({relative(m)})" for m in unplaced))
 
 
-def test_no_import_inside_core_points_up_the_run_order() -> None:
-    against = edges_against_the_order(import_graph(), "service.core")
-    assert not against, _listing("imports up the core's rooms", map(Edge.describe, against))
-
-
-def test_no_import_inside_jobs_points_up_its_floors() -> None:
-    against = edges_against_the_order(import_graph(), "service.jobs")
-    assert not against, _listing("imports up the jobs' floors", map(Edge.describe, against))
+@pytest.mark.parametrize("package", list(ROOMS))
+def test_no_import_inside_a_package_points_up_its_floors(package: str) -> None:
+    """Inside ``service.core`` the floors are the run order; inside ``io``, ``jobs``, ``api``
+    and ``cli`` what each room does (:data:`ROOMS`)."""
+    against = edges_against_the_order(import_graph(), package)
+    title = f"imports up the floors of {package}"
+    assert not against, _listing(title, map(Edge.describe, against))
 
 
 def test_only_the_composition_point_imports_a_job_backend() -> None:
@@ -575,6 +633,18 @@ def test_the_rooms_rules_themselves() -> None:
     assert floor("service.core", "entry") == len(CORE_ROOMS) - 1
     assert floor("service.jobs", "embedded") == floor("service.jobs", "distributed")
     assert floor("service.core", "no-such-room") is None
+
+    def below(package: str, lower: str, upper: str) -> bool:
+        floors = floor(package, lower), floor(package, upper)
+        return floors[0] is not None and floors[1] is not None and floors[0] < floors[1]
+
+    assert below("service.io", "formats", "registry") and below("service.io", "holds", "dispatch")
+    assert below("service.api", "schemas", "intake") and below("service.api", "routers", "app")
+    assert below("service.cli", "smooth", "batch") and below("service.cli", "batch", "main")
+    assert leaf("service.settings.http") == "service.settings" and leaf("service.io") is None
+    assert not _breaks_rule("service.settings", "service.settings.http")
+    assert _breaks_rule("service.settings.http", "service.io.registry")
+    assert _breaks_rule("service.io.dispatch", "service.settings.jobs")
 
     def edge(a: str, b: str) -> tuple[str, Edge]:
         return b, Edge(a, b, 1)
@@ -621,13 +691,13 @@ def test_every_error_class_exit_code_is_a_documented_status() -> None:
     from service.jobs import errors as jobs_errors
     from service.settings import ConfigError
 
-    classes = [ConfigError]
+    classes: list[type] = [ConfigError]
     for module in (core_errors, io_errors, jobs_errors):
         found = [c for c in vars(module).values() if isinstance(c, type)]
         classes += [c for c in found if "exit_code" in vars(c)]
     assert len(classes) >= 6
     for cls in classes:
-        code = cls.exit_code
+        code = getattr(cls, "exit_code", None)
         assert type(code) is int and code in EXIT_CODES, cls
 
 

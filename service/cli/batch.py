@@ -234,7 +234,8 @@ def _jobs(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int:
 
 def smooth_one_file(ns: argparse.Namespace) -> FileOutcome:
     """Smooth ``ns.input`` into ``ns.output`` quietly; any failure becomes the outcome."""
-    from service.cli.main import failure, threads
+    from service.cli.errors import failure
+    from service.cli.params import threads
     from service.cli.progress import ProgressDisplay
     from service.cli.smooth import smooth_one
 

@@ -4,14 +4,29 @@ Typed errors of the engine, the file formats and the settings carry their exit s
 class attribute ``exit_code`` (:mod:`service.core.errors`, :mod:`service.io.errors`); the CLI
 reads it from there (:func:`exit_code_of`) and never keeps a table of error classes.
 :class:`CliError` is for what only the command line knows (a bad option, an unwritable output).
+:func:`failure` turns any exception into the exit status and the one line (naming the option at
+fault or the input file), for ``main`` and for each file of a batch.
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import sys
 from typing import TextIO
 
-__all__ = ["CliError", "exit_code_of", "fail", "message_of", "os_reason"]
+from service.exit_codes import EXIT_INTERNAL
+
+__all__ = [
+    "CliError",
+    "debugging",
+    "exit_code_of",
+    "fail",
+    "failure",
+    "message_of",
+    "option_name",
+    "os_reason",
+]
 
 
 class CliError(Exception):
@@ -72,3 +87,42 @@ def fail(message: str, err: TextIO | None = None) -> None:
         stream.flush()
     except (OSError, ValueError):
         pass
+
+
+def option_name(field: str) -> str:
+    """``max_iterations`` -> ``--max-iterations``."""
+    return "--" + field.replace("_", "-")
+
+
+def debugging() -> bool:
+    """Whether ``GEOSMOOTH_DEBUG`` asks for tracebacks."""
+    return os.environ.get("GEOSMOOTH_DEBUG", "").strip() not in ("", "0", "false", "no")
+
+
+def _where(exc: BaseException, ns: argparse.Namespace | None) -> str | None:
+    """What a typed error is about: ``--option`` for a parameter, else the input file."""
+    from service.core.params import SmoothingParams
+
+    field = str(getattr(exc, "field", "") or "")
+    name = field.removeprefix("params.")
+    if field.startswith("params.") and name in SmoothingParams.model_fields:
+        return option_name(name)
+    source = getattr(ns, "input", None)
+    return str(source) if source else None
+
+
+def _typed_message(exc: BaseException, ns: argparse.Namespace | None) -> str:
+    if isinstance(exc, CliError):
+        return exc.message
+    where = _where(exc, ns)
+    return f"{where}: {message_of(exc)}" if where else message_of(exc)
+
+
+def failure(exc: BaseException, ns: argparse.Namespace | None) -> tuple[int, str]:
+    """The exit status and the one line (without ``geosmooth: error:``) of a failure."""
+    code = exit_code_of(exc)
+    if code is not None:
+        return code, _typed_message(exc, ns)
+    text = message_of(exc) if str(exc) else "(no message)"
+    hint = "" if debugging() else " (set GEOSMOOTH_DEBUG=1 for the traceback)"
+    return EXIT_INTERNAL, f"internal error: {type(exc).__name__}: {text}{hint}"

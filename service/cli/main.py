@@ -11,17 +11,16 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 import traceback
 from collections.abc import Sequence
 from typing import TextIO
 
-from service.cli.errors import CliError, exit_code_of, fail, message_of
+from service.cli.errors import debugging, fail, failure
 from service.cli.parser import build_parser, command_of
-from service.exit_codes import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE
+from service.exit_codes import EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE
 
-__all__ = ["failure", "main"]
+__all__ = ["main"]
 
 #: command -> module with ``run(ns, err) -> int`` (imported when the command runs, so that
 #: ``smooth`` never loads the HTTP stack).
@@ -33,30 +32,6 @@ _COMMANDS = {
     "worker": ".worker",
     "completion": ".completion",
 }
-
-
-def _debug() -> bool:
-    return os.environ.get("GEOSMOOTH_DEBUG", "").strip() not in ("", "0", "false", "no")
-
-
-def _where(exc: BaseException, ns: argparse.Namespace | None) -> str | None:
-    """What a typed error is about: ``--option`` for a parameter, else the input file."""
-    from service.cli.params import option_name
-    from service.core.params import SmoothingParams
-
-    field = str(getattr(exc, "field", "") or "")
-    name = field.removeprefix("params.")
-    if field.startswith("params.") and name in SmoothingParams.model_fields:
-        return option_name(name)
-    source = getattr(ns, "input", None)
-    return str(source) if source else None
-
-
-def _typed_message(exc: BaseException, ns: argparse.Namespace | None) -> str:
-    if isinstance(exc, CliError):
-        return exc.message
-    where = _where(exc, ns)
-    return f"{where}: {message_of(exc)}" if where else message_of(exc)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -85,6 +60,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         except SystemExit as exc:  # --help / --version
             return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
         if ns.command in ("smooth", "info"):
+            from service.cli.params import threads
+
             threads()
         module = importlib.import_module(_COMMANDS[ns.command], __package__)
         return int(module.run(ns, err))
@@ -96,29 +73,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _report(exc, ns, err)
 
 
-def threads() -> None:
-    """The numerical libraries' thread count: ``GEOSMOOTH_THREADS``, default 1 (docs/threads.md)."""
-    from service.core.linalg.threads import use_default_threads
-
-    try:
-        use_default_threads(os.environ)
-    except ValueError as exc:
-        raise CliError(str(exc), EXIT_USAGE) from None
-
-
-def failure(exc: BaseException, ns: argparse.Namespace | None) -> tuple[int, str]:
-    """The exit status and the one line (without ``geosmooth: error:``) of a failure."""
-    code = exit_code_of(exc)
-    if code is not None:
-        return code, _typed_message(exc, ns)
-    text = message_of(exc) if str(exc) else "(no message)"
-    hint = "" if _debug() else " (set GEOSMOOTH_DEBUG=1 for the traceback)"
-    return EXIT_INTERNAL, f"internal error: {type(exc).__name__}: {text}{hint}"
-
-
 def _report(exc: Exception, ns: argparse.Namespace | None, err: TextIO) -> int:
     """Print one line for ``exc``; its exit status."""
-    if _debug():
+    if debugging():
         traceback.print_exc(file=err)
     code, line = failure(exc, ns)
     fail(line, err)

@@ -10,6 +10,7 @@ naming the option (:func:`params_from_args`).
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import textwrap
 import typing
@@ -18,7 +19,7 @@ from pydantic import ValidationError
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticUndefined
 
-from service.cli.errors import CliError
+from service.cli.errors import CliError, option_name
 from service.core.params import SmoothingParams
 from service.exit_codes import EXIT_USAGE
 
@@ -28,6 +29,7 @@ __all__ = [
     "literal_names",
     "option_name",
     "params_from_args",
+    "threads",
 ]
 
 #: The ways to pick lambda: mutually exclusive options. Whether one is required is the model's
@@ -49,11 +51,6 @@ _HELP_PREFIX = {
     "rms": "Target RMS displacement (tau = sum_i w_i^2 * R^2).",
     "lam": "Use this lambda directly (no tau search).",
 }
-
-
-def option_name(field: str) -> str:
-    """``max_iterations`` -> ``--max-iterations``."""
-    return "--" + field.replace("_", "-")
 
 
 def _default_text(info: FieldInfo) -> str:
@@ -163,3 +160,14 @@ def _validation_message(exc: ValidationError) -> str:
             msg = re.sub(rf"\b{name}\b", option_name(name), msg)
         parts.append(msg)
     return "; ".join(parts) or "invalid parameters"
+
+
+def threads() -> None:
+    """Set the numerical libraries' thread count: ``GEOSMOOTH_THREADS``, default 1
+    (docs/threads.md); a bad value is a usage error."""
+    from service.core.linalg.threads import use_default_threads
+
+    try:
+        use_default_threads(os.environ)
+    except ValueError as exc:
+        raise CliError(str(exc), EXIT_USAGE) from None

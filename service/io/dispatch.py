@@ -18,11 +18,17 @@ from typing import Any, BinaryIO
 
 from numpy.typing import ArrayLike
 
-from service.io._shared.georef import georeference
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
 from service.io.document import GeometryDocument
 from service.io.errors import FormatError, UnsupportedFormat
-from service.io.holds import dropped_kinds, input_kinds, is_geographic, output_notes, same_family
+from service.io.holds import (
+    dropped_kinds,
+    georeference,
+    input_kinds,
+    is_geographic,
+    output_notes,
+    same_family,
+)
 from service.io.limits import ReadLimits, reading
 from service.io.registry import (
     FORMATS,
@@ -128,11 +134,10 @@ def read_geometry(
     filename : str, optional
         Name used to detect the format of bytes.
     weld : bool, optional
-        Merge exactly coincident vertices (see :mod:`service.io._shared.weld`); writers still write
-        the
-        file's vertex count and order. Default: the format's (STL and GLB: yes); other formats
-        weld when duplicate positions tie faces (a mesh stored one vertex per position and
-        normal would otherwise tear apart when smoothed; issue 31).
+        Merge exactly coincident vertices (see :mod:`service.io._shared.weld`); writers still
+        write the file's vertex count and order. Default: the format's (STL and GLB: yes); other
+        formats weld when duplicate positions tie faces (a mesh stored one vertex per position
+        and normal would otherwise tear apart when smoothed; issue 31).
     limits : ReadLimits, optional
         Points a file may hold and memory its reading may take, checked from the declared
         counts before anything is allocated (:mod:`service.io.limits`; default: the limits in
@@ -160,11 +165,7 @@ def read_geometry(
     if not spec.binary or spec.name in _TEXT_HEADERS:
         src = bare
     check_not_empty(src, spec.name)
-    given = {k: v for k, v in options.items() if v is not None}
-    for key in given:
-        if key not in spec.options:
-            users = [f.title for f in FORMATS.values() if key in f.options] or ["no"]
-            raise ValueError(f"{key} applies to {' and '.join(users)} files only")
+    given = _reader_options(spec, options)
     do_weld = spec.weld_default if weld is None else bool(weld)
     with reading(limits) as bounds:
         doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
@@ -174,6 +175,16 @@ def read_geometry(
 
         doc = weld_if_tied(doc)
     return doc
+
+
+def _reader_options(spec: Format, options: dict[str, Any]) -> dict[str, Any]:
+    """The options given (not ``None``); ``ValueError`` for one ``spec``'s reader lacks."""
+    given = {k: v for k, v in options.items() if v is not None}
+    for key in given:
+        if key not in spec.options:
+            users = [f.title for f in FORMATS.values() if key in f.options] or ["no"]
+            raise ValueError(f"{key} applies to {' and '.join(users)} files only")
+    return given
 
 
 def _plain(

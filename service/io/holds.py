@@ -4,19 +4,26 @@
 holds points (``"cloud"`` in its registry ``kinds``) but not the input's faces or lines writes
 the vertices as points, with a note (:func:`dropped_kinds`), as PDAL and CloudCompare do;
 :func:`output_notes` names every attribute the output cannot hold (colours, extra columns,
-texture coordinates) and where georeferenced input goes.
+texture coordinates) and where georeferenced input goes; :func:`georeference` records that frame
+in the written document, or projects to the ``crs`` option (the frames themselves:
+:mod:`service.io._shared.georef`).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from service.io._shared.georef import CrsOption, Georef, project, target_crs
+
 if TYPE_CHECKING:
+    from service.io._shared.plain import PlainDocument
     from service.io.document import GeometryDocument
     from service.io.registry import Format
 
 __all__ = [
     "dropped_kinds",
+    "georeference",
     "input_kinds",
     "is_geographic",
     "output_notes",
@@ -107,3 +114,35 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
             " not longitude/latitude (write GPX or GeoJSON to keep them)"
         )
     return notes
+
+
+def georeference(
+    doc: GeometryDocument, spec: Format, plain: PlainDocument, option: CrsOption
+) -> PlainDocument:
+    """``plain`` with its frame recorded, and projected to the ``crs`` option if given.
+
+    Raises
+    ------
+    ValueError
+        ``crs`` given for input that is not geographic, for a longitude/latitude output, or not
+        a projected EPSG CRS.
+    """
+    geo = getattr(doc.layout, "frame", None)
+    frame = getattr(geo, "frame", None)
+    if option is not None and (frame is None or spec.geographic_only or same_family(doc, spec)):
+        where = "longitude/latitude" if spec.geographic_only else "planar coordinates"
+        raise ValueError(
+            "crs applies to geographic input (GPX, GeoJSON) written to a projected format;"
+            f" this {spec.title} output gets {where}"
+        )
+    if frame is None or spec.geographic_only or same_family(doc, spec):
+        return plain
+    assert geo is not None
+    origin = (frame.lon0, frame.lat0, 0.0)
+    if option is None:
+        name = "geosmooth local east/north/up metres"
+        return replace(plain, georef=Georef("local", origin, name))
+    target = target_crs(option, frame)
+    lon, lat, ele = geo.back(plain.points)
+    pts, name = project(target, lon, lat, ele)
+    return replace(plain, points=pts, normals=None, georef=Georef(target, origin, name))

@@ -2,17 +2,16 @@
 
 The API's media types and enums, the CLI's ``--format`` choices, the jobs' format check, the
 extension and content detection all come from :data:`FORMATS`; a new format is one entry here
-plus its reader/writer module. Readers take a :class:`~service.io.source.Source` and return a
+plus its reader/writer module and its content test (:mod:`service.io.formats.magic`). Readers
+take a :class:`~service.io.source.Source` and return a
 :class:`~service.io.document.GeometryDocument`; writers take the plain (un-welded) document of
 :mod:`service.io._shared.plain` and a binary stream. Modules are imported on first use, so the CLI
-does
-not pay for laspy, trimesh or ezdxf when it reads a PLY.
+does not pay for laspy, trimesh or ezdxf when it reads a PLY.
 """
 
 from __future__ import annotations
 
 import importlib
-import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,7 @@ from types import MappingProxyType
 from typing import Any, BinaryIO
 
 from service.io.errors import UnsupportedFormat
+from service.io.formats.magic import SNIFFERS, Sniffer
 
 __all__ = [
     "ALL_KINDS",
@@ -38,7 +38,6 @@ _COLOURS = ("red", "green", "blue", "alpha")
 
 Reader = Callable[..., Any]
 Writer = Callable[..., None]
-Sniffer = Callable[[bytes, int], bool]
 
 
 def _lazy(module: str, name: str) -> Callable[..., Any]:
@@ -129,76 +128,9 @@ class Format:
         self.write(plain, out)
 
 
-def _text_start(head: bytes) -> bytes:
-    return head.lstrip(b"\xef\xbb\xbf \t\r\n")
-
-
-_PCD = re.compile(rb"\A(?:[ \t]*#[^\n]*\n|\s*\n)*\s*(?:VERSION|FIELDS)\b")
-_OFF = re.compile(rb"\A(?:\s*#[^\n]*\n)*\s*(?:ST)?C?N?4?n?OFF\b")
-_DXF = re.compile(rb"\A\s*(?:999\s*\n[^\n]*\n\s*)*0\s*\n\s*SECTION\b")
-_GEOJSON = re.compile(
-    rb'"type"\s*:\s*"(?:FeatureCollection|Feature|LineString|MultiLineString|Polygon|'
-    rb'MultiPolygon|Point|MultiPoint|GeometryCollection)"'
-)
-_OBJ_KEYS = {b"v", b"vn", b"vt", b"f", b"l", b"o", b"g", b"mtllib", b"usemtl", b"s", b"vp"}
-
-
-def _stl_binary(head: bytes, size: int) -> bool:
-    if len(head) < 84:
-        return False
-    count = int.from_bytes(head[80:84], "little")
-    return 84 + 50 * count == size
-
-
-def _stl_ascii(head: bytes, size: int) -> bool:
-    text = _text_start(head)
-    return text[:5].lower() == b"solid" and b"facet" in text and not _stl_binary(head, size)
-
-
-def _laz(head: bytes, size: int) -> bool:
-    return head[:4] == b"LASF" and len(head) > 104 and bool(head[104] & 0xC0)
-
-
-def _las(head: bytes, size: int) -> bool:
-    return head[:4] == b"LASF" and not _laz(head, size)
-
-
-def _json(head: bytes, size: int) -> bool:
-    return _text_start(head)[:1] in (b"{", b"[") and not _GEOJSON.search(head)
-
-
-def _geojson(head: bytes, size: int) -> bool:
-    return _text_start(head)[:1] == b"{" and bool(_GEOJSON.search(head))
-
-
-def _gpx(head: bytes, size: int) -> bool:
-    return _text_start(head)[:1] == b"<" and b"<gpx" in head
-
-
-def _obj(head: bytes, size: int) -> bool:
-    for line in head.split(b"\n")[:-1] or head.split(b"\n"):
-        words = line.split()
-        if not words or words[0].startswith(b"#"):
-            continue
-        return words[0] in _OBJ_KEYS
-    return False
-
-
-def _xyz(head: bytes, size: int) -> bool:
-    for line in head.split(b"\n")[:-1] or head.split(b"\n"):
-        words = line.replace(b",", b" ").split()
-        if not words or words[0].startswith(b"#"):
-            continue
-        try:
-            [float(w) for w in words]
-        except ValueError:
-            continue
-        return True
-    return False
-
-
 def _f(name: str, module: str, media: str, exts: tuple[str, ...], title: str, **kw: Any) -> Format:
     writer = kw.pop("writer", (module, f"write_{name}"))
+    kw.setdefault("sniff", SNIFFERS[name])
     return Format(
         name,
         _lazy(module, f"read_{name}"),
@@ -221,7 +153,6 @@ _TABLE: dict[str, Format] = {
             ("ply",),
             "PLY",
             writer=("formats.ply.write", "write_ply"),
-            sniff=lambda h, s: h.startswith((b"ply\n", b"ply\r\n")),
             binary=True,
         ),
         _f(
@@ -231,7 +162,6 @@ _TABLE: dict[str, Format] = {
             ("obj",),
             "OBJ",
             writer=("formats.obj.write", "write_obj"),
-            sniff=_obj,
             attributes=(*_COLOURS[:3], "uv"),
         ),
         _f(
@@ -241,7 +171,6 @@ _TABLE: dict[str, Format] = {
             ("xyz", "txt", "csv", "pts"),
             "XYZ",
             options=("xyz_dims",),
-            sniff=_xyz,
             kinds=_CLOUD,
             max_dims=None,
         ),
@@ -251,7 +180,6 @@ _TABLE: dict[str, Format] = {
             "application/json",
             ("json",),
             "geosmooth JSON",
-            sniff=_json,
             min_dims=1,
             max_dims=None,
         ),
@@ -262,7 +190,6 @@ _TABLE: dict[str, Format] = {
             ("stl",),
             "STL",
             weld_default=True,
-            sniff=lambda h, s: _stl_binary(h, s) or _stl_ascii(h, s),
             binary=True,
             kinds=frozenset({"mesh"}),
             attributes=(),
@@ -274,7 +201,6 @@ _TABLE: dict[str, Format] = {
             "text/plain; charset=utf-8",
             ("off",),
             "OFF",
-            sniff=lambda h, s: bool(_OFF.match(h)),
             kinds=frozenset({"mesh", "cloud"}),
             attributes=(),
         ),
@@ -285,7 +211,6 @@ _TABLE: dict[str, Format] = {
             ("glb",),
             "glTF binary",
             weld_default=True,
-            sniff=lambda h, s: h[:4] == b"glTF",
             binary=True,
             kinds=frozenset({"mesh", "cloud"}),
             attributes=(*_COLOURS, "color"),
@@ -297,7 +222,6 @@ _TABLE: dict[str, Format] = {
             "application/vnd.las",
             ("las",),
             "LAS",
-            sniff=_las,
             binary=True,
             kinds=_CLOUD,
         ),
@@ -307,7 +231,6 @@ _TABLE: dict[str, Format] = {
             "application/vnd.laszip",
             ("laz",),
             "LAZ",
-            sniff=_laz,
             binary=True,
             kinds=_CLOUD,
         ),
@@ -317,7 +240,6 @@ _TABLE: dict[str, Format] = {
             _OCTET,
             ("pcd",),
             "PCD",
-            sniff=lambda h, s: bool(_PCD.match(h)),
             binary=True,
             kinds=_CLOUD,
         ),
@@ -327,7 +249,6 @@ _TABLE: dict[str, Format] = {
             "model/e57",
             ("e57",),
             "E57",
-            sniff=lambda h, s: h[:8] == b"ASTM-E57",
             binary=True,
             kinds=_CLOUD,
             attributes=("intensity", *_COLOURS[:3]),
@@ -339,7 +260,6 @@ _TABLE: dict[str, Format] = {
             ("gpx",),
             "GPX",
             options=("geographic",),
-            sniff=_gpx,
             kinds=frozenset({"polyline"}),
             geographic_only=True,
             attributes=(),
@@ -351,7 +271,6 @@ _TABLE: dict[str, Format] = {
             ("geojson",),
             "GeoJSON",
             options=("geographic",),
-            sniff=_geojson,
             kinds=frozenset({"polyline"}),
             geographic_only=True,
             attributes=(),
@@ -362,7 +281,6 @@ _TABLE: dict[str, Format] = {
             "image/vnd.dxf",
             ("dxf",),
             "DXF",
-            sniff=lambda h, s: bool(_DXF.match(h)) or h.startswith(b"AutoCAD Binary DXF"),
             attributes=(),
         ),
     )

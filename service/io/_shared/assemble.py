@@ -14,7 +14,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.core.geometry import Geometry
-from service.io._shared.elements import drop_repeating, fan_triangulate, normalize_polyline
+from service.io._shared.elements import (
+    drop_repeating,
+    edge_array,
+    fan_triangulate,
+    normalize_polyline,
+)
 from service.io._shared.weld import weld_document
 from service.io.document import GeometryDocument, Polyline
 from service.io.errors import FormatError
@@ -97,25 +102,9 @@ def assemble(
     if polygons is not None:
         faces, dropped = triangles(polygons)
         notes.extend(dropped)
-    standalone = None
-    if edges is not None and len(edges):
-        standalone, n_rep = drop_repeating(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
-        if n_rep:
-            notes.append(f"dropped {_plural(n_rep, 'edge')} that repeat a vertex")
-        if not len(standalone):
-            standalone = None
-    lines: list[Polyline] = []
-    n_short = 0
-    for idx, closed in polylines:
-        pl = normalize_polyline(idx, closed)
-        if pl is None:
-            n_short += 1
-        else:
-            lines.append(pl)
-    if n_short:
-        notes.append(f"dropped {_plural(n_short, 'polyline')} with fewer than 2 distinct vertices")
-    edge_parts = ([standalone] if standalone is not None else []) + [p.edges() for p in lines]
-    all_edges = np.concatenate(edge_parts) if edge_parts else None
+    standalone = _standalone_edges(edges, notes)
+    lines = _polylines(polylines, notes)
+    all_edges = edge_array(standalone, lines)
     geometry = Geometry(pts, faces=faces, edges=all_edges, weights=weights, fixed=fixed)
     doc = GeometryDocument(
         geometry=geometry,
@@ -126,3 +115,32 @@ def assemble(
         comments=list(comments or []),
     )
     return weld_document(doc) if weld else doc
+
+
+def _standalone_edges(
+    edges: NDArray[np.int64] | None, notes: list[str]
+) -> NDArray[np.int64] | None:
+    """The edges that join two distinct vertices (``None``: none); a note for those dropped."""
+    if edges is None or not len(edges):
+        return None
+    standalone, n_rep = drop_repeating(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
+    if n_rep:
+        notes.append(f"dropped {_plural(n_rep, 'edge')} that repeat a vertex")
+    return standalone if len(standalone) else None
+
+
+def _polylines(
+    polylines: Sequence[tuple[NDArray[np.int64], bool]], notes: list[str]
+) -> list[Polyline]:
+    """The polylines of at least 2 distinct vertices, normalized; a note for those dropped."""
+    lines: list[Polyline] = []
+    n_short = 0
+    for idx, closed in polylines:
+        pl = normalize_polyline(idx, closed)
+        if pl is None:
+            n_short += 1
+        else:
+            lines.append(pl)
+    if n_short:
+        notes.append(f"dropped {_plural(n_short, 'polyline')} with fewer than 2 distinct vertices")
+    return lines

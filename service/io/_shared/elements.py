@@ -15,6 +15,7 @@ Rules (the same for every format):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ __all__ = [
     "as_indices",
     "check_indices",
     "drop_repeating",
+    "edge_array",
     "fan_triangulate",
     "normalize_polyline",
 ]
@@ -181,3 +183,13 @@ def normalize_polyline(indices: NDArray[np.int64], closed: bool = False) -> Poly
     if idx.size < 2:
         return None
     return Polyline(idx, closed=bool(closed) and idx.size >= 3)
+
+
+def edge_array(
+    standalone: NDArray[np.int64] | None, polylines: Sequence[Polyline]
+) -> NDArray[np.int64] | None:
+    """The engine's edges: the standalone ones, then each polyline's (``None``: no edges)."""
+    parts = ([standalone] if standalone is not None and len(standalone) else []) + [
+        p.edges() for p in polylines
+    ]
+    return np.concatenate(parts) if parts else None

@@ -17,23 +17,21 @@ The frame is recorded where the format holds one (:class:`Georef`): LAS/LAZ a WK
 point format 6/7; the local frame as an engineering CRS whose remark holds the pipeline), DXF the
 ``$LATITUDE``/``$LONGITUDE`` header variables of the origin plus custom properties
 ``CRS`` and ``CRS_FRAME``, PLY/OBJ header comments (and geosmooth JSON's ``comments``). XYZ, OFF,
-PCD, E57 and glTF record nothing (no comment or CRS field geosmooth writes there yet).
+PCD, E57 and glTF record nothing (no comment or CRS field geosmooth writes there yet). Which of
+the two an output gets is decided by :func:`service.io.holds.georeference`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 if TYPE_CHECKING:
     from service.io._shared.geo import LocalFrame
-    from service.io._shared.plain import PlainDocument
-    from service.io.document import GeometryDocument
-    from service.io.registry import Format
 
-__all__ = ["CrsOption", "Georef", "georeference", "utm_epsg"]
+__all__ = ["CrsOption", "Georef", "project", "target_crs", "utm_epsg"]
 
 CrsOption = str | int | None
 
@@ -101,7 +99,7 @@ def utm_epsg(lon: float, lat: float) -> int:
     return (32600 if lat >= 0 else 32700) + zone
 
 
-def _target(option: CrsOption, frame: LocalFrame) -> str:
+def target_crs(option: CrsOption, frame: LocalFrame) -> str:
     """``"EPSG:<code>"`` of the ``crs`` option (``ValueError`` for anything else)."""
     text = str(option).strip()
     if text.lower() == "utm":
@@ -114,7 +112,7 @@ def _target(option: CrsOption, frame: LocalFrame) -> str:
     return f"EPSG:{int(code)}"
 
 
-def _project(target: str, lon: Any, lat: Any, ele: Any) -> tuple[Any, str]:
+def project(target: str, lon: Any, lat: Any, ele: Any) -> tuple[Any, str]:
     import pyproj
 
     try:
@@ -130,37 +128,3 @@ def _project(target: str, lon: Any, lat: Any, ele: Any) -> tuple[Any, str]:
     if not np.isfinite(pts).all():
         raise ValueError(f"crs {target} ({crs.name}) cannot hold these points (outside its area)")
     return pts, str(crs.name)
-
-
-def georeference(
-    doc: GeometryDocument, spec: Format, plain: PlainDocument, option: CrsOption
-) -> PlainDocument:
-    """``plain`` with its frame recorded, and projected to the ``crs`` option if given.
-
-    Raises
-    ------
-    ValueError
-        ``crs`` given for input that is not geographic, for a longitude/latitude output, or not
-        a projected EPSG CRS.
-    """
-    from service.io.holds import same_family
-
-    geo = getattr(doc.layout, "frame", None)
-    frame = getattr(geo, "frame", None)
-    if option is not None and (frame is None or spec.geographic_only or same_family(doc, spec)):
-        where = "longitude/latitude" if spec.geographic_only else "planar coordinates"
-        raise ValueError(
-            "crs applies to geographic input (GPX, GeoJSON) written to a projected format;"
-            f" this {spec.title} output gets {where}"
-        )
-    if frame is None or spec.geographic_only or same_family(doc, spec):
-        return plain
-    assert geo is not None
-    origin = (frame.lon0, frame.lat0, 0.0)
-    if option is None:
-        name = "geosmooth local east/north/up metres"
-        return replace(plain, georef=Georef("local", origin, name))
-    target = _target(option, frame)
-    lon, lat, ele = geo.back(plain.points)
-    pts, name = _project(target, lon, lat, ele)
-    return replace(plain, points=pts, normals=None, georef=Georef(target, origin, name))

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.core.geometry import Geometry
-from service.io._shared.elements import drop_repeating, normalize_polyline
+from service.io._shared.elements import drop_repeating, edge_array, normalize_polyline
 from service.io.document import GeometryDocument, Polyline, WeldMap
 
 __all__ = ["weld_document", "weld_if_tied", "weld_index"]
@@ -101,23 +101,20 @@ def weld_if_tied(doc: GeometryDocument) -> GeometryDocument:
     if not tied.any():
         return doc
     out = weld_document(doc)
-    note = (f"{g.n - first.size} duplicate positions tie faces: welded by default (the output "
-            "keeps the file's vertex count and order; copies of a vertex stay identical; "
-            "weld=False keeps them apart)")
+    note = (
+        f"{g.n - first.size} duplicate positions tie faces: welded by default (the output "
+        "keeps the file's vertex count and order; copies of a vertex stay identical; "
+        "weld=False keeps them apart)"
+    )
     return out.with_extras(notes=[*out.notes, note])
 
 
-def weld_document(doc: GeometryDocument) -> GeometryDocument:
-    """Weld exactly coincident vertices of ``doc`` (which must not be welded already)."""
-    if doc.weld is not None:
-        return doc
+def _welded_connectivity(
+    doc: GeometryDocument, index: NDArray[np.int64], notes: list[str]
+) -> tuple[NDArray[np.int64] | None, NDArray[np.int64] | None, list[Polyline]]:
+    """Faces, standalone edges and polylines of ``doc`` on the welded vertices ``index``,
+    without those that became degenerate (a note for each kind dropped)."""
     g = doc.geometry
-    index, first = weld_index(g.points)
-    notes = list(doc.notes)
-    if first.size == g.n:
-        notes.append(f"welding: all {g.n} vertices are distinct")
-    else:
-        notes.append(f"welded {g.n} vertices to {first.size} distinct positions")
     faces = None
     if g.faces is not None:
         faces, n_rep = drop_repeating(index[g.faces])
@@ -138,18 +135,30 @@ def weld_document(doc: GeometryDocument) -> GeometryDocument:
             f"dropped {len(doc.polylines) - len(polylines)} polylines that collapsed to a point"
             " after welding"
         )
+    return faces, standalone, polylines
+
+
+def weld_document(doc: GeometryDocument) -> GeometryDocument:
+    """Weld exactly coincident vertices of ``doc`` (which must not be welded already)."""
+    if doc.weld is not None:
+        return doc
+    g = doc.geometry
+    index, first = weld_index(g.points)
+    notes = list(doc.notes)
+    if first.size == g.n:
+        notes.append(f"welding: all {g.n} vertices are distinct")
+    else:
+        notes.append(f"welded {g.n} vertices to {first.size} distinct positions")
+    faces, standalone, polylines = _welded_connectivity(doc, index, notes)
     weights = None
     if g.weights is not None:
         counts = np.bincount(index, minlength=first.size)
         weights = np.bincount(index, weights=g.weights, minlength=first.size) / counts
     fixed = np.unique(index[g.fixed]) if g.fixed is not None else None
-    edge_parts = ([standalone] if standalone is not None and len(standalone) else []) + [
-        p.edges() for p in polylines
-    ]
     welded = Geometry(
         g.points[first],
         faces=faces,
-        edges=np.concatenate(edge_parts) if edge_parts else None,
+        edges=edge_array(standalone, polylines),
         weights=weights,
         fixed=fixed,
     )

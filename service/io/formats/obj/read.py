@@ -281,6 +281,45 @@ def _block(
     acc.nvn += len(rows[b"vn"])
 
 
+def _scan(data: bytes) -> tuple[_Acc, Faces, Faces]:
+    """Every line of ``data`` classified, block by block of complete lines: the vertices and
+    other statements, the faces, the polylines (``l``)."""
+    acc, faces, polys = _Acc(), Faces(), Faces()
+    line = 1
+    for block in line_blocks(data, 0):
+        lines = block.data.split(b"\n")
+        if block.data.endswith(b"\n"):
+            lines.pop()
+        _block(acc, faces, polys, block.data, lines, block.offset, line)
+        line += block.data.count(b"\n")
+    return acc, faces, polys
+
+
+_Ints = NDArray[np.int64]
+
+
+def _polygons(
+    acc: _Acc, faces: Faces, totals: tuple[int, int, int], notes: list[str]
+) -> tuple[
+    tuple[_Ints, _Ints] | None, _Ints | None, _Ints | None, tuple[_Ints, _Ints, _Ints] | None
+]:
+    """The faces as ``(flat, counts)``, their counts, the ``(vertex, vn)`` index of every corner
+    and the corners' texture coordinates (:attr:`ObjLayout.uv`; each ``None`` when absent)."""
+    polygons: tuple[_Ints, _Ints] | None = None
+    counts: _Ints | None = None
+    corners: _Ints | None = None
+    uv: tuple[_Ints, _Ints, _Ints] | None = None
+    if faces.v:
+        flat, counts, vn = faces.finish(totals, "face", notes)
+        polygons = (flat, counts)
+        corner_vt = faces.texture(acc.nvt)
+        if corner_vt is not None:
+            uv = (corner_vt, counts, np.concatenate(acc.vt_spans))
+        if vn is not None and acc.nvn:
+            corners = np.column_stack([flat, vn])
+    return polygons, counts, corners, uv
+
+
 def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
     """Read an OBJ file.
 
@@ -291,14 +330,7 @@ def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
         than 3 coordinates, no ``v`` lines.
     """
     data = source.data()
-    acc, faces, polys = _Acc(), Faces(), Faces()
-    line = 1
-    for block in line_blocks(data, 0):
-        lines = block.data.split(b"\n")
-        if block.data.endswith(b"\n"):
-            lines.pop()
-        _block(acc, faces, polys, block.data, lines, block.offset, line)
-        line += block.data.count(b"\n")
+    acc, faces, polys = _scan(data)
     notes = [f"ignored {k} OBJ {name!r} statements" for name, k in sorted(acc.other.items())]
     if acc.nv == 0:
         found = sorted(acc.other)
@@ -306,15 +338,7 @@ def read_obj(source: Source, *, weld: bool = False) -> GeometryDocument:
         raise FormatError(f"the file holds no points: no 'v' lines{hint}", fmt="obj")
     table = np.concatenate(acc.v_rows)
     totals = (acc.nv, acc.nvt, acc.nvn)
-    polygons = corners = counts = uv = None
-    if faces.v:
-        flat, counts, vn = faces.finish(totals, "face", notes)
-        polygons = (flat, counts)
-        corner_vt = faces.texture(acc.nvt)
-        if corner_vt is not None:
-            uv = (corner_vt, counts, np.concatenate(acc.vt_spans))
-        if vn is not None and acc.nvn:
-            corners = np.column_stack([flat, vn])
+    polygons, counts, corners, uv = _polygons(acc, faces, totals, notes)
     polylines: list[tuple[NDArray[np.int64], bool]] = []
     if polys.v:
         flat_l, counts_l, _ = polys.finish(totals, "polyline", notes)

@@ -101,15 +101,8 @@ def _fail(message: str, line: int | None = None) -> FormatError:
     return FormatError(where + message, fmt="ply", line=line)
 
 
-def parse_header(data: bytes) -> PlyHeader:
-    """Parse the header of a PLY file.
-
-    Raises
-    ------
-    FormatError
-        Missing ``ply`` magic, ``format`` or ``end_header``; unknown keywords or types; bad
-        element counts; properties outside an element.
-    """
+def _header_lines(data: bytes) -> tuple[list[str], int]:
+    """The header's lines (without ``end_header``) and the offset of the body."""
     if not data.strip():
         raise FormatError("the file is empty", fmt="ply")
     if not data.startswith(b"ply"):
@@ -121,6 +114,19 @@ def parse_header(data: bytes) -> PlyHeader:
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
+    return lines, end.end()
+
+
+def parse_header(data: bytes) -> PlyHeader:
+    """Parse the header of a PLY file.
+
+    Raises
+    ------
+    FormatError
+        Missing ``ply`` magic, ``format`` or ``end_header``; unknown keywords or types; bad
+        element counts; properties outside an element.
+    """
+    lines, body = _header_lines(data)
     encoding: str | None = None
     elements: list[PlyElement] = []
     comments: list[str] = []
@@ -165,7 +171,7 @@ def parse_header(data: bytes) -> PlyHeader:
     for el in elements:
         if el.count and not el.properties:
             raise _fail(f"element {el.name!r} has no properties")
-    return PlyHeader(encoding, elements, end.end(), len(lines) + 1, comments, obj_info)
+    return PlyHeader(encoding, elements, body, len(lines) + 1, comments, obj_info)
 
 
 def _property(words: list[str], raw: str, number: int) -> PlyProperty:
