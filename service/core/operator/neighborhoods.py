@@ -189,7 +189,11 @@ def mesh_neighborhoods(
     from service.core.operator.kernels import mesh_rings
 
     faces = np.ascontiguousarray(unique_faces(faces), dtype=np.int64)
-    wedges = np.concatenate([faces, faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
+    m = len(faces)
+    wedges = np.empty((3 * m, 3), dtype=np.int64)  # faces, then rotated once and twice
+    for r in range(3):
+        for c in range(3):
+            wedges[r * m : (r + 1) * m, c] = faces[:, (c + r) % 3]
     indptr, cols, boundary = mesh_rings(faces, n)
     adj = sp.csr_matrix((np.ones(cols.size), cols, indptr), shape=(n, n))
     chains = NO_TRIPLES
