@@ -60,7 +60,8 @@ def warm_up() -> None:
 
 def warm_compiled(rng: np.random.Generator) -> None:
     """Call the compiled kernels that only inputs of 50,000 points or more reach (the grid
-    ``k``-NN, the data weights' fits and isolation pass, the closed-form frames) on a tiny
+    ``k``-NN, the data weights' fits and isolation pass, the closed-form frames, the per-face
+    passes of the finish and the shape checks, the normal system's scaling) on a tiny
     surface: without this, the first large job or upload of each process compiled them (a few
     CPU seconds each; more than a minute on a loaded machine with no numba cache yet)."""
     from service.core.noise.fast_fits import leave_one_out
@@ -78,7 +79,16 @@ def warm_compiled(rng: np.random.Generator) -> None:
     faces = np.r_[np.c_[quad, quad + 1, quad + side], np.c_[quad + 1, quad + side + 1, quad + side]]
     isolation_distances(Geometry(sheet), nbr)
     isolation_distances(Geometry(sheet, faces=faces), nbr)
-    surface_normals(sheet, 10)
+    normals = surface_normals(sheet, 10)[:, :, 0]
+    # the finish and the shape checks (issue 30): per-face passes; the normal system's scaling
+    from service.core.finish import mesh_kernels
+    from service.core.system.fast_frames import scale_by_normals
+
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    mesh_kernels.folded(mesh_kernels.face_normals(sheet, faces), faces, side * side)
+    mesh_kernels.signed_volumes(sheet, faces)
+    A = sp.csr_matrix(sp.eye(side * side, format="csr"), copy=True)
+    scale_by_normals(A.indptr, A.indices, A.data, np.ascontiguousarray(normals))
 
 
 def apply_thread_limit() -> None:

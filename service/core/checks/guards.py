@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.core.finish.folds import face_normals, folded_faces
-from service.core.finish.volume import enclosed_measure, is_closed_curve_set, is_closed_mesh
+from service.core.finish.volume import enclosed_measures, is_closed_curve_set, is_closed_mesh
 from service.core.geometry import Geometry
 
 __all__ = [
@@ -122,6 +122,26 @@ def _relative(after: float, before: float) -> float | None:
     return (after - before) / before if before > 0 and np.isfinite(after) else None
 
 
+def _mesh_checks(
+    P: NDArray[np.float64], X: NDArray[np.float64], F: NDArray[np.int64], n: int
+) -> tuple[int, int, tuple[int, int, int], float | None, float | None]:
+    """Faces compared, flipped faces, folds (result, input, new), area and volume change of a
+    triangle mesh in 3-D: every per-face quantity from the two sets of face normals (compiled
+    from :data:`~service.core.finish.folds.COMPILED_FROM` faces), the parts found once."""
+    n0, n1 = face_normals(P, F), face_normals(X, F)
+    a0, a1 = np.linalg.norm(n0, axis=1), np.linalg.norm(n1, axis=1)
+    ok = a0 > 0
+    flipped = int(np.sum(np.einsum("ij,ij->i", n0[ok], n1[ok]) < 0))
+    fold0, fold1 = folded_faces(n0, F, n), folded_faces(n1, F, n)
+    folds = (int(fold1.sum()), int(fold0.sum()), _new_folds(fold0, fold1, F, n))
+    area = _relative(float(a1.sum()), float(a0.sum()))
+    volume = None
+    if is_closed_mesh(F):
+        before, after = enclosed_measures((P, X), F)
+        volume = _relative(after, before)
+    return int(ok.sum()), flipped, folds, area, volume
+
+
 def shape_checks(geometry: Geometry, X: NDArray[np.float64]) -> ShapeChecks:
     """Compare the smoothed points ``X`` with the input ``geometry``.
 
@@ -144,23 +164,13 @@ def shape_checks(geometry: Geometry, X: NDArray[np.float64]) -> ShapeChecks:
     volume = area = None
     F, E = geometry.faces, geometry.edges
     if F is not None and geometry.dim == 3:
-        n0 = face_normals(P, F)
-        ok = np.linalg.norm(n0, axis=1) > 0
-        n_faces = int(ok.sum())
-        n1 = face_normals(X, F)
-        flipped = int(np.sum(np.einsum("ij,ij->i", n0[ok], n1[ok]) < 0))
-        fold0, fold1 = folded_faces(n0, F, geometry.n), folded_faces(n1, F, geometry.n)
-        folds = (int(fold1.sum()), int(fold0.sum()), _new_folds(fold0, fold1, F, geometry.n))
-        area = _relative(
-            float(np.linalg.norm(n1, axis=1).sum()), float(np.linalg.norm(n0, axis=1).sum())
-        )
-        if is_closed_mesh(F):
-            volume = _relative(enclosed_measure(X, F), enclosed_measure(P, F))
+        n_faces, flipped, folds, area, volume = _mesh_checks(P, X, F, geometry.n)
     elif F is None and E is not None:
         length = float(np.linalg.norm(P[E[:, 0]] - P[E[:, 1]], axis=1).sum())
         area = _relative(float(np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1).sum()), length)
         if geometry.dim == 2 and is_closed_curve_set(E, geometry.n):
-            volume = _relative(enclosed_measure(X, None, E), enclosed_measure(P, None, E))
+            before, after = enclosed_measures((P, X), None, E)
+            volume = _relative(after, before)
     return ShapeChecks(flipped, n_faces, volume, area, moved_far, *folds)
 
 

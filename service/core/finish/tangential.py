@@ -44,6 +44,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from service.core.finish.folds import fold_mask
+from service.core.finish.volume import edge_counts
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
@@ -177,10 +178,7 @@ def valence_irregularity(faces: NDArray[np.int64], n: int) -> float:
     0 on regular triangulations (valence 6, or 4 and 8 on grids with alternating diagonals, and
     the few valence-5 vertices of an icosphere), about 0.44 on triangulated random points.
     """
-    E = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    keys = E[:, 0].astype(np.int64) * n + E[:, 1]
-    uniq, counts = np.unique(keys, return_counts=True)
-    a, b = uniq // n, uniq % n
+    a, b, counts = edge_counts(faces, n)
     valence = np.bincount(np.concatenate([a, b]), minlength=n)
     boundary = np.zeros(n, dtype=bool)
     boundary[a[counts == 1]] = True
@@ -209,10 +207,6 @@ def tangential_budget(
     return float(BUDGET_FACTOR * dims * phi_normal * excess)
 
 
-def _tangential(E: Array, normals: Array) -> Array:
-    return E - np.einsum("ij,ij->i", E, normals)[:, None] * normals
-
-
 def tangential_flow(
     L: sp.csr_matrix,
     P: Array,
@@ -237,14 +231,17 @@ def tangential_flow(
     steps : int
     psi : float
     """
-    free = ~fixed
+    free: NDArray[np.bool_] | slice = ~fixed if fixed.any() else slice(None)  # views if all
     d2 = (omega[free] ** 2)[:, None]
     X = P.copy()
-    E = np.zeros((int(free.sum()), P.shape[1]))
+    E = np.zeros((int((~fixed).sum()), P.shape[1]))
     psi = 0.0
     for steps in range(1, MAX_STEPS + 1):
-        G = -STEP * _tangential(np.asarray(L @ X)[free], normals)
-        after = float(np.sum(d2 * (E + G) ** 2))
+        LX = np.asarray(L @ X)[free]
+        G = np.einsum("ij,ij->i", LX, normals)[:, None] * normals  # -STEP T T^T (L X), in place
+        G = np.multiply(np.subtract(LX, G, out=G), -STEP, out=G)
+        tmp = E + G  # d2 (E + G)^2 in place: the same numbers, one temporary
+        after = float(np.sum(np.multiply(np.square(tmp, out=tmp), d2, out=tmp)))
         if after >= budget * (1.0 - 1e-12):  # psi(t) = psi + 2t <E, G> + t^2 |G|^2 = budget
             a, b = float(np.sum(d2 * G**2)), 2.0 * float(np.sum(d2 * E * G))
             t = (-b + np.sqrt(max(b * b + 4.0 * a * (budget - psi), 0.0))) / (2.0 * a)
@@ -345,12 +342,13 @@ def relax_tangential(
     if budget <= 0:
         return X, TangentialStep(share, budget, irregular=irregular)
     omega = geometry.omega() / frame.weight_scale
-    E_t, steps, _ = tangential_flow(op.L, P, omega, fixed, normals[~fixed], budget)
+    free: NDArray[np.bool_] | slice = ~fixed if fixed.any() else slice(None)  # views if all
+    E_t, steps, _ = tangential_flow(op.L, P, omega, fixed, normals[free], budget)
     base = frame.points(X)
     out = base.copy()
-    out[~fixed] += E_t
+    out[free] += E_t
     out, reverted = unfold(out, base, faces)
-    psi = float(np.sum((omega[~fixed] ** 2)[:, None] * (out - base)[~fixed] ** 2))
+    psi = float(np.sum((omega[free] ** 2)[:, None] * (out - base)[free] ** 2))
     X = X.copy()
-    X[~fixed] = frame.back(out[~fixed])
+    X[free] = frame.back(out[free])
     return X, TangentialStep(share, budget, psi, steps, reverted, irregular)

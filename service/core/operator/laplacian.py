@@ -145,6 +145,10 @@ def presmooth(
     W = sp.diags(inv) @ adjacency
     X = points.copy()
     has = deg > 0
+    if has.all():  # the same numbers without the masked copies (issue 30)
+        for _ in range(steps):
+            X = 0.5 * (X + np.asarray(W @ X))
+        return X
     for _ in range(steps):
         X[has] = 0.5 * (X[has] + np.asarray(W @ X)[has])
     return X

@@ -112,10 +112,12 @@ def unique_faces(faces: NDArray[np.int64]) -> NDArray[np.int64]:
     """Drop duplicate triangles (same vertex set, any order or winding), keeping the first."""
     if len(faces) == 0:
         return faces
-    key = _row_keys(np.sort(faces, axis=1), int(faces.max()) + 1)
-    srt = np.sort(key)
-    if not (srt[1:] == srt[:-1]).any():  # the common case: one plain sort, no argsort
-        return faces
+    from service.core.operator.kernels import has_duplicate_faces
+
+    n = int(faces.max()) + 1
+    if not has_duplicate_faces(np.ascontiguousarray(faces, dtype=np.int64), n):
+        return faces  # the common case: one linear pass (issue 30)
+    key = _row_keys(np.sort(faces, axis=1), n)
     _, first, _, _ = unique_keys(key)
     if first.size == len(faces):
         return faces
@@ -187,7 +189,11 @@ def mesh_neighborhoods(
     from service.core.operator.kernels import mesh_rings
 
     faces = np.ascontiguousarray(unique_faces(faces), dtype=np.int64)
-    wedges = np.concatenate([faces, faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
+    m = len(faces)
+    wedges = np.empty((3 * m, 3), dtype=np.int64)  # faces, then rotated once and twice
+    for r in range(3):
+        for c in range(3):
+            wedges[r * m : (r + 1) * m, c] = faces[:, (c + r) % 3]
     indptr, cols, boundary = mesh_rings(faces, n)
     adj = sp.csr_matrix((np.ones(cols.size), cols, indptr), shape=(n, n))
     chains = NO_TRIPLES
@@ -205,7 +211,7 @@ def mesh_neighborhoods(
         deg_e = np.diff(eg.indptr)
         boundary |= deg_e == 1
         chains = _chains(eg, np.flatnonzero(deg_e >= 2))
-    return Neighborhoods(n, adj, wedges.astype(np.int64), chains, boundary, "mesh")
+    return Neighborhoods(n, adj, wedges.astype(np.int64, copy=False), chains, boundary, "mesh")
 
 
 def knn(points: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:

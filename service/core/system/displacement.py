@@ -207,9 +207,14 @@ def projected_normal_system(
     if r == 1:  # A has the pattern of L_F, entries L_ij (n_i . n_j): scale its data in place
         A = sp.csr_matrix(L_F, copy=True)
         A.sum_duplicates()
-        rows = np.repeat(np.arange(m), np.diff(A.indptr))
         f = frames[:, :, 0]
-        A.data *= np.einsum("ks,ks->k", f[rows], f[A.indices])
+        if m >= COMPILED_FRAMES_FROM and f.shape[1] == 3:
+            from service.core.system.fast_frames import scale_by_normals
+
+            scale_by_normals(A.indptr, A.indices, A.data, np.ascontiguousarray(f))
+        else:
+            rows = np.repeat(np.arange(m), np.diff(A.indptr))
+            A.data *= np.einsum("ks,ks->k", f[rows], f[A.indices])
     else:
         rows, cols, vals = _blocks(sp.coo_matrix(L_F), frames, r)
         A = sp.csr_matrix((vals, (rows, cols)), shape=(m * r, m * r))
@@ -279,11 +284,17 @@ def normal_mode(
             f"{geometry.dim}-D has none; use displacement 'free'",
             field="params.displacement",
         )
-    free = np.flatnonzero(~fixed)
-    frames = normal_frames(P, nb.adjacency, codim)[free]
-    L_R = sp.csr_matrix(L)[free]
-    ns = projected_normal_system(L_R[:, free], np.asarray(L_R @ P), frames, omega[free] ** 2)
-    P_F = P[free]
+    if fixed.any():
+        free = np.flatnonzero(~fixed)
+        frames = normal_frames(P, nb.adjacency, codim)[free]
+        L_R = sp.csr_matrix(L)[free]
+        ns = projected_normal_system(L_R[:, free], np.asarray(L_R @ P), frames, omega[free] ** 2)
+        P_F = P[free]
+    else:  # the same system without the row and column selections (issue 30)
+        L_R = sp.csr_matrix(L)
+        frames = normal_frames(P, nb.adjacency, codim)
+        ns = projected_normal_system(L_R, np.asarray(L_R @ P), frames, omega**2)
+        P_F = P
     return SmoothingSystem(ns.M, ns.d2, ns.b, ns.U0), lambda U: ns.points(P_F, U)
 
 

@@ -11,7 +11,8 @@ under ``n_i -> -n_i``: ``t_i`` changes sign, ``p_i + n_i t_i`` does not); direct
 rounding (tests). :func:`service.core.system.displacement.normal_frames` takes this path for
 one normal direction in 3-D at every point, from
 :data:`~service.core.system.displacement.COMPILED_FRAMES_FROM` points (the averaging steps are
-its own).
+its own); from as many unknowns :func:`scale_by_normals` forms the normal system's ``A``
+(:func:`~service.core.system.displacement.projected_normal_system`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from numpy.typing import NDArray
 from service.core.noise.fast_fits import _eig3
 from service.core.operator.knn import knn
 
-__all__ = ["surface_normals"]
+__all__ = ["scale_by_normals", "surface_normals"]
 
 Array = NDArray[np.float64]
 
@@ -64,3 +65,16 @@ def _normals(X: Array, idx: NDArray[np.int64]) -> Array:  # pragma: no cover
             nx = 1.0
         out[p, 0], out[p, 1], out[p, 2] = nx, ny, nz
     return out
+
+
+@njit(cache=True)
+def scale_by_normals(
+    indptr: NDArray[np.int64], indices: NDArray[np.int32], data: Array, f: Array
+) -> None:  # pragma: no cover
+    """``A_ij <- A_ij (n_i . n_j)`` in place on a CSR pattern, ``n`` the rows of ``f`` (the
+    normal system's ``A`` for one normal direction in 3-D, without the two ``(nnz, 3)`` gathers
+    of ``f``; the dot product in ``np.einsum``'s order of the three terms: same numbers)."""
+    for i in range(indptr.size - 1):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            data[p] *= (f[i, 0] * f[j, 0] + f[i, 2] * f[j, 2]) + f[i, 1] * f[j, 1]

@@ -140,3 +140,26 @@ def test_adjacency_from_pairs_matches_scipy() -> None:
     A.sort_indices()
     B = pair_adjacency(i, j, 60)
     assert np.array_equal(B.indptr, A.indptr) and np.array_equal(B.indices, A.indices)
+
+
+def test_unique_faces_keeps_the_first_of_each_vertex_set() -> None:
+    from service.core.operator.kernels import has_duplicate_faces
+    from service.core.operator.neighborhoods import unique_faces
+
+    rng = np.random.default_rng(7)
+    n = 400
+    F = np.unique(np.sort(rng.integers(0, n, size=(2000, 3)), axis=1), axis=0)  # distinct sets
+    F = rng.permuted(F, axis=1)  # any order within a face
+    hub = np.c_[np.zeros(300, dtype=np.int64), np.arange(1, 301), np.arange(2, 302)]  # one bucket
+    for faces in (F, hub):
+        assert not has_duplicate_faces(faces, n + 2)
+        assert unique_faces(faces) is faces
+    messy = np.concatenate([F, F[[5, 9]][:, [2, 0, 1]], hub, hub[[299]][:, [1, 0, 2]]])
+    assert has_duplicate_faces(messy, n + 2)
+    seen: set[tuple[int, ...]] = set()
+    keep = []
+    for row in messy.tolist():  # the first face of each sorted vertex triple, by a loop
+        if tuple(sorted(row)) not in seen:
+            seen.add(tuple(sorted(row)))
+            keep.append(row)
+    np.testing.assert_array_equal(unique_faces(messy), keep)

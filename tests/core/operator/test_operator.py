@@ -76,3 +76,25 @@ def test_analysis_cache_follows_the_sparsity_pattern(monkeypatch: pytest.MonkeyP
     keep[5] = False  # a closed mesh minus one face keeps every edge: same pattern, cache hit
     smooth(Geometry(P, faces=F[keep]), SmoothingParams(tau=0.02))
     assert calls["n"] == 3
+
+
+def test_presmooth_without_isolated_points_is_the_masked_iteration() -> None:
+    """Every point with a neighbour: the averaging skips the masks, same bits; an isolated
+    point added to the graph (masked path) leaves the others' results unchanged."""
+    import scipy.sparse as sp
+
+    from service.core.operator.laplacian import presmooth
+    from service.core.operator.neighborhoods import mesh_neighborhoods
+
+    P, F = noisy_icosphere(3, 0.05)
+    A = mesh_neighborhoods(F, len(P)).adjacency
+    fast = presmooth(P, A, 4)
+    A1 = sp.csr_matrix(sp.block_diag([A, sp.csr_matrix((1, 1))]))
+    masked = presmooth(np.vstack([P, [[9.0, 9.0, 9.0]]]), A1, 4)
+    np.testing.assert_array_equal(fast, masked[:-1])
+    np.testing.assert_array_equal(masked[-1], [9.0, 9.0, 9.0])
+    W = np.diag(1.0 / A.toarray().sum(1)) @ A.toarray()  # dense reference
+    X = P.copy()
+    for _ in range(4):
+        X = 0.5 * (X + W @ X)
+    np.testing.assert_allclose(fast, X, rtol=0, atol=1e-13)

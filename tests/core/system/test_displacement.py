@@ -143,3 +143,44 @@ def test_compiled_covariances_match_numpy() -> None:
     idx = rng.integers(0, 40, size=(40, 7))
     Q = X[idx] - X[idx].mean(axis=1, keepdims=True)
     assert np.allclose(neighbourhood_covariances(X, idx), np.einsum("nki,nkj->nij", Q, Q))
+
+
+def test_compiled_scaling_of_the_normal_system_is_the_numpy_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """From COMPILED_FRAMES_FROM unknowns A_ij = L_ij n_i . n_j is formed by a kernel: the same
+    bits as the gathered einsum (and the dense product above checks the formula)."""
+    from service.core.system import displacement
+
+    rng = np.random.default_rng(3)
+    m = 80
+    L = sp.random(m, m, density=0.1, random_state=4, format="csr") + sp.eye(m)
+    frames = rng.normal(size=(m, 3, 1))
+    frames /= np.linalg.norm(frames, axis=1, keepdims=True)
+    LP, w2 = rng.normal(size=(m, 3)), rng.uniform(0.5, 2.0, m)
+    plain = projected_normal_system(L, LP, frames, w2)
+    monkeypatch.setattr(displacement, "COMPILED_FRAMES_FROM", 1)
+    compiled = projected_normal_system(L, LP, frames, w2)
+    assert np.array_equal(plain.M.tocsr().toarray(), compiled.M.tocsr().toarray())
+    assert np.array_equal(plain.b, compiled.b)
+
+
+def test_no_fixed_points_give_the_system_of_the_full_selection() -> None:
+    """normal_mode without fixed points skips the row and column selections: same system."""
+    from service.core.operator.build import build_operator
+    from service.core.system.displacement import normal_mode
+
+    P, F = noisy_icosphere(3, 0.02)
+    g = Geometry(P, faces=F)
+    op = build_operator(g, SmoothingParams())
+    Q = op.frame.points(P)
+    omega = np.random.default_rng(2).uniform(0.5, 2.0, g.n)
+    system, to_points = normal_mode(g, op.L, op.neighborhoods, Q, omega, np.zeros(g.n, bool))
+    every = np.arange(g.n)
+    L_R = sp.csr_matrix(op.L)[every]
+    frames = normal_frames(Q, op.neighborhoods.adjacency, 1)[every]
+    ref = projected_normal_system(L_R[:, every], np.asarray(L_R @ Q), frames, omega[every] ** 2)
+    assert np.array_equal(system.M.tocsr().toarray(), ref.M.tocsr().toarray())
+    assert np.array_equal(system.b, ref.b) and np.array_equal(system.d2, ref.d2)
+    U = np.random.default_rng(3).normal(size=(g.n, 1))
+    assert np.array_equal(to_points(U), ref.points(Q[every], U))
