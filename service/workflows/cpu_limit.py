@@ -31,7 +31,8 @@ from service.workflows.errors import ServiceError
 
 __all__ = ["DEFAULT_TIME_LIMIT", "TimeLimitReached", "cpu_time_limit", "parse_time_limit"]
 
-#: CPU seconds of one file's run by default: the server's ``job_timeout`` default.
+#: CPU seconds of one file's run by default: the server's ``job_timeout`` default
+#: (service/settings.py; tests/cli/test_time_limit.py checks that they agree).
 DEFAULT_TIME_LIMIT = 3600.0
 
 

@@ -49,7 +49,12 @@ def test_wall_time_does_not_count() -> None:
 
 
 def test_parse_time_limit() -> None:
-    assert parse_time_limit(None) == DEFAULT_TIME_LIMIT == 3600.0
+    from service.settings import Settings
+
+    # the CLI's default is the server's job time limit (workflows may not import the settings)
+    assert (
+        parse_time_limit(None) == DEFAULT_TIME_LIMIT == Settings.model_fields["job_timeout"].default
+    )
     assert parse_time_limit("none") is None and parse_time_limit("0") is None
     assert parse_time_limit("2.5") == 2.5
     for bad in ("-1", "abc", "inf", "nan"):
