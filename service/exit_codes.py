@@ -22,6 +22,7 @@ EXIT_GEOMETRY = 4
 EXIT_SOLVER = 5
 EXIT_OUTPUT = 6
 EXIT_SHAPE = 12
+EXIT_LIMIT = 13
 EXIT_INTERRUPTED = 130
 
 #: Exit status -> meaning; printed in ``geosmooth --help``.
@@ -35,6 +36,7 @@ EXIT_CODES: dict[int, str] = {
     EXIT_SOLVER: "the linear solver failed",
     EXIT_OUTPUT: "cannot write the output or report file",
     EXIT_SHAPE: "--strict: smoothing lost shape (a shape check warned); nothing was written",
+    EXIT_LIMIT: "the run used its CPU time limit (--time-limit); nothing was written",
     EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
 }
 

@@ -102,6 +102,11 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
     )  # fmt: skip
     add_limits(more)
     more.add_argument(
+        "--time-limit", metavar="SECONDS",
+        help="stop a file's run after SECONDS of CPU time, nothing written (exit 13) "
+        "[default: 3600, the server's job time limit; 'none': no bound]",
+    )  # fmt: skip
+    more.add_argument(
         "--exit-unchanged", type=_exit_status, default=0, metavar="N",
         help="exit status when nothing was smoothed (the output is the input: copied, or "
         "converted to another format), so a batch can branch on it [default: 0]",

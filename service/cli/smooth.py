@@ -262,7 +262,13 @@ def smooth_one(
     ns: argparse.Namespace, progress: ProgressDisplay
 ) -> tuple[SmoothingParams, Smoothed]:
     """Smooth the one file ``ns.input`` into ``ns.output`` (errors are raised)."""
-    with read_limits(ns):
+    from service.workflows.cpu_limit import cpu_time_limit, parse_time_limit
+
+    try:
+        seconds = parse_time_limit(getattr(ns, "time_limit", None))
+    except ValueError as exc:
+        raise CliError(f"--time-limit: {exc}", EXIT_USAGE) from exc
+    with read_limits(ns), cpu_time_limit(seconds):
         return _smooth_one(ns, progress)
 
 

@@ -5,4 +5,6 @@
   :mod:`geosmooth` facade.
 * :mod:`service.workflows.admission`: the submit check of a job (estimate, ``tau`` range, dry
   run, tiles), computed once; the :class:`~service.jobs.queue.NewJob` carries its result.
+* :mod:`service.workflows.cpu_limit`: the CPU seconds one run may use (``geosmooth smooth
+  --time-limit``).
 """

@@ -79,7 +79,8 @@ def test_jobs_belong_to_their_key_and_others_get_404(keyed: LiveServer) -> None:
             body = _problem(bob.get(f"/v1/jobs/{job['id']}{path}"), 404)
             assert body["code"] == "job-not-found"
         _problem(bob.delete(f"/v1/jobs/{job['id']}"), 404)
-        _problem(bob.delete(f"/v1/jobs/{queued}"), 404)  # cannot cancel it either
+        _problem(bob.delete(f"/v1/jobs/{queued}"), 404)  # cannot delete it either
+        _problem(bob.post(f"/v1/jobs/{queued}/cancel"), 404)  # nor cancel it
         assert job["id"] not in [i["id"] for i in bob.get("/v1/jobs").json()["items"]]
         assert bob.get("/v1/jobs").json()["total"] == 0
         mine = {i["id"] for i in alice.get("/v1/jobs", params={"limit": 500}).json()["items"]}

@@ -68,7 +68,7 @@ def test_cancel_running_job_stops_its_process(client: httpx.Client, server: Live
     assert early.headers["content-type"] == "application/problem+json"
     assert early.json()["code"] == "result-not-ready" and "retry-after" in early.headers
 
-    r = client.delete(f"/v1/jobs/{job_id}")
+    r = client.post(f"/v1/jobs/{job_id}/cancel")
     assert r.status_code == 200, r.text
     assert r.json()["status"] == "cancelled"
     deadline = time.monotonic() + 5
@@ -87,6 +87,31 @@ def test_cancel_running_job_stops_its_process(client: httpx.Client, server: Live
     assert client.get(f"/v1/jobs/{job_id}").status_code == 404
 
 
+def test_delete_running_job_stops_it_and_removes_it(
+    client: httpx.Client, server: LiveServer
+) -> None:
+    """``DELETE`` of a running job: its solver process is gone and every route of it is 404."""
+    assert server.proc is not None
+    idle = descendants(server.proc.pid)
+    files = {"file": ("slow.xyz", _slow_input())}
+    r = client.post("/v1/jobs", files=files, data={"params": json.dumps(SLOW_PARAMS)})
+    assert r.status_code == 202, r.text
+    job_id = r.json()["id"]
+    assert _wait_running(client, job_id)["status"] == "running"
+    solver = _busy_descendant(server.proc.pid, idle)
+
+    r = client.delete(f"/v1/jobs/{job_id}")
+    assert r.status_code == 204 and r.content == b"", r.text
+    assert cpu_ticks(solver) is None, "the solver process still runs after the 204"
+    for method, tail in (("GET", ""), ("GET", "/result"), ("GET", "/report"),
+                         ("GET", "/events"), ("POST", "/cancel"), ("DELETE", "")):  # fmt: skip
+        gone = client.request(method, f"/v1/jobs/{job_id}{tail}")
+        assert gone.status_code == 404, (method, tail, gone.text)
+        assert gone.headers["content-type"] == "application/problem+json"
+        assert gone.json()["code"] == "job-not-found"
+    assert job_id not in [i["id"] for i in client.get("/v1/jobs").json()["items"]]
+
+
 def test_cancel_queued_job(make_server: Callable[..., LiveServer]) -> None:
     live = make_server(workers=1)
     with live.client() as c:
@@ -96,9 +121,10 @@ def test_cancel_queued_job(make_server: Callable[..., LiveServer]) -> None:
         body = {"geometry": json.loads(encode("json", pts, faces)), "params": {"tau": 0.05}}
         queued = c.post("/v1/jobs", json=body).json()
         assert c.get(f"/v1/jobs/{queued['id']}").json()["status"] == "queued"
-        r = c.delete(f"/v1/jobs/{queued['id']}")
+        r = c.post(f"/v1/jobs/{queued['id']}/cancel")
         assert r.status_code == 200 and r.json()["status"] == "cancelled"
-        assert c.delete(f"/v1/jobs/{slow['id']}").json()["status"] == "cancelled"
+        assert c.post(f"/v1/jobs/{queued['id']}/cancel").json()["status"] == "cancelled"
+        assert c.post(f"/v1/jobs/{slow['id']}/cancel").json()["status"] == "cancelled"
 
 
 @pytest.mark.slow

@@ -93,6 +93,7 @@ def test_unknown_job_is_404(client: httpx.Client) -> None:
         for suffix in ("", "/result", "/report"):
             _problem(client.get(path + suffix), 404, "job_id")
         _problem(client.delete(path), 404, "job_id")
+        _problem(client.post(path + "/cancel"), 404, "job_id")
 
 
 def test_unknown_route_and_method(client: httpx.Client) -> None:

@@ -161,7 +161,7 @@ def test_submit_cancelled_job(live: LiveServer, tmp_path: Path) -> None:
     proc, running = _start_slow_submit(live, tmp_path, seed=42)
     try:
         with live.client() as client:
-            assert client.delete(f"/v1/jobs/{running[0]['id']}").status_code == 200
+            assert client.post(f"/v1/jobs/{running[0]['id']}/cancel").status_code == 200
         _, stderr = proc.communicate(timeout=180)
     finally:
         proc.kill()

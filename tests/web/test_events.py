@@ -115,7 +115,7 @@ def test_events_end_with_cancelled(web_server: WebServer) -> None:
                 data = json.loads(event["data"]) if "event" in event else {}
                 running = event.get("event") == "progress" or data.get("status") == "running"
                 if running and not cancelled:
-                    assert client.delete(f"/v1/jobs/{job['id']}").status_code == 200
+                    assert client.post(f"/v1/jobs/{job['id']}/cancel").status_code == 200
                     cancelled = True
     assert cancelled
     last = json.loads(seen[-1]["data"])

@@ -42,7 +42,7 @@ EVENTS_READ_TIMEOUT = 45.0  # the service pings every 15 s
 
 
 def job_path(job_id: str, tail: str = "") -> str:
-    """``/v1/jobs/{id}`` (+ ``/result``, ``/report``, ``/events``)."""
+    """``/v1/jobs/{id}`` (+ ``/result``, ``/report``, ``/events``, ``/cancel``)."""
     if not job_id or "/" in job_id:
         raise ValueError(f"not a job id: {job_id!r}")
     return f"{JOBS}/{job_id}{tail}"

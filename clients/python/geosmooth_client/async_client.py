@@ -163,16 +163,11 @@ class AsyncClient(ClientBase[httpx.AsyncClient]):
 
     async def cancel(self, job_id: str) -> Job:
         """See :meth:`~geosmooth_client.Client.cancel`."""
-        job = await self.get(job_id)
-        if job.finished:
-            return job
-        response = await self._send("DELETE", job_path(job_id))
-        return job if response.status_code == 204 else Job.from_dict(response.json())
+        return Job.from_dict((await self._send("POST", job_path(job_id, "/cancel"))).json())
 
     async def delete(self, job_id: str) -> None:
         """See :meth:`~geosmooth_client.Client.delete`."""
-        if (await self._send("DELETE", job_path(job_id))).status_code == 200:
-            await self._send("DELETE", job_path(job_id))
+        await self._send("DELETE", job_path(job_id))
 
     async def _cancel_quietly(self, job_id: str) -> str:
         try:

@@ -226,20 +226,15 @@ class Client(ClientBase[httpx.Client]):
         return self._send("GET", job_path(job_id, "/result"), params=query).content
 
     def cancel(self, job_id: str) -> Job:
-        """Cancel a queued or running job; a finished job is returned unchanged (not deleted)."""
-        job = self.get(job_id)
-        if job.finished:
-            return job
-        response = self._send("DELETE", job_path(job_id))
-        if response.status_code == 204:  # it finished meanwhile, and DELETE removed it
-            return job
-        return Job.from_dict(response.json())
+        """Cancel a queued or running job (``POST /v1/jobs/{id}/cancel``); the job stays readable.
+
+        A finished job is returned unchanged (not deleted).
+        """
+        return Job.from_dict(self._send("POST", job_path(job_id, "/cancel")).json())
 
     def delete(self, job_id: str) -> None:
-        """Delete a job and its files (a queued or running job is cancelled first)."""
-        response = self._send("DELETE", job_path(job_id))
-        if response.status_code == 200:  # it was active: now cancelled, delete it
-            self._send("DELETE", job_path(job_id))
+        """Delete a job and its files (a queued or running job is cancelled first); then 404."""
+        self._send("DELETE", job_path(job_id))
 
     def _cancel_quietly(self, job_id: str) -> str:
         """Best effort (Ctrl-C, timeout): the job's status afterwards, or ``"unknown"``."""

@@ -1,4 +1,4 @@
-"""``/v1/jobs``: asynchronous smoothing jobs (submit, poll, download, cancel, list).
+"""``/v1/jobs``: asynchronous smoothing jobs (submit, poll, download, cancel, delete, list).
 
 Every route is scoped to the request's tenant: a job of another key is unknown (404).
 """
@@ -300,18 +300,43 @@ async def get_report(job: JobDep) -> Response:
     return FiniteJSONResponse(job.report or {})
 
 
+@router.post(
+    "/{job_id}/cancel",
+    response_model=Job,
+    response_description="The job after the call: ``cancelled``, or the final status it had.",
+    summary="Cancel a job",
+    description=(
+        "A queued or running job is cancelled (a running solver process is stopped before the "
+        "answer) and stays readable with status ``cancelled`` (its status and events) until it "
+        "expires or is deleted. A job that already "
+        "finished is returned unchanged. Idempotent: cancelling twice answers the same job."
+    ),
+    responses=problem_responses(404, 422, 503),
+)
+async def cancel_job(job: JobDep, queue: QueueDep, tenant: Tenant) -> Response:
+    if job.finished:
+        return FiniteJSONResponse(job_json(job))
+    record = await run_in_threadpool(lambda: queue.cancel(job.id, tenant=tenant))
+    if record is None:  # deleted meanwhile
+        raise job_not_found(job.id)
+    if record.status is JobStatus.CANCELLED:
+        log.info("job.cancelled", job_id=job.id, tenant=tenant)
+    return FiniteJSONResponse(job_json(record))
+
+
 @router.delete(
     "/{job_id}",
-    response_model=Job,
-    response_description="The cancelled job.",
-    summary="Cancel or delete a job",
+    status_code=204,
+    response_class=Response,
+    summary="Delete a job",
     description=(
-        "A queued or running job is cancelled (a running solver process is stopped) and "
-        "returned with status ``cancelled`` (200). A finished job is deleted with its files "
-        "(204, no body)."
+        "The job and its files are deleted (204, no body); afterwards every route of the job "
+        "answers 404. A queued or running job is cancelled first (a running solver process is "
+        "stopped before the answer). To stop a job and keep reading its final status, use "
+        "``POST /v1/jobs/{job_id}/cancel``."
     ),
     responses={
-        204: {"description": "The finished job and its files were deleted."},
+        204: {"description": "The job and its files were deleted."},
         **problem_responses(404, 422, 503),
     },
 )
@@ -322,8 +347,6 @@ async def delete_job(job: JobDep, queue: QueueDep, tenant: Tenant) -> Response:
             raise job_not_found(job.id)
         if record.status is JobStatus.CANCELLED:
             log.info("job.cancelled", job_id=job.id, tenant=tenant)
-            return FiniteJSONResponse(job_json(record))
-        job = record  # it finished on its own meanwhile: delete it
     deleted = await run_in_threadpool(lambda: queue.delete(job.id, tenant=tenant))
     if not deleted:
         raise job_not_found(job.id)

@@ -72,7 +72,9 @@ export class JobList {
     const active = job.status === "queued" || job.status === "running";
     actions.append(button(active ? "cancel" : "delete", async () => {
       try {
-        await apiFetch(job.links.status, { method: "DELETE" });
+        // cancel keeps the job readable (its final status shows); delete removes it (then 404)
+        if (active) await apiFetch(`${job.links.status}/cancel`, { method: "POST" });
+        else await apiFetch(job.links.status, { method: "DELETE" });
       } catch (err) { showProblem(err, "jobs"); }
       this.refresh();
     }));
