@@ -18,6 +18,8 @@ from service.core.errors import ParameterError
 from service.core.finish.volume import check_preservable
 from service.core.frame import Frame
 from service.core.geometry import Geometry
+from service.core.noise.curves import track_pins
+from service.core.noise.estimate import estimate_noise
 from service.core.noise.robust import DataWeights, data_weights
 from service.core.operator.build import SmoothingOperator, build_operator, operator_key
 from service.core.params import SmoothingParams
@@ -163,7 +165,10 @@ def free_set(
     L = op.L
     coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
     pinned = op.pinned if op.pinned is not None else False  # open-curve ends (issue 21)
-    return fixed | ~coupled | pinned, int(fixed.sum())
+    est = estimate_noise(geometry) if params.tau_rule == "auto" and geometry.faces is None \
+        and geometry.edges is not None else None
+    corners = track_pins(geometry, None if est is None else est.track, est.k if est else 0)
+    return fixed | ~coupled | pinned | corners, int(fixed.sum())
 
 
 def smoothing_system(

@@ -43,6 +43,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
+from service.core.noise.curves import SCALES, TrackNoise, track_noise
 
 __all__ = [
     "NOISE_RATIO",
@@ -105,6 +106,8 @@ class NoiseEstimate:
     roughness: float = 0.0
     scale_ratio: float | None = None
     neighbours: NDArray[np.int64] | None = None
+    #: Correlated noise along a polyline (:mod:`.curves`); ``sigma`` is then its level.
+    track: TrackNoise | None = None
 
     @property
     def noise_found(self) -> bool:
@@ -113,6 +116,10 @@ class NoiseEstimate:
 
     def describe(self) -> str:
         """One line for the report: the estimate and the evidence behind it."""
+        if self.track is not None:
+            t = self.track
+            return (f"noise found: sigma = {self.sigma:.6g}, correlated along the curve (AR(1), "
+                    f"phi = {t.phi:.2f}; its rough part {t.removable:.3g} is removable)")
         if self.sigma > 0:
             ratio = "" if self.scale_ratio is None else (
                 f"; residuals x{self.scale_ratio:.2f} from {self.k} to {2 * self.k} neighbours: "
@@ -272,7 +279,7 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
         rows, along = curve_neighbours(geometry, 2 * k)
         if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
             full = rows.size == n  # every point, in order: kept for the data weights
-            return _kept(_estimate(P, along, k, d), along if full else None)
+            return _tracked(geometry, _kept(_estimate(P, along, k, d), along if full else None))
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
     tree = cKDTree(P)
     at = _sample(P.shape[0])
@@ -292,6 +299,23 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
 
 def _kept(est: NoiseEstimate | None, nbr: NDArray[np.int64] | None) -> NoiseEstimate | None:
     return est if est is None or nbr is None else replace(est, neighbours=nbr)
+
+
+def _tracked(geometry: Geometry, est: NoiseEstimate | None) -> NoiseEstimate | None:
+    """``est`` with the correlated noise of :func:`.curves.track_noise` when it explains the
+    residual modes at ``k``, 2k, 4k, 8k samples (a GPS-like track), else ``est`` unchanged."""
+    if est is None or est.roughness <= 0:
+        return est
+    ks = tuple(est.k * s for s in SCALES)
+    _, along = curve_neighbours(geometry, ks[-1])
+    if along.shape[0] < max(10, geometry.n // 10):
+        return est
+    modes = [est.roughness**2]
+    for K in ks[1:]:
+        v = patch_variances(geometry.points, along[:, :K], 1)
+        modes.append(log_mode(v[np.isfinite(v)]))
+    t = track_noise(modes, ks) if np.all(np.isfinite(modes)) else None
+    return est if t is None else replace(est, sigma=t.sigma, track=t)
 
 
 def curve_neighbours(
