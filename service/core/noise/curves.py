@@ -13,8 +13,9 @@ with ``H_k`` the fit's hat matrix, ``R(phi)_ij = phi^|i-j|`` and ``p = 3``: ``g_
 on such tracks, and ``g_20 / g_10`` grows to 1.72 at ``phi = 0.9`` (white noise: 1), which is
 why the noise test's cut-off (1.85) was reached by a few corners more.
 
-**The curve's test.** The modes ``m(K)`` of ``log v_i(K)`` at ``K = k, 2k, 4k`` consecutive
-samples (:data:`SCALES`) are fitted by (1): for each ``phi`` of a grid ``sigma^2`` is the
+**The curve's test.** The modes ``m(K)`` of ``log v_i(K)`` at ``K = k, 2k, 4k, 8k``
+consecutive samples (:data:`SCALES`; windows along the chains, :func:`chain_windows`) are
+fitted by (1): for each ``phi`` of a grid ``sigma^2`` is the
 geometric mean of ``m(K) / g_K(phi)``, the misfit the RMS of ``log(m(K) / (sigma^2
 g_K(phi)))``. A mode is the value most windows share, so corners, which are few and isolated,
 only add a tail at every scale (a window straddling a corner), while noise, which is
@@ -24,14 +25,19 @@ A fit with ``phi >= PHI_MIN`` and misfit ``<= FIT_TOL`` is correlated noise: ``s
 ``phi`` are those of the fit. Anything else leaves :mod:`.estimate`'s white-noise estimate and
 test as they were (white noise gives ``phi`` near 0: the estimate stands, unchanged).
 
-**What smoothing can remove** of correlated noise is its rough part only: the wander longer
-than a window is indistinguishable from the track. The budget of the automatic tau uses the
-white-equivalent level ``sqrt(m(k))`` (:attr:`TrackNoise.removable`), not ``sigma``.
+**Smoothing a track.** The automatic tau's discrepancy budget takes this ``sigma`` (a point
+moves by about ``sigma`` when its noise is removed) and no tangential share: the weights are
+reciprocal (chord lengths carry little of a correlated noise, and uniform weights slide unevenly
+spaced samples along the track), and the corners are held (below). Without the corners held and
+with uniform weights, the same budget rounded the corners (vertex error up to 2.4 x the input's).
 
 **Corners kept**: the points where the track turns by more than :data:`CORNER_ANGLE` between
-the chords ``p_i - p_(i-s)`` and ``p_(i+s) - p_i`` (``s = k / 2``), local maxima of that turn
-over ``+-s``, are held in place (as the ends of an open track): the legs between them are
-smoothed, the corner is not rounded. Measurements: ``service/core/README.md``, "Tracks".
+the chords ``p_i - p_(i-s)`` and ``p_(i+s) - p_i`` (``s = k / 2``), with the turn concentrated
+there (at least :data:`CONCENTRATED` of the turn over ``2s``: a smooth bend turns about twice
+as much over twice the length), local maxima of that turn over ``+-s``, are held in place (as
+the ends of an open track) with the automatic tau: the legs between them are smoothed, the
+corner is not rounded, and it is not reported as an outlier
+(:func:`service.core.problem.held_corners`). Measurements: ``service/core/README.md``, "Tracks".
 """
 
 from __future__ import annotations
@@ -45,12 +51,16 @@ from numpy.typing import NDArray
 from service.core.geometry import Geometry
 
 __all__ = [
+    "CONCENTRATED",
     "CORNER_ANGLE",
     "FIT_TOL",
     "PHI_MIN",
     "SCALES",
+    "TRACK_RATIO_MAX",
+    "TRACK_WEIGHTS_WHY",
     "TrackNoise",
     "ar1_factor",
+    "chain_windows",
     "track_corners",
     "track_noise",
     "track_pins",
@@ -62,8 +72,17 @@ SCALES = (1, 2, 4, 8)
 PHI_MIN = 0.7
 #: Largest RMS log misfit of eq. (1) across :data:`SCALES` still read as correlated noise.
 FIT_TOL = 0.15
+#: Largest ``v(2k) / v(k)`` of the white-noise test for which eq. (1) is fitted at all: AR(1)
+#: noise gives at most ``g_20 / g_10`` = 1.76 (``phi`` 0.95), the calibration tracks 1.55 - 1.86
+#: (corners add a little); shape 3.0 (coastline) - 6.3 (the recorded track, clean) and more.
+TRACK_RATIO_MAX = 2.5
 #: The grid of ``phi`` searched.
 PHI_GRID = np.round(np.linspace(0.0, 0.95, 96), 4)
+#: Why a track's weights are reciprocal (the plan's ``weights`` with the automatic tau).
+TRACK_WEIGHTS_WHY = (
+    "reciprocal: a track with correlated noise (noise/curves.py); its chord lengths carry "
+    "little of the noise, so they keep unevenly spaced samples in place along the track"
+)
 #: Turn (degrees) between the chords over ``k / 2`` samples either side of a corner.
 CORNER_ANGLE = 30.0
 #: A corner's turn over ``s`` is at least this share of its turn over ``2s``.
@@ -82,7 +101,7 @@ class TrackNoise:
     phi : float
         Its correlation from one sample to the next.
     removable : float
-        White-equivalent level ``sqrt(m(k))``: the rough part a smoothing can remove.
+        White-equivalent level ``sqrt(m(k))``: what the white-noise estimate read.
     misfit : float
         RMS log misfit of eq. (1) across :data:`SCALES`.
     modes : tuple of float
@@ -175,6 +194,40 @@ def track_corners(geometry: Geometry, k: int) -> NDArray[np.bool_]:
         win = np.lib.stride_tricks.sliding_window_view(pad, 2 * s + 1)
         peak = (turn >= win.max(axis=1)) & (turn > CORNER_ANGLE)
         out[chain[peak]] = True
+    return out
+
+
+def chain_windows(
+    geometry: Geometry, ks: tuple[int, ...], budget: int
+) -> list[tuple[NDArray[np.int64], int]]:
+    """Windows of ``K`` consecutive points along the chains of the polylines (between ends
+    and junctions; around closed loops) for each ``K`` of ``ks``, and how many there are: one
+    per point of every chain of at least ``K`` points (clipped at open ends), of which at most
+    ``budget / K`` are returned (evenly spread: neighbouring windows share most of their
+    points). The neighbourhoods of
+    eq. (1)'s larger scales, without the hop-by-hop search of
+    :func:`service.core.noise.estimate.curve_neighbours`."""
+    E = np.asarray(geometry.edges)
+    n = geometry.n
+    chains = _chains(E, np.bincount(E.ravel(), minlength=n), n)
+    out = []
+    for K in ks:
+        rows = []
+        for chain in chains:
+            loop = chain.size > 2 and chain[0] == chain[-1]
+            c = chain[:-1] if loop else chain
+            if c.size < K:
+                continue
+            j = np.arange(c.size)[:, None]
+            if loop:
+                rows.append(c[(j - K // 2 + np.arange(K)) % c.size])
+            else:
+                rows.append(c[np.clip(j - K // 2, 0, c.size - K) + np.arange(K)])
+        W = np.vstack(rows) if rows else np.zeros((0, K), dtype=np.int64)
+        count, keep = W.shape[0], max(1, budget // K)
+        if count > keep:
+            W = W[np.linspace(0, count - 1, keep).astype(np.int64)]
+        out.append((W, count))
     return out
 
 

@@ -43,7 +43,8 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
-from service.core.noise.curves import SCALES, TrackNoise, track_noise
+from service.core.noise import curves
+from service.core.noise.curves import TrackNoise
 
 __all__ = [
     "NOISE_RATIO",
@@ -119,7 +120,7 @@ class NoiseEstimate:
         if self.track is not None:
             t = self.track
             return (f"noise found: sigma = {self.sigma:.6g}, correlated along the curve (AR(1), "
-                    f"phi = {t.phi:.2f}; its rough part {t.removable:.3g} is removable)")
+                    f"phi = {t.phi:.2f}; {len(t.modes)} scales, misfit {t.misfit:.3f})")
         if self.sigma > 0:
             ratio = "" if self.scale_ratio is None else (
                 f"; residuals x{self.scale_ratio:.2f} from {self.k} to {2 * self.k} neighbours: "
@@ -304,17 +305,16 @@ def _kept(est: NoiseEstimate | None, nbr: NDArray[np.int64] | None) -> NoiseEsti
 def _tracked(geometry: Geometry, est: NoiseEstimate | None) -> NoiseEstimate | None:
     """``est`` with the correlated noise of :func:`.curves.track_noise` when it explains the
     residual modes at ``k``, 2k, 4k, 8k samples (a GPS-like track), else ``est`` unchanged."""
-    if est is None or est.roughness <= 0:
+    if est is None or est.roughness <= 0 or (est.scale_ratio or np.inf) > curves.TRACK_RATIO_MAX:
         return est
-    ks = tuple(est.k * s for s in SCALES)
-    _, along = curve_neighbours(geometry, ks[-1])
-    if along.shape[0] < max(10, geometry.n // 10):
-        return est
+    ks = tuple(est.k * s for s in curves.SCALES)
     modes = [est.roughness**2]
-    for K in ks[1:]:
-        v = patch_variances(geometry.points, along[:, :K], 1)
+    for rows, count in curves.chain_windows(geometry, ks[1:], SAMPLE * est.k):
+        if count < max(10, geometry.n // 10):
+            return est
+        v = patch_variances(geometry.points, rows, 1)
         modes.append(log_mode(v[np.isfinite(v)]))
-    t = track_noise(modes, ks) if np.all(np.isfinite(modes)) else None
+    t = curves.track_noise(modes, ks) if np.all(np.isfinite(modes)) else None
     return est if t is None else replace(est, sigma=t.sigma, track=t)
 
 

@@ -118,12 +118,11 @@ def auto_tau(
                        "move: returned unchanged")
     rho = 0.0
     if params.displacement == "free" and adjacency is not None and est.track is None:
-        rho = tangential_ratio(geometry.points, adjacency, r)
-    removable = est.sigma if est.track is None else est.track.removable  # noise/curves.py
-    tau = discrepancy_tau(removable, w2, r, params.displacement, rho)
+        rho = tangential_ratio(geometry.points, adjacency, r)  # a track: reciprocal weights
+    tau = discrepancy_tau(est.sigma, w2, r, params.displacement, rho)
     rule = (
         f"automatic: {est.describe()}; tau = {tau:.6g} "
-        f"(discrepancy principle: {tau / (r * removable**2 * w2):.3g} x {r} x sigma^2 x "
+        f"(discrepancy principle: {tau / (r * est.sigma**2 * w2):.3g} x {r} x sigma^2 x "
         f"sum omega^2 over {int((~fixed).sum())} free points"
         + (f"; roughness along/across the shape {rho:.3g}" if rho else "")
         + ")"

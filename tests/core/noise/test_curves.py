@@ -100,3 +100,26 @@ def test_noisy_track_smoothed_with_corners_kept() -> None:
     assert res.report()["noise_found"] and err_out < err_in
     corners = track_corners(g, 10)
     assert np.array_equal(res.points[corners], noisy[corners])
+
+
+def test_track_plan_reciprocal_weights_unless_given() -> None:
+    """The automatic run of a track takes reciprocal weights (the plan says why); weights the
+    caller gives, and a given tau, keep theirs."""
+    P, E = _track()
+    h = float(np.mean(np.linalg.norm(np.diff(P, axis=0), axis=1)))
+    g = Geometry(P + _ar1(len(P), 0.5 * h, 0.9, 5), edges=E)
+    assert smooth(g, SmoothingParams()).report()["plan"]["weights"]["value"] == "reciprocal"
+    given = smooth(g, SmoothingParams(weights="uniform")).report()["plan"]["weights"]
+    assert given["value"] == "uniform"
+    tau = smooth(g, SmoothingParams(tau=1e-4)).report()["plan"]["weights"]
+    assert tau["value"] == "uniform"
+
+
+def test_tiled_track_runs_with_the_callers_weights() -> None:
+    """Tiles reuse an operator built from the caller's parameters: no weights switch there."""
+    P, E = _track(3000)
+    h = float(np.mean(np.linalg.norm(np.diff(P, axis=0), axis=1)))
+    g = Geometry(P + _ar1(len(P), 0.5 * h, 0.9, 6), edges=E)
+    res = smooth(g, SmoothingParams(tile_points=1000))
+    assert res.report()["plan"]["weights"]["value"] == "uniform"
+    assert np.all(np.isfinite(res.points))
