@@ -48,6 +48,7 @@ NEW_SHAPES: dict[str, Callable[[], Shape]] = {
     "helicoid": surfaces.helicoid,
     "track-corners-a": tracks.track_a,
     "track-corners-b": tracks.track_b,
+    "track-recorded": tracks.recorded_track,
 }
 
 #: Kind of every shape in the split (``grid``: regular grid triangulations of height fields).
@@ -58,7 +59,8 @@ KIND: dict[str, str] = {
                      "helicoid"), "mesh"),
     **dict.fromkeys(("terrain", "dem"), "grid"),
     **dict.fromkeys(("circle-2d", "trefoil-3d", "network-2d", "network-3d", "torusknot", "fig8",
-                     "helix", "track-2d", "track-corners-a", "track-corners-b"), "curve"),
+                     "helix", "track-2d", "track-corners-a", "track-corners-b",
+                     "track-recorded"), "curve"),
     **dict.fromkeys(("cloud-sphere", "cloud-torus", "cloud-fandisk", "cloud-bunny",
                      "cloud-dens-sphere", "cloud-dens-terrain"), "cloud"),
 }
@@ -142,6 +144,8 @@ _TABLE31: tuple[tuple[str, str, str, tuple[float, ...], str], ...] = (
     # GPS-like tracks: corners, uneven spacing, AR(1) noise
     ("track-corners-a", "gps", C, (0.1, 0.5), "gps"),
     ("track-corners-b", "gps", T, (0.1, 0.5), "gps"),
+    ("track-recorded", "gps", T, (0.1, 0.5), "gps"),
+    ("track-recorded", "clean", C, (0.0,), "clean"),
     # clouds with stray points 10 - 50 spacings off the surface
     ("cloud-sphere", "stray2", C, (0.25,), "stray"),
     ("cloud-dens-terrain", "stray05", C, (0.1,), "stray"),
@@ -170,9 +174,13 @@ CASES: list[str] = [f"{s}/{nz}-{lv:g}" for s, nz, _, levels in _TABLE for lv in 
 
 #: Issue-31 cases drawn with several seeds (``key#1`` ... ``key#k-1`` besides ``key``): the
 #: misses that occur on some draws only (the step block's crease sigma^: 4 of 8 draws at iso
-#: 0.1 h, 1 of 8 at normal 0.1 h; the 6K cube's noise weights at 0.05 h: every draw).
+#: 0.1 h, 1 of 8 at normal 0.1 h; the 6K cube's noise weights at 0.05 h: every draw; a track's
+#: correlated sigma^, which varies from draw to draw: 0.74 - 1.36 sigma).
 REPEATS31: dict[str, int] = {"stepblock/iso-0.1": 8, "stepblock/normal-0.1": 8,
-                             "cube-6K/iso-0.05": 4, "cube-6K/normal-0.05": 4}
+                             "cube-6K/iso-0.05": 4, "cube-6K/normal-0.05": 4,
+                             **dict.fromkeys(("track-corners-a/gps-0.1", "track-corners-a/gps-0.5",
+                                              "track-corners-b/gps-0.1", "track-corners-b/gps-0.5"),
+                                             4)}
 
 
 def _cases31() -> dict[str, str]:

@@ -58,6 +58,6 @@ def smooth(
     tiled = smooth_tiled(geometry, params, n_tile, progress, run_map, memory_limit)
     per_tile = Choice(None, "decided per tile (tiles keep the user's weights)")
     plan = dataclasses.replace(
-        make_plan(geometry, params), data_weights=per_tile, tangential=per_tile
+        make_plan(geometry, params, tracks=False), data_weights=per_tile, tangential=per_tile
     )
     return dataclasses.replace(tiled.result, tiles=tiles_report(tiled, n_tile), plan=plan)

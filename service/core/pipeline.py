@@ -90,7 +90,7 @@ def plan_and_prepare(
 ) -> tuple[Plan, Problem]:
     """The plan (:func:`~service.core.plan.make_plan`) and the problem it sets up
     (:func:`~service.core.problem.prepare`), the plan completed with what that decided."""
-    plan = make_plan(geometry, params)
+    plan = make_plan(geometry, params, tracks=operator is None)  # a given operator: its weights
     problem = prepare(
         geometry, plan.params, params.displacement, operator=operator, notes=notes
     )

@@ -19,11 +19,13 @@ from typing import TYPE_CHECKING, Any
 from service.core.errors import ParameterError
 from service.core.finish.tangential import applies as tangential_applies
 from service.core.geometry import Geometry
+from service.core.noise.curves import TRACK_WEIGHTS_WHY
 from service.core.noise.estimate import codimension
 from service.core.operator.boundary import boundary_rule, ends_rule
 from service.core.operator.build import resolve_weights
 from service.core.params import SmoothingParams
 from service.core.params.rules import DEFAULT_DISPLACEMENT, free_only
+from service.core.problem import is_track
 from service.core.system.displacement import AUTO_NORMAL_MAX_CODIM, resolve_displacement
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -114,7 +116,7 @@ def _displacement(params: SmoothingParams, geometry: Geometry, mode: str) -> Cho
 
 
 def _operator_choices(
-    params: SmoothingParams, geometry: Geometry
+    params: SmoothingParams, geometry: Geometry, tracks: bool = True
 ) -> tuple[Choice, Choice, Choice]:
     """Neighbour weights (eq. 1, sections 4.2-4.4), curve ends and mesh boundary rows."""
     triangles = geometry.kind == "mesh" or (
@@ -127,6 +129,8 @@ def _operator_choices(
         "the report's: mean value with triangles (4.3-4.4), reciprocal distance otherwise (4.2)",
         {"kind": geometry.kind, "triangles": triangles},
     )  # fmt: skip
+    if tracks and "weights" not in params.model_fields_set and is_track(geometry, params.tau_rule):
+        weights = Choice("reciprocal", TRACK_WEIGHTS_WHY, weights.evidence)
     open_ends = geometry.edges is not None and geometry.faces is None
     if not open_ends:
         ends_why = "no open polylines: the rule does not apply"
@@ -195,8 +199,11 @@ def _budget_choices(params: SmoothingParams) -> tuple[Choice, Choice, Choice, Ch
     return Choice(rule, tau_why), method, search, solver
 
 
-def make_plan(geometry: Geometry, params: SmoothingParams) -> Plan:
+def make_plan(geometry: Geometry, params: SmoothingParams, tracks: bool = True) -> Plan:
     """Every choice the parameters and the input decide, before anything is built.
+
+    ``tracks``: a track's own weights may be chosen (:data:`TRACK_WEIGHTS_WHY`); ``False``
+    where an operator built from the caller's parameters is reused (tiles).
 
     Raises
     ------
@@ -205,7 +212,7 @@ def make_plan(geometry: Geometry, params: SmoothingParams) -> Plan:
         :func:`resolve_weights`).
     """
     resolved = resolve_displacement(params, geometry)
-    weights, ends, boundary = _operator_choices(params, geometry)
+    weights, ends, boundary = _operator_choices(params, geometry, tracks)
     outliers = _outliers(params, geometry)
     resolved = resolved.model_copy(update={
         "weights": weights.value, "ends": ends.value, "boundary": boundary.value,

@@ -9,7 +9,7 @@ eliminated, section 8) -> data weights -> the smoothing system of the chosen dis
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,7 +18,9 @@ from service.core.errors import ParameterError
 from service.core.finish.volume import check_preservable
 from service.core.frame import Frame
 from service.core.geometry import Geometry
-from service.core.noise.robust import DataWeights, data_weights
+from service.core.noise.curves import track_pins
+from service.core.noise.estimate import estimate_noise
+from service.core.noise.robust import DataWeights, data_weights, outlier_note
 from service.core.operator.build import SmoothingOperator, build_operator, operator_key
 from service.core.params import SmoothingParams
 from service.core.params.groups import OperatorParams, field_names
@@ -26,7 +28,7 @@ from service.core.system.deviation import SmoothingSystem
 from service.core.system.displacement import auto_system, normal_mode
 from service.core.system.elimination import laplacian_system
 
-__all__ = ["Problem", "free_set", "prepare", "smoothing_system"]
+__all__ = ["Problem", "free_set", "held_corners", "is_track", "prepare", "smoothing_system"]
 
 Array = NDArray[np.float64]
 
@@ -114,8 +116,10 @@ def prepare(
         Collects what the caller should be told (e.g. ``fix_boundary`` without a boundary).
     """
     op = _operator(geometry, params, operator)
-    fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes)
+    corners = held_corners(geometry, params)
+    fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes, corners)
     geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
+    weights = _corners_kept(weights, corners, params)
     if weights is not None and notes is not None:
         notes.extend(weights.notes)
     frame = op.frame.weighted(geometry.omega()[~fixed])
@@ -123,6 +127,38 @@ def prepare(
         params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
     )
     return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points, weights)
+
+
+def is_track(geometry: Geometry, tau_rule: str) -> bool:
+    """Whether the automatic tau (``tau_rule``) smooths a polyline whose noise is correlated
+    along it (:mod:`service.core.noise.curves`: corners held, reciprocal weights)."""
+    if tau_rule != "auto" or geometry.faces is not None or geometry.edges is None:
+        return False
+    est = estimate_noise(geometry)
+    return est is not None and est.track is not None
+
+
+def held_corners(geometry: Geometry, params: SmoothingParams) -> NDArray[np.bool_]:
+    """A track's corners held in place with the automatic tau (issue 31;
+    :func:`service.core.noise.curves.track_pins`); none on other inputs and rules."""
+    if not is_track(geometry, params.tau_rule):
+        return np.zeros(geometry.n, dtype=bool)
+    est = estimate_noise(geometry)
+    return track_pins(geometry, None if est is None else est.track, est.k if est else 0)
+
+
+def _corners_kept(
+    weights: DataWeights | None, corners: NDArray[np.bool_], params: SmoothingParams
+) -> DataWeights | None:
+    """``weights`` without the outliers that are held corners: a corner is shape."""
+    if weights is None or not corners[weights.outliers].any():
+        return weights
+    out = weights.outliers[~corners[weights.outliers]]
+    notes = tuple(n for n in weights.notes if "outliers" not in n)
+    if out.size:
+        notes += (outlier_note(int(out.size), params.outliers, weights.robust),)
+    return replace(weights, outliers=out, pulled=weights.pulled[~corners[weights.pulled]],
+                   notes=notes)
 
 
 def _operator(
@@ -140,9 +176,11 @@ def _operator(
 
 
 def free_set(
-    geometry: Geometry, op: SmoothingOperator, params: SmoothingParams, notes: list[str]
+    geometry: Geometry, op: SmoothingOperator, params: SmoothingParams, notes: list[str],
+    corners: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.bool_], int]:
-    """Points eliminated from the system: fixed ones (section 8) and uncoupled ones.
+    """Points eliminated from the system: fixed ones (section 8), uncoupled ones and a track's
+    held ``corners`` (:func:`held_corners`).
 
     Returns
     -------
@@ -163,7 +201,8 @@ def free_set(
     L = op.L
     coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)
     pinned = op.pinned if op.pinned is not None else False  # open-curve ends (issue 21)
-    return fixed | ~coupled | pinned, int(fixed.sum())
+    held = False if corners is None else corners
+    return fixed | ~coupled | pinned | held, int(fixed.sum())
 
 
 def smoothing_system(

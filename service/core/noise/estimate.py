@@ -43,6 +43,8 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
+from service.core.noise import curves
+from service.core.noise.curves import TrackNoise
 
 __all__ = [
     "NOISE_RATIO",
@@ -105,6 +107,8 @@ class NoiseEstimate:
     roughness: float = 0.0
     scale_ratio: float | None = None
     neighbours: NDArray[np.int64] | None = None
+    #: Correlated noise along a polyline (:mod:`.curves`); ``sigma`` is then its level.
+    track: TrackNoise | None = None
 
     @property
     def noise_found(self) -> bool:
@@ -113,6 +117,10 @@ class NoiseEstimate:
 
     def describe(self) -> str:
         """One line for the report: the estimate and the evidence behind it."""
+        if self.track is not None:
+            t = self.track
+            return (f"noise found: sigma = {self.sigma:.6g}, correlated along the curve (AR(1), "
+                    f"phi = {t.phi:.2f}; {len(t.modes)} scales, misfit {t.misfit:.3f})")
         if self.sigma > 0:
             ratio = "" if self.scale_ratio is None else (
                 f"; residuals x{self.scale_ratio:.2f} from {self.k} to {2 * self.k} neighbours: "
@@ -272,7 +280,7 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
         rows, along = curve_neighbours(geometry, 2 * k)
         if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
             full = rows.size == n  # every point, in order: kept for the data weights
-            return _kept(_estimate(P, along, k, d), along if full else None)
+            return _tracked(geometry, _kept(_estimate(P, along, k, d), along if full else None))
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
     tree = cKDTree(P)
     at = _sample(P.shape[0])
@@ -292,6 +300,22 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
 
 def _kept(est: NoiseEstimate | None, nbr: NDArray[np.int64] | None) -> NoiseEstimate | None:
     return est if est is None or nbr is None else replace(est, neighbours=nbr)
+
+
+def _tracked(geometry: Geometry, est: NoiseEstimate | None) -> NoiseEstimate | None:
+    """``est`` with the correlated noise of :func:`.curves.track_noise` when it explains the
+    residual modes at ``k``, 2k, 4k, 8k samples (a GPS-like track), else ``est`` unchanged."""
+    if est is None or est.roughness <= 0 or (est.scale_ratio or np.inf) > curves.TRACK_RATIO_MAX:
+        return est
+    ks = tuple(est.k * s for s in curves.SCALES)
+    modes = [est.roughness**2]
+    for rows, count in curves.chain_windows(geometry, ks[1:], SAMPLE * est.k):
+        if count < max(10, geometry.n // 10):
+            return est
+        v = patch_variances(geometry.points, rows, 1)
+        modes.append(log_mode(v[np.isfinite(v)]))
+    t = curves.track_noise(modes, ks) if np.all(np.isfinite(modes)) else None
+    return est if t is None else replace(est, sigma=t.sigma, track=t)
 
 
 def curve_neighbours(

@@ -117,8 +117,8 @@ def auto_tau(
         return AutoTau(0.0, est.sigma, f"automatic: {est.describe()}, but no point is free to "
                        "move: returned unchanged")
     rho = 0.0
-    if params.displacement == "free" and adjacency is not None:
-        rho = tangential_ratio(geometry.points, adjacency, r)
+    if params.displacement == "free" and adjacency is not None and est.track is None:
+        rho = tangential_ratio(geometry.points, adjacency, r)  # a track: reciprocal weights
     tau = discrepancy_tau(est.sigma, w2, r, params.displacement, rho)
     rule = (
         f"automatic: {est.describe()}; tau = {tau:.6g} "
