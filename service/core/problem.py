@@ -97,6 +97,7 @@ def prepare(
     *,
     operator: SmoothingOperator | None = None,
     notes: list[str] | None = None,
+    step: Callable[[str], None] | None = None,
 ) -> Problem:
     """Neighbourhoods and ``L`` -> free points -> data weights -> the system of the mode.
 
@@ -112,9 +113,13 @@ def prepare(
         Built for this geometry and operator group (reuse across tau).
     notes : list of str, optional
         Collects what the caller should be told (e.g. ``fix_boundary`` without a boundary).
+    step : callable, optional
+        Told ``"weights"`` when the neighbourhoods are built (progress, :meth:`.Run.step`).
     """
     op = _operator(geometry, params, operator)
     fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes)
+    if step is not None:
+        step("weights")
     geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
     if weights is not None and notes is not None:
         notes.extend(weights.notes)
