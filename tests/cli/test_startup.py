@@ -47,7 +47,8 @@ def test_command_of() -> None:
 
 
 #: Libraries a small input does not use: the compiled kernels (numba from 50,000 points),
-#: the GCV optimizer, the tiles, other formats' readers, the HTTP and queue stacks.
+#: the GCV optimizer, the tiles, other formats' readers, the HTTP and queue stacks (the jobs'
+#: progress estimate only with the stage lines).
 NOT_FOR_A_SMALL_RUN = (
     "numba",
     "llvmlite",
@@ -69,7 +70,7 @@ NOT_FOR_A_SMALL_RUN = (
     "service.api",
     "service.core.tiles",
     "service.core.operator.kernels",
-    "service.jobs.embedded",
+    "service.jobs",
 )
 
 _SMALL_RUN = (

@@ -113,12 +113,13 @@ class StageDisplay(ProgressDisplay):
         tick: float | None = None,
     ) -> None:
         super().__init__(stream, enabled=enabled, tty=False if json_lines else tty)
-        from service.jobs.progress import ProgressTracker
-
         self.stages = stages or json_lines
         self.json_lines = json_lines
         self.interval = tick if tick is not None else (TICK if self.tty or json_lines else LOG_TICK)
-        self._tracker = ProgressTracker(tolerance=tolerance)
+        if self.stages:  # the jobs' package only when the stages are shown
+            from service.jobs.progress import ProgressTracker
+
+            self._tracker = ProgressTracker(tolerance=tolerance)
         self._t0 = time.perf_counter()
         self._lock = threading.RLock()
         self._stage: str | None = None
