@@ -57,6 +57,14 @@ def add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
     files.add_argument(
         "-q", "--quiet", action="store_true", help="print nothing on success (errors still go)"
     )
+    if local:
+        files.add_argument(
+            "--progress", choices=("auto", "text", "json"), default="auto",
+            help="the stages on stderr (read, neighbourhoods, weights, noise, search, finish, "
+            "write) with progress and an estimate, updated every second on a terminal: text "
+            "lines, or one JSON object per line; auto: text lines for an input of 1 MiB or "
+            "more, else only the lambda search [default: auto]",
+        )  # fmt: skip
 
 
 def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:

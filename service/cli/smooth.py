@@ -200,7 +200,7 @@ def _cli_errors(params: SmoothingParams, progress: ProgressDisplay) -> Iterator[
     except OutputFormatError as exc:  # the format cannot hold this geometry: an output problem
         raise CliError(f"cannot write {exc.target_fmt}: {exc.message}", EXIT_OUTPUT) from exc
     finally:
-        progress.finish()
+        progress.close()
 
 
 def _tile_map(streamed: str | None) -> contextlib.AbstractContextManager[Any]:
@@ -251,10 +251,16 @@ def _check_crs_applies(doc: GeometryDocument, out_fmt: str | None, options: dict
 def run(ns: argparse.Namespace, err: TextIO) -> int:
     """Run ``geosmooth smooth INPUT -o OUTPUT`` (one file: :func:`service.cli.batch.run` decides);
     returns the exit status (errors are raised)."""
+    from service.cli.progress.stages import display_for
+    from service.core.params import TOLERANCE
+
     started = time.perf_counter()
-    progress = ProgressDisplay(err, enabled=not ns.quiet)
-    params, done = smooth_one(ns, progress)
-    _report(ns, params, done, started, progress)
+    progress = display_for(ns, err, getattr(ns, "tolerance", None) or TOLERANCE)
+    try:
+        params, done = smooth_one(ns, progress)
+        _report(ns, params, done, started, progress)
+    finally:
+        progress.close()
     return ns.exit_unchanged if done.unchanged else EXIT_OK
 
 
@@ -285,8 +291,10 @@ def _smooth_one(
     geometry = doc = None
     if not streamed:
         fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
+        progress.stage("reading")
         source = doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
         geometry = _with_fixed(doc, fixed)
+        progress.expect(_model_seconds(geometry, params))
         target = lambda _result, data: write_output(ns.output, data, "output")  # noqa: E731
     with _cli_errors(params, progress), _tile_map(streamed) as run_map:
         if doc is not None:
@@ -294,9 +302,17 @@ def _smooth_one(
         done = smooth_file(source, target, params, fmt=streamed, out_fmt=out_fmt,
                            read_options={"weld": ns.weld, "xyz_dims": ns.xyz_dims},
                            write_options=options, geometry=geometry, progress=progress,
-                           run_map=run_map, stage=lambda _name: progress.finish(),
+                           run_map=run_map, stage=progress.stage,
                            original=None if ns.input == "-" else Path(ns.input))  # fmt: skip
     return params, done
+
+
+def _model_seconds(geometry: Geometry, params: SmoothingParams) -> float:
+    """The engine's model of the time smoothing ``geometry`` takes (for the progress estimate)."""
+    from service.core.linalg.resources import estimate_resources
+
+    faces = None if geometry.faces is None else len(geometry.faces)
+    return estimate_resources(geometry.n, geometry.dim, geometry.kind, params, faces).seconds
 
 
 def _report(

@@ -9,7 +9,7 @@ otherwise :func:`service.core.tiles.driver.smooth_tiled`, whose tiles are listed
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
@@ -18,7 +18,9 @@ from service.core.pipeline import smooth_one
 from service.core.plan import Choice, make_plan
 from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
-from service.core.tiles.driver import RunMap, TiledResult, smooth_tiled
+
+if TYPE_CHECKING:  # the tiles load only for a tiled run (issue 30: start-up)
+    from service.core.tiles.driver import RunMap, TiledResult
 
 __all__ = ["smooth", "tiles_report"]
 
@@ -55,6 +57,8 @@ def smooth(
     if n_tile is None or geometry.n <= n_tile:
         return smooth_one(geometry, params, progress, operator=operator,
                           memory_limit=memory_limit)  # fmt: skip
+    from service.core.tiles.driver import smooth_tiled
+
     tiled = smooth_tiled(geometry, params, n_tile, progress, run_map, memory_limit)
     per_tile = Choice(None, "decided per tile (tiles keep the user's weights)")
     plan = dataclasses.replace(

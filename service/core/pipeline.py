@@ -12,6 +12,7 @@ notes. The public ``smooth()`` (untiled or tiled) is :func:`service.core.entry.s
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 from service.core.checks.diagnostics import diagnostics
@@ -74,7 +75,8 @@ def smooth_one(
     """
     run = Run(progress)
     run.emit("neighborhoods")
-    plan, problem = plan_and_prepare(geometry, params, operator, run.notes)
+    plan, problem = plan_and_prepare(geometry, params, operator, run.notes, step=run.step)
+    run.step("noise")
     aim = target(problem, plan)
     run.emit("analysis", tau=aim.tau)
     solution = solve(problem, plan, aim, run, memory_limit)
@@ -87,12 +89,15 @@ def plan_and_prepare(
     params: SmoothingParams,
     operator: SmoothingOperator | None = None,
     notes: list[str] | None = None,
+    *,
+    step: Callable[[str], None] | None = None,
 ) -> tuple[Plan, Problem]:
     """The plan (:func:`~service.core.plan.make_plan`) and the problem it sets up
-    (:func:`~service.core.problem.prepare`), the plan completed with what that decided."""
+    (:func:`~service.core.problem.prepare`, told ``step("weights")`` when it gets to the data
+    weights), the plan completed with what that decided."""
     plan = make_plan(geometry, params, tracks=operator is None)  # a given operator: its weights
     problem = prepare(
-        geometry, plan.params, params.displacement, operator=operator, notes=notes
+        geometry, plan.params, params.displacement, operator=operator, notes=notes, step=step
     )
     return with_problem(plan, problem), problem
 

@@ -99,6 +99,7 @@ def prepare(
     *,
     operator: SmoothingOperator | None = None,
     notes: list[str] | None = None,
+    step: Callable[[str], None] | None = None,
 ) -> Problem:
     """Neighbourhoods and ``L`` -> free points -> data weights -> the system of the mode.
 
@@ -114,10 +115,14 @@ def prepare(
         Built for this geometry and operator group (reuse across tau).
     notes : list of str, optional
         Collects what the caller should be told (e.g. ``fix_boundary`` without a boundary).
+    step : callable, optional
+        Told ``"weights"`` when the neighbourhoods are built (progress, :meth:`.Run.step`).
     """
     op = _operator(geometry, params, operator)
     corners = held_corners(geometry, params)
     fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes, corners)
+    if step is not None:
+        step("weights")
     geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
     weights = _corners_kept(weights, corners, params)
     if weights is not None and notes is not None:

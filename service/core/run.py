@@ -43,3 +43,8 @@ class Run:
             )  # fmt: skip
 
         return evaluated
+
+    def step(self, name: str) -> None:
+        """A ``neighborhoods`` event naming the part under way
+        (:data:`~service.core.progress.STEPS`)."""
+        self.emit("neighborhoods", step=name)

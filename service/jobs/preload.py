@@ -80,6 +80,13 @@ def warm_compiled(rng: np.random.Generator) -> None:
     isolation_distances(Geometry(sheet), nbr)
     isolation_distances(Geometry(sheet, faces=faces), nbr)
     normals = surface_normals(sheet, 10)[:, :, 0]
+    # the neighbourhood kernels: below 50,000 points a run takes their NumPy versions
+    # (operator.sized_kernels), but once this loads numba every run of the process uses these
+    from service.core.operator import kernels
+
+    kernels.mesh_rings(np.ascontiguousarray(faces, dtype=np.int64), side * side)
+    kernels.neighbourhood_covariances(sheet, np.ascontiguousarray(nbr, dtype=np.int64))
+    kernels.polar_hull_fans(np.ascontiguousarray(sheet[nbr[:, 1:4], :2] - sheet[:, None, :2]))
     # the finish and the shape checks (issue 30): per-face passes; the normal system's scaling
     from service.core.finish import mesh_kernels
     from service.core.system.fast_frames import scale_by_normals

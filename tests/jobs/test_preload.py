@@ -49,3 +49,23 @@ def test_every_kernel_called_from_python_is_compiled_by_the_warm_up() -> None:
             "service.core.system.fast_frames._normals"} <= set(called)  # fmt: skip
     cold = sorted(k for k, count in called.items() if count == 0)
     assert not cold, f"compiled on first use in each job process: {cold}"
+
+
+def test_the_neighbourhood_kernels_are_compiled_by_the_warm_up() -> None:
+    """Below 50,000 points a run takes the NumPy kernels of ``operator.sized_kernels``, so the
+    warm-up's tiny smooths no longer compile ``operator.kernels``; once numba is loaded every
+    run of the process takes the compiled ones, so the warm-up calls each itself."""
+    probe = (
+        "import json, service.jobs.preload\n"
+        "from numba.core.registry import CPUDispatcher\n"
+        "from service.core.operator import kernels\n"
+        "print(json.dumps({k: len(v.signatures) for k, v in vars(kernels).items()\n"
+        "                  if isinstance(v, CPUDispatcher) and k in kernels.__all__}))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    called = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(called) == {"mesh_rings", "neighbourhood_covariances", "polar_hull_fans",
+                           "rows_from_pairs"}  # fmt: skip
+    assert all(count > 0 for count in called.values()), called

@@ -42,6 +42,7 @@ from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_
 from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.noise.quantiles import chi2, poisson_ppf
 from service.core.noise.uneven import RATIO_CAP, crease_factor, local_sigma, on_grid, row_quantile
+from service.core.operator.sized_kernels import COMPILED_FROM
 from service.core.params import SmoothingParams
 
 __all__ = [
@@ -187,9 +188,11 @@ def _factors(
     compiled kernels (issue 30: the grid ``k``-NN, whose distances also tell coincident points,
     the fits and the isolation pass; same rules, same numbers to rounding).
     """
-    from service.core.noise import fast_weights
+    fast = None
+    if geometry.n >= COMPILED_FROM:  # fast_weights loads numba: not for a small input
+        from service.core.noise import fast_weights
 
-    fast = fast_weights.neighbours(geometry)
+        fast = fast_weights.neighbours(geometry)
     if fast is not None:
         return _from_neighbours(geometry, *fast, robust, uneven, compiled=True)
     P = geometry.points
@@ -217,10 +220,12 @@ def _from_neighbours(
     uneven: str, compiled: bool,
 ) -> tuple[Array, Array, NDArray[np.int64], str, bool, float]:  # fmt: skip
     """:func:`_factors` from each point's neighbours (row ``i``: ``i`` first)."""
-    from service.core.noise import fast_fits
-
     P = geometry.points
-    r, v = (fast_fits.leave_one_out if compiled else leave_one_out)(P, nbr, d)
+    if compiled:
+        from service.core.noise.fast_fits import leave_one_out as fits
+    else:
+        fits = leave_one_out
+    r, v = fits(P, nbr, d)
     c = geometry.dim - d
     nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
     s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)

@@ -47,7 +47,7 @@ def _local_frames(
     """
     size, s = idx.shape[1] + 1, points.shape[1]
     if s <= size:  # compiled covariances: no (n, k+1, s) gather
-        from service.core.operator.kernels import neighbourhood_covariances
+        from service.core.operator.sized_kernels import neighbourhood_covariances
 
         own = np.column_stack([np.arange(len(points)), idx]).astype(np.int64)
         cov = neighbourhood_covariances(np.ascontiguousarray(points, dtype=np.float64), own)
@@ -87,7 +87,7 @@ def _polar_hull_fans(
     open_fan : ndarray of bool, shape (n,)
         True where the origin is on the hull (the point lies on the cloud's border).
     """
-    from service.core.operator.kernels import polar_hull_fans
+    from service.core.operator.sized_kernels import polar_hull_fans
 
     fans, count, open_fan = polar_hull_fans(np.ascontiguousarray(q, dtype=np.float64))
     return fans, count, open_fan

@@ -82,7 +82,7 @@ class Neighborhoods:
 def pair_adjacency(i: NDArray[np.int64], j: NDArray[np.int64], n: int) -> sp.csr_matrix:
     """Pattern (ones) of the pairs ``(i, j)``, duplicates merged, rows sorted (compiled
     counting sort: linear in the number of pairs, see ``kernels.rows_from_pairs``)."""
-    from service.core.operator.kernels import rows_from_pairs
+    from service.core.operator.sized_kernels import rows_from_pairs
 
     ii = np.ascontiguousarray(i, dtype=np.int64)
     jj = np.ascontiguousarray(j, dtype=np.int64)
@@ -186,7 +186,7 @@ def mesh_neighborhoods(
     Neighborhoods
         Boundary vertices are those on an edge used by exactly one (distinct) face.
     """
-    from service.core.operator.kernels import mesh_rings
+    from service.core.operator.sized_kernels import mesh_rings
 
     faces = np.ascontiguousarray(unique_faces(faces), dtype=np.int64)
     m = len(faces)

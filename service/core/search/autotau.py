@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
 
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
@@ -173,6 +172,8 @@ def gcv_lambda(
     vals = [score(x) for x in grid]
     i = int(np.argmin(vals))
     if 0 < i < len(grid) - 1:
+        from scipy.optimize import minimize_scalar  # GCV only: not loaded by other runs
+
         minimize_scalar(
             score, bracket=(grid[i - 1], grid[i], grid[i + 1]), method="brent",
             options={"xtol": 1e-2},

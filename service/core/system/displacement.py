@@ -136,7 +136,7 @@ def _frames(
         from service.core.system.fast_frames import surface_normals  # issue 30: closed form
 
         return surface_normals(X, k)
-    from service.core.operator.kernels import neighbourhood_covariances
+    from service.core.operator.sized_kernels import neighbourhood_covariances
 
     _, idx = cKDTree(X).query(query, k=k)
     idx = np.ascontiguousarray(np.asarray(idx).reshape(query.shape[0], k), dtype=np.int64)

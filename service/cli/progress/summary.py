@@ -1,9 +1,7 @@
-"""Terminal output of ``smooth`` and ``submit``: the lambda-search progress line and the summary.
+"""The summary of a finished ``smooth`` or ``submit`` run, on stderr.
 
-Everything here writes to a text stream (stderr in the CLI) so that stdout stays free for
-``-o -``. Nothing here imports numpy or the engine: the progress line shows
-``(iteration, lambda, phi, tau)`` from a local progress event or a remote job alike, and the
-summary reads a :meth:`service.core.SmoothResult.report` dictionary (local, or a job's report).
+It reads a :meth:`service.core.SmoothResult.report` dictionary (local, or a job's report) and
+imports neither numpy nor the engine.
 """
 
 from __future__ import annotations
@@ -11,121 +9,15 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any
+
+from service.cli.progress.display import ProgressDisplay
+from service.cli.progress.display import fmt_g as _g
 
 if TYPE_CHECKING:
     from service.core.params import SmoothingParams
-    from service.core.progress import ProgressEvent
 
-__all__ = ["ProgressDisplay", "format_summary", "show_summary"]
-
-
-def _g(value: float | None, digits: int = 4) -> str:
-    """Format a float compactly in scientific notation (``-`` for ``None``)."""
-    if value is None:
-        return "-"
-    return f"{value:.{digits}e}"
-
-
-class ProgressDisplay:
-    """Progress of the lambda search, shown while :func:`service.core.pipeline` iterates.
-
-    An instance is the ``progress(event)`` callback of ``smooth()``; it shows the search
-    iterations (stage ``search``) with the engine's resolved ``tau``. On a
-    terminal it keeps one line up to date with carriage returns; on anything else (a pipe, a
-    log file, a CI job) it writes one plain line per iteration.
-
-    Parameters
-    ----------
-    stream : TextIO
-        Where to write (the CLI passes ``sys.stderr``).
-    tau : float or None, optional
-        The smoothing factor to compare with until an event carries the engine's own.
-    enabled : bool, optional
-        ``False`` (``--quiet``) writes nothing at all.
-    tty : bool or None, optional
-        Force terminal (``True``) or plain-line (``False``) mode; by default
-        ``stream.isatty()`` decides.
-    """
-
-    def __init__(
-        self,
-        stream: TextIO,
-        tau: float | None = None,
-        *,
-        enabled: bool = True,
-        tty: bool | None = None,
-    ) -> None:
-        self.stream = stream
-        self.tau = tau
-        self.enabled = enabled
-        if tty is None:
-            isatty = getattr(stream, "isatty", None)
-            tty = bool(isatty()) if callable(isatty) else False
-        self.tty = tty
-        self.calls = 0
-        self.last_iteration = 0
-        self._width = 0
-
-    def line(self, iteration: int, lam: float, phi: float) -> str:
-        """The text shown for one iteration (without line ending).
-
-        Parameters
-        ----------
-        iteration : int
-            1-based lambda iteration.
-        lam, phi : float
-            The lambda just tried and the deviation ``phi(lam)`` it gives (eq. 15).
-
-        Returns
-        -------
-        str
-        """
-        text = f"geosmooth: iteration {iteration:>2}  lambda={_g(lam)}  phi={_g(phi)}"
-        if self.tau is not None:
-            rel = abs(phi - self.tau) / self.tau
-            text += f"  tau={_g(self.tau)}  rel.error={_g(rel, 2)}"
-        return text
-
-    def __call__(self, event: ProgressEvent) -> None:
-        """The ``progress`` callback of :func:`service.core.smooth`."""
-        if event.tau is not None:
-            self.tau = event.tau
-        if event.lam is None or event.phi is None:
-            return
-        self.show(event.iteration, event.lam, event.phi)
-
-    def show(self, iteration: int, lam: float, phi: float, tau: float | None = None) -> None:
-        """Show one lambda iteration (``tau``: the target, when newly known)."""
-        if tau is not None:
-            self.tau = tau
-        self.calls += 1
-        self.last_iteration = max(self.last_iteration, iteration)
-        if not self.enabled:
-            return
-        text = self.line(iteration, lam, phi)
-        if self.tty:
-            pad = max(0, self._width - len(text))
-            self.stream.write("\r" + text + " " * pad)
-            self._width = len(text)
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def note(self, text: str) -> None:
-        """A line of its own (e.g. a job's status), below the updating line."""
-        if not self.enabled:
-            return
-        self.finish()
-        self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def finish(self) -> None:
-        """End the updating terminal line (call once the search is over or interrupted)."""
-        if self.enabled and self.tty and self._width:
-            self.stream.write("\n")
-            self.stream.flush()
-        self._width = 0
+__all__ = ["format_summary", "show_summary"]
 
 
 def _timings(timings: Mapping[str, float]) -> str:
