@@ -85,6 +85,7 @@ def warm_compiled(rng: np.random.Generator) -> None:
     from service.core.operator import kernels
 
     kernels.mesh_rings(np.ascontiguousarray(faces, dtype=np.int64), side * side)
+    kernels.has_duplicate_faces(np.ascontiguousarray(faces, dtype=np.int64), side * side)
     kernels.neighbourhood_covariances(sheet, np.ascontiguousarray(nbr, dtype=np.int64))
     kernels.polar_hull_fans(np.ascontiguousarray(sheet[nbr[:, 1:4], :2] - sheet[:, None, :2]))
     # the finish and the shape checks (issue 30): per-face passes; the normal system's scaling

@@ -12,14 +12,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
-COMPILED = [
-    "service.core.operator.kernels",
-    "service.core.operator.knn",
-    "service.core.linalg.symbolic",
-    "service.core.noise.fast_fits",
-    "service.core.noise.fast_weights",
-    "service.core.system.fast_frames",
-]
+#: Every module of the engine that defines compiled kernels (found, so a new one is checked too).
+COMPILED = sorted(
+    ".".join(path.relative_to(ROOT).with_suffix("").parts)
+    for path in (ROOT / "service").rglob("*.py")
+    if "@njit" in path.read_text(encoding="utf-8")
+)
 
 PROBE = """
 import importlib, inspect, json, sys
@@ -66,6 +64,6 @@ def test_the_neighbourhood_kernels_are_compiled_by_the_warm_up() -> None:
         [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True
     )
     called = json.loads(done.stdout.strip().splitlines()[-1])
-    assert set(called) == {"mesh_rings", "neighbourhood_covariances", "polar_hull_fans",
-                           "rows_from_pairs"}  # fmt: skip
+    assert {"mesh_rings", "neighbourhood_covariances", "polar_hull_fans",
+            "rows_from_pairs"} <= set(called)  # fmt: skip
     assert all(count > 0 for count in called.values()), called
