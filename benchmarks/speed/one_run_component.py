@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     from benchmarks.speed.jobs import INPUTS, LEVELS
     from benchmarks.speed.open3d_ratio import _open3d, _quality
     from service.core import SmoothingParams
-    from service.core.pipeline import prepare
+    from service.core.pipeline import plan_and_prepare
     from service.core.search.autotau import auto_tau
     from service.core.search.budget import free_weight, rms_to_tau
     from service.core.search.one_run import direct_cost, one_run
@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     g, sigma, truth = INPUTS[kind](arg)
     out: dict[str, Any] = {"input": args.input, "n": g.n, "load": [list(os.getloadavg())]}
     with threadpool_limits(1):
-        pr = prepare(g, SmoothingParams())
+        _, pr = plan_and_prepare(g, SmoothingParams())
         s, frame = pr.system, pr.frame
         d = np.sqrt(s.d2)[:, None]
         M = s.M

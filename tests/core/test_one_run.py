@@ -15,6 +15,7 @@ import scipy.sparse as sp
 
 from service.core.linalg.lanczos_run import LanczosRun, true_residual_bound
 from service.core.search.autotau import KNEE_WINDOW, _flattest
+from service.core.search.knee_run import knee_target
 from service.core.search.one_run import one_run
 
 
@@ -198,5 +199,49 @@ def test_knee_matches_the_dense_rule(k: int) -> None:
         assert got.knee is None and got.tau == tau0
     else:
         assert got.knee == pytest.approx(phis[i], rel=1e-2)
-        assert got.tau == got.knee
+        assert got.tau == pytest.approx(knee_target(got.knee), rel=1e-12)
+        assert got.tau < got.knee
     assert abs(got.phi - got.tau) <= 1e-3 * got.tau
+
+
+def test_second_pass_resumes_after_the_kept_vectors() -> None:
+    s = _free(fixed_every=5)
+    tau = 0.2 * s.phi(s.floor, 2)
+    per_vector = s.c.size * 8
+    kept = one_run(s.apply, s.c, s.d, tau, s.floor, order=2, basis_dtype=np.float64)
+    part = one_run(s.apply, s.c, s.d, tau, s.floor, order=2, basis_dtype=np.float64,
+                   keep_bytes=5 * per_vector)  # fmt: skip
+    assert kept.lam == part.lam
+    np.testing.assert_array_equal(kept.E, part.E)
+    again = one_run(s.apply, s.c, s.d, tau, s.floor, order=2, keep_bytes=0)
+    # the full second pass regenerates v_2 .. v_j, the resumed one v_6 .. v_j only
+    assert part.products - kept.products == again.products - kept.products - 4 > 0
+
+
+@pytest.mark.parametrize("k", [1, 2])
+def test_knee_on_a_plateau_matches_the_closed_form(k: int) -> None:
+    """A designed spectrum (diagonal ``M_t``, ``d = 1``): noise in ``mu in [1e-2, 4]``, a
+    signal 100 times stronger in ``[1e-8, 1e-6]``, nothing between: ``phi`` has a plateau at
+    the noise energy. The knee and the solution against ``phi`` and ``y`` in closed form."""
+    mu = np.concatenate([np.geomspace(1e-8, 1e-6, 100), np.geomspace(1e-2, 4.0, 900)])
+    p = np.concatenate([np.full(100, 10.0), np.random.default_rng(4).normal(0, 1, 900)])
+    c = (mu * p)[:, None]
+    d = np.ones((mu.size, 1))
+
+    def phi(lam: float) -> float:
+        return float(np.sum(c[:, 0] ** 2 * mu ** (2 * k - 2) / (mu + lam) ** (2 * k)))
+
+    tau0 = float(np.sum(p[100:] ** 2))
+    floor = 1e-13 * mu.max()
+    got = one_run(lambda V: mu[:, None] * V, c, d, tau0, floor, order=k, knee=True,
+                  basis_dtype=np.float64)  # fmt: skip
+    lams = np.geomspace(1e-9, 10.0, 4000)
+    phis = np.array([phi(x) for x in lams])
+    inside = (phis >= KNEE_WINDOW[0] * tau0) & (phis <= KNEE_WINDOW[1] * tau0)
+    i = _flattest(lams[inside], phis[inside])
+    assert i is not None and got.knee is not None
+    assert got.knee == pytest.approx(phis[inside][i], rel=1e-2)
+    assert got.tau == pytest.approx(knee_target(got.knee), rel=1e-12)
+    assert abs(phi(got.lam) - got.tau) <= 1e-3 * got.tau
+    y = c[:, 0] * mu ** (k - 1) / (mu + got.lam) ** k  # the exact minimiser at lambda
+    assert np.linalg.norm(got.E[:, 0] - y) <= 1e-3 * np.linalg.norm(y)

@@ -29,9 +29,10 @@ cost): the Gauss rule stays accurate for ``phi`` when orthogonality is lost (the
 and the Galerkin vectors behave like conjugate gradients in finite precision (delayed, not
 wrong). Nothing rests on that alone: the caller verifies the vectors with their true residuals
 (:func:`true_residual_bound`). The basis is kept (``float32`` by default: a relative error of
-``~1e-7`` per vector) while it fits ``keep_bytes``; else :meth:`LanczosRun.combine` runs the
-recurrence a second time with the stored ``alpha, beta`` (bit-identical vectors, one product per
-step, no inner products).
+``~1e-7`` per vector) while it fits ``keep_bytes``; beyond, :meth:`LanczosRun.combine` runs the
+recurrence a second time with the stored ``alpha, beta``, resumed from its ``float64`` state at
+the last kept vector (bit-identical vectors, one product per step beyond the kept ones, no inner
+products; 1M torus: 312 products instead of 580).
 """
 
 from __future__ import annotations
@@ -93,6 +94,9 @@ class LanczosRun:
         per_vector = self.m * self.s * np.dtype(dtype).itemsize
         self.keep_steps = int(keep_bytes // max(per_vector, 1))
         self.basis: list[NDArray[np.floating]] = []
+        #: The recurrence's state (float64) when the last kept vector was stored: a second
+        #: pass resumes from it instead of from ``c``.
+        self._resume: tuple[int, Array, Array, Array, NDArray[np.int64]] | None = None
         self._keep(self.V)
 
     @property
@@ -107,6 +111,9 @@ class LanczosRun:
     def _keep(self, V: Array) -> None:
         if len(self.basis) < self.keep_steps:  # beyond: a solution from more steps than
             self.basis.append(V.astype(self.dtype))  # are kept takes a second pass
+            if len(self.basis) == self.keep_steps:
+                self._resume = (len(self.basis), self.V_prev.copy(), V.copy(),
+                                self.b_prev.copy(), self.length.copy())  # fmt: skip
 
     def step(self) -> None:
         """One Lanczos step (one product with ``M_t``)."""
@@ -167,12 +174,20 @@ class LanczosRun:
         return out
 
     def _regenerate(self, j: int) -> Iterator[NDArray[np.floating]]:
-        """The vectors ``v_1 .. v_j`` again from ``c`` and the stored ``alpha, beta`` (the same
-        operations as :meth:`step`, so bit-identical vectors; ``j - 1`` products)."""
-        safe = np.where(self.beta0 > 0, self.beta0, 1.0)
-        V, V_prev, b_prev = self.c / safe, np.zeros_like(self.c), np.zeros(self.s)
-        length = np.where(self.beta0 > 0, -1, 0)
-        for i in range(j):
+        """The vectors ``v_1 .. v_j`` again: the kept ones, then the recurrence resumed from its
+        state at the last kept vector (from ``c`` when none is kept) with the stored ``alpha,
+        beta`` (the same operations as :meth:`step`, so bit-identical vectors; ``j - kept``
+        products)."""
+        if self._resume is not None:
+            start, V_prev, V, b_prev, length = self._resume
+            length = length.copy()
+            yield from self.basis[: start - 1]
+            start -= 1  # v_start is V (float64)
+        else:
+            safe = np.where(self.beta0 > 0, self.beta0, 1.0)
+            V, V_prev, b_prev = self.c / safe, np.zeros_like(self.c), np.zeros(self.s)
+            length, start = np.where(self.beta0 > 0, -1, 0), 0
+        for i in range(start, j):
             yield V
             if i == j - 1:
                 return

@@ -4,8 +4,8 @@ One recurrence on ``M_t = D^-1 M D^-1`` from ``c = D^-1 r`` (:mod:`service.core.
 one product per step for all coordinate columns) is checked every few steps:
 
 1. **Knee** (automatic tau only): :mod:`service.core.search.knee_run` (decided from converged
-   quantities, when the old rule's model is stable, or at the old cap). The new target is
-   ``phi`` at the knee.
+   quantities: where the Gauss and Gauss-Radau models of ``phi`` agree). The new target is
+   :func:`~service.core.search.knee_run.knee_target`, 1 % below ``phi`` at the knee.
 2. **lambda**: the root ``lambda_G`` of the Gauss model's ``phi = tau`` and ``lambda_R`` of the
    Radau model's; for order 1 they bracket the root of the exact ``phi`` (Golub and Meurant).
    Stop when ``lambda_R / lambda_G - 1 <= LAMBDA_RTOL`` **and** the model's bound of the solution
@@ -49,7 +49,7 @@ from service.core.linalg.lanczos_run import (
     TikhonovModel,
     true_residual_bound,
 )
-from service.core.search.knee_run import KneeRule
+from service.core.search.knee_run import KneeRule, converged_knee, knee_target
 
 __all__ = ["LAMBDA_RTOL", "SOLUTION_RTOL", "OneRun", "direct_cost", "one_run"]
 
@@ -69,7 +69,8 @@ class OneRun:
     tau : float
         The target met (the knee's ``phi`` when one was found).
     knee : float or None
-        ``tau`` at the knee; ``None`` when none was asked or found.
+        ``phi`` at the knee (``tau`` is then :func:`~.knee_run.knee_target` of it); ``None``
+        when none was asked or found.
     E : ndarray, shape (m, s), or None
         The deviation ``E_k(lambda)``; ``None`` when the cost model left the solve to the
         caller (``lam`` is then the model's root).
@@ -114,12 +115,24 @@ def direct_cost(size: int) -> int:
     return int(52 * max(size, 1) ** 0.3)
 
 
-def _checkpoint(steps: int) -> bool:
-    """Models every 10 steps up to 100, every 20 up to 200, then about every 10 % of the
-    steps (a model costs ``O(j^2)`` per column: at 1300 steps ~25 ms)."""
-    if steps <= 100:
-        return steps % 10 == 0
-    return steps % max(20, (steps // 10) // 10 * 10) == 0
+def _checkpoint(steps: int, trail: list[tuple[int, float]], rtol: float) -> int:
+    """The step of the next model after one at ``steps``: every 10 steps up to 100, then about
+    every 10 % of the steps (a model costs ``O(j^2)`` per column: at 1300 steps ~25 ms); once
+    the solve has two checkpoints (``trail``: steps and error bounds), where the log-linear
+    decay of the bound over the last two reaches ``rtol`` (from 2 % to 25 % of the steps
+    ahead: Lanczos converges superlinearly, so the prediction is late rather than early)."""
+    if steps < 100:
+        return steps + 10
+    ahead = max(20, steps // 10 // 10 * 10)
+    if trail and trail[-1][1] <= rtol:  # only lambda's bracket to close
+        return steps + max(10, steps // 50)
+    if len(trail) >= 2:
+        (j0, e0), (j1, e1) = trail[-2:]
+        rate = math.log(e0 / e1) / max(j1 - j0, 1) if e1 > 0 and e0 > e1 else 0.0
+        if rate > 0:
+            need = math.log(e1 / rtol) / rate
+            ahead = int(min(max(need, 10, steps // 50), max(20, steps // 4)))
+    return steps + ahead
 
 
 def one_run(
@@ -169,28 +182,32 @@ def one_run(
         cnorm = float(np.linalg.norm(c))
         ceiling = lambda t: cnorm / math.sqrt(t)  # noqa: E731
     top = lambda t: max(ceiling(t), lo)  # noqa: E731
-    rule = KneeRule(tau, lo, ceiling, c.shape[0], order) if knee else None
+    rule = KneeRule(tau, lo, ceiling, c.shape[0]) if knee else None
     target: float | None = None if knee else tau
     knee_tau: float | None = None
     knee_steps: int | None = None
     lam_g = lam_r = top(tau)
     trail: list[tuple[int, float]] = []
     stop = ""
+    check = _checkpoint(0, [], rtol)
     while run.steps < max_steps and not run.done and not stop:
         run.step()
-        if not (_checkpoint(run.steps) or run.done or (rule and rule.wants(run.steps))):
+        if run.steps < check and not run.done:
             continue
         model = run.model(order)
         if target is None:
             assert rule is not None
             decided, knee_tau = rule.update(run, model)
+            check = _checkpoint(run.steps, [], rtol)
             if not decided:
                 continue
-            target, knee_steps = (knee_tau if knee_tau is not None else tau), run.steps
+            target = tau if knee_tau is None else knee_target(knee_tau)
+            knee_steps = run.steps
         lam_g = model.root(target, lo, top(target))
         size = math.sqrt(max(float(model.phi(lam_g)), 1e-300))
         err = model.error_bound(lam_g) / size
         trail.append((run.steps, err))
+        check = _checkpoint(run.steps, trail, rtol)
         if report is not None:
             report(lam_g, size * size, len(trail))
         if err <= rtol:  # the Radau rule (a second eigendecomposition) only when needed
@@ -203,22 +220,23 @@ def one_run(
     model = run.model(order)
     if target is None:  # max_steps before the knee was decided: the last models decide
         assert rule is not None
-        _, knee_tau = rule.update(run, model)
-        target, knee_steps = (knee_tau if knee_tau is not None else tau), run.steps
+        knee_tau, ok, _ = converged_knee(model, tau, lo, ceiling)
+        knee_tau = knee_tau if ok else None
+        target = tau if knee_tau is None else knee_target(knee_tau)
+        knee_steps = run.steps
         lam_g = model.root(target, lo, top(target))
     if stop == "budget":
         return OneRun(lam_g, target, knee_tau, None, {}, math.nan, math.inf, (lam_g, lam_r),
                       run.steps, run.products, False, knee_steps, notes)  # fmt: skip
     if stop == "converged":  # the fewest steps whose solution meets the bound (the knee may
+        # have run the recurrence past the solution's convergence: a shorter second pass)
         above = [j for j, e in trail if e > rtol]  # the last checkpoint short of the bound
         model = _shortest(run, order, lam_g, rtol, above[-1] + 1 if above else 1)
     return _solution(run, model, c, d, lam_g, lam_r, target, knee_tau, knee_steps, rtol,
                      stop == "converged", notes)  # fmt: skip
 
 
-def _shortest(
-    run: LanczosRun, order: int, lam: float, rtol: float, lo: int = 1
-) -> TikhonovModel:
+def _shortest(run: LanczosRun, order: int, lam: float, rtol: float, lo: int = 1) -> TikhonovModel:
     """The model of the fewest steps whose error bound at ``lam`` is at most ``rtol`` of its
     solution (bisection on the steps; the bound decreases with them in practice, and the
     caller verifies the vectors anyway); from ``lo`` steps on."""

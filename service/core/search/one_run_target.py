@@ -80,16 +80,17 @@ def knee_and_solve(
 
 
 def _knee_target(aim: Target, res: OneRun, frame: Frame) -> Target:
-    """The target moved to the knee (the words of :func:`~.target.knee`)."""
+    """The target moved to the knee (the words of :func:`~.target.knee`; the run's target lies
+    :data:`~service.core.search.knee_run.KNEE_RTOL` below the knee's tau)."""
     assert aim.tau is not None
     if res.knee is None:
         return aim.noted("; no knee of phi(lambda) near it: used as is")
-    moved = frame.phi_out(res.knee) / aim.tau
+    tau = frame.phi_out(res.tau)
     noted = aim.noted(
-        f"; moved to the knee of phi(lambda) at tau = {frame.phi_out(res.knee):.6g} "
-        f"({moved:.3g} x)"
+        f"; moved to the knee of phi(lambda) at tau = {frame.phi_out(res.knee):.6g}, "
+        f"target {tau:.6g} ({tau / aim.tau:.3g} x), 1 % below it (the knee's resolution)"
     )
-    return replace(noted, tau=frame.phi_out(res.knee), knee=moved)
+    return replace(noted, tau=tau, knee=tau / aim.tau)
 
 
 def _progress(dev: Deviation) -> Callable[[float, float, int], None]:
