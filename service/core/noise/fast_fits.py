@@ -283,3 +283,121 @@ def _inverse(G: Array, L: Array, Gi: Array, y: Array) -> bool:  # pragma: no cov
             if not abs(s - (1.0 if a == b else 0.0)) < 1e-6:
                 return False
     return True
+
+
+def patch_variances(points: Array, neighbours: NDArray[np.int64]) -> Array:
+    """:func:`service.core.noise.estimate.patch_variances` of surfaces in 3-D (quadratic
+    height functions; the point is one of its neighbourhood's fits), one row at a time: the
+    normal from :func:`_eig3`, any tangent pair (the module docstring), the normal equations
+    through Cholesky. Its ``cond(G) < 1e10`` test: ``kappa = |G|_F tr(G^-1)`` lies in
+    ``[cond, 6 sqrt(6) cond]``, so rows with ``kappa < 1e9`` pass and rows with
+    ``kappa > 1.5e11`` fail for sure; the rows between (and any without a normal) are
+    measured by the NumPy path itself."""
+    from service.core.noise import estimate
+
+    P = np.ascontiguousarray(points, dtype=np.float64)
+    nbr = np.ascontiguousarray(neighbours, dtype=np.int64)
+    v = np.full(nbr.shape[0], np.nan)
+    unsure = np.zeros(nbr.shape[0], dtype=np.bool_)
+    _patch_fits(P, nbr, v, unsure)
+    rows = np.flatnonzero(unsure)
+    if rows.size:
+        v[rows] = estimate.patch_variances(P, nbr[rows], 2, compiled=False)
+    return v
+
+
+@njit(cache=True)
+def _patch_fits(
+    P: Array, nbr: NDArray[np.int64], v: Array, unsure: NDArray[np.bool_]
+) -> None:  # pragma: no cover
+    """The fits of :func:`patch_variances`, into ``v`` (``unsure`` where the NumPy path
+    decides)."""
+    m, kk = nbr.shape
+    npar = 6
+    B = np.empty((kk, npar))
+    z = np.empty(kk)
+    G = np.empty((npar, npar))
+    L = np.empty((npar, npar))
+    Gi = np.empty((npar, npar))
+    rhs = np.empty(npar)
+    y = np.empty(npar)
+    for i in range(m):
+        mx = my = mz = 0.0
+        for t in range(kk):
+            j = nbr[i, t]
+            mx += P[j, 0]
+            my += P[j, 1]
+            mz += P[j, 2]
+        mx, my, mz = mx / kk, my / kk, mz / kk
+        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+        for t in range(kk):
+            j = nbr[i, t]
+            qx, qy, qz = P[j, 0] - mx, P[j, 1] - my, P[j, 2] - mz
+            c00 += qx * qx
+            c01 += qx * qy
+            c02 += qx * qz
+            c11 += qy * qy
+            c12 += qy * qz
+            c22 += qz * qz
+        _, _, nx, ny, nz = _eig3(c00, c01, c02, c11, c12, c22)
+        if nx == ny == nz == 0.0:
+            unsure[i] = True
+            continue
+        if abs(nx) <= abs(ny) and abs(nx) <= abs(nz):
+            ax, ay, az = 0.0, nz, -ny
+        elif abs(ny) <= abs(nz):
+            ax, ay, az = -nz, 0.0, nx
+        else:
+            ax, ay, az = ny, -nx, 0.0
+        s = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
+        t1x, t1y, t1z = ax * s, ay * s, az * s
+        t2x, t2y, t2z = ny * t1z - nz * t1y, nz * t1x - nx * t1z, nx * t1y - ny * t1x
+        ss = 0.0
+        for t in range(kk):
+            j = nbr[i, t]
+            qx, qy, qz = P[j, 0] - mx, P[j, 1] - my, P[j, 2] - mz
+            B[t, 1] = qx * t1x + qy * t1y + qz * t1z
+            B[t, 2] = qx * t2x + qy * t2y + qz * t2z
+            z[t] = qx * nx + qy * ny + qz * nz
+            ss += B[t, 1] * B[t, 1] + B[t, 2] * B[t, 2]
+        scale = math.sqrt(ss / (2.0 * kk))
+        if not scale > 0.0:
+            scale = 1.0
+        G[:, :] = 0.0
+        rhs[:] = 0.0
+        for t in range(kk):
+            u1, u2 = B[t, 1] / scale, B[t, 2] / scale
+            B[t, 0], B[t, 1], B[t, 2] = 1.0, u1, u2
+            B[t, 3], B[t, 4], B[t, 5] = u1 * u1, u1 * u2, u2 * u2
+            for a in range(npar):
+                rhs[a] += B[t, a] * z[t]
+                for b in range(a, npar):
+                    G[a, b] += B[t, a] * B[t, b]
+        for a in range(npar):
+            for b in range(a):
+                G[a, b] = G[b, a]
+        if not _inverse(G, L, Gi, y):  # not definite to rounding: cond(G) ~ 1 / eps
+            unsure[i] = True
+            continue
+        g2 = tr = 0.0
+        for a in range(npar):
+            tr += Gi[a, a]
+            for b in range(npar):
+                g2 += G[a, b] * G[a, b]
+        kappa = math.sqrt(g2) * tr
+        if kappa >= 1e9:
+            if kappa <= 1.5e11:
+                unsure[i] = True
+            continue
+        rss = 0.0
+        for a in range(npar):
+            ca = 0.0
+            for b in range(npar):
+                ca += Gi[a, b] * rhs[b]
+            y[a] = ca
+        for t in range(kk):
+            e = z[t]
+            for a in range(npar):
+                e -= B[t, a] * y[a]
+            rss += e * e
+        v[i] = rss / (kk - npar)

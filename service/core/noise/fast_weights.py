@@ -22,15 +22,12 @@ from numba import njit
 from numpy.typing import NDArray
 
 from service.core.geometry import Geometry
-from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
-from service.core.operator.knn import GRID_FROM, knn
+from service.core.noise.estimate import COMPILED_FROM, NoiseEstimate, estimate_noise, manifold_dim
+from service.core.operator.knn import knn, release
 
 __all__ = ["COMPILED_FROM", "isolated_mask", "isolation_distances", "local_sigma", "neighbours"]
 
 Array = NDArray[np.float64]
-#: Points from which surfaces in 3-D take the compiled path (below, the NumPy path is as fast
-#: and small inputs load no compiled code).
-COMPILED_FROM = GRID_FROM
 
 
 def neighbours(
@@ -45,7 +42,8 @@ def neighbours(
     d = manifold_dim(geometry)
     if est is None or not est.noise_found or d != 2:
         return None
-    dist, nbr = knn(geometry.points, est.k + 1)
+    dist, nbr = knn(geometry.points, est.k + 1)  # the grid the noise estimate's sample used
+    release()
     if np.any(dist[:, 1] == 0.0):
         return None
     return est, d, nbr, dist
