@@ -191,8 +191,8 @@ def _factors(
 
     fast = fast_weights.neighbours(geometry)
     if fast is not None:
-        est, d, nbr, dist = fast
-        return _from_neighbours(geometry, est, d, nbr, robust, uneven, compiled=True, dist=dist)
+        return _from_neighbours(geometry, fast[0], fast[1], fast[2], robust, uneven,
+                                compiled=True, dist=fast[3])  # fmt: skip
     P = geometry.points
     uniq, inv = np.unique(P, axis=0, return_inverse=True)
     if uniq.shape[0] < geometry.n:

@@ -303,7 +303,7 @@ def _query_at(
         margin = np.inf
         for a in range(3):
             x = (S[p, a] - lo[a]) / h
-            c[a] = int(math.floor(x)) + 1
+            c[a] = math.floor(x) + 1
             f = x - math.floor(x)
             margin = min(margin, h * (reach + min(f, 1.0 - f)))
         filled = 0
