@@ -52,7 +52,7 @@ def grid_knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
     _grid_query(S, lo, h, order, starts, cells, k, dist, idx, ok)
     bad = np.flatnonzero(~ok)
     if bad.size:
-        dist[bad], idx[bad] = nearest(P, bad, k, k)
+        dist[bad], idx[bad] = _widening(P, grid, bad, k)
     return dist, idx
 
 
@@ -69,6 +69,13 @@ def nearest(
     grid = _grid(P, cell_k) if n >= GRID_FROM and s == 3 and k >= 2 else None
     if grid is None:
         return _tree(P, k, at)
+    return _widening(P, grid, at, k)
+
+
+def _widening(
+    P: Array, grid: tuple[Any, ...], at: NDArray[np.int64], k: int
+) -> tuple[Array, NDArray[np.int64]]:
+    """:func:`nearest` on ``grid``: blocks of 3, 5, 7 cells a side, then the k-d tree."""
     S, lo, h, order, starts, cells = grid
     dist = np.empty((at.size, k))
     idx = np.empty((at.size, k), dtype=np.int64)
