@@ -47,12 +47,13 @@ def test_isolated_mask_is_the_numpy_test() -> None:
     g = Geometry(P, faces=g.faces)
     dist, nbr = cKDTree(P).query(P, k=13)
     sigma = np.full(g.n, 0.002)
-    edges = np.unique(np.sort(np.r_[g.faces[:, :2], g.faces[:, 1:]], axis=1), axis=0)
+    F = np.asarray(g.faces)
+    edges = np.unique(np.sort(np.r_[F[:, :2], F[:, 1:]], axis=1), axis=0)
     for geom in (g, Geometry(P, edges=edges), Geometry(P)):
         ref = robust.isolated(geom, nbr, sigma)
         assert np.array_equal(robust.isolated(geom, nbr, sigma, True, dist), ref)
         assert np.array_equal(robust.isolated(geom, nbr, sigma, True), ref)
-        assert geom.faces is None and geom.edges is None or ref[far].all()
+        assert (geom.faces is None and geom.edges is None) or ref[far].all()
 
 
 def test_the_elements_bound_the_graph_median_distance() -> None:
@@ -60,7 +61,8 @@ def test_the_elements_bound_the_graph_median_distance() -> None:
     P = np.ascontiguousarray(g.points)
     _, nbr = cKDTree(P).query(P, k=13)
     _, _, delta = fast_weights.isolation_distances(g, nbr)
-    bound = np.sqrt(getattr(fast_weights, "_box_bound")(P, g.faces.astype(np.int64)))
+    box_bound = getattr(fast_weights, "_box_bound")  # noqa: B009
+    bound = np.sqrt(box_bound(P, np.asarray(g.faces, dtype=np.int64)))
     assert delta is not None and np.all(delta <= bound * (1 + 1e-12))
 
 
