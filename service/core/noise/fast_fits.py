@@ -1,4 +1,4 @@
-"""Compiled leave-one-out fits of surfaces in 3-D (issue 30: data weights 12 s -> ~1 s at 1M).
+"""Compiled leave-one-out fits of surfaces in 3-D (issue 30: the data weights at 1M).
 
 The same numbers as :func:`service.core.noise.pointfits.leave_one_out` (its docstring defines
 ``r_i`` and ``v_i``) for the case that dominates the default's cost, surfaces in 3-D
@@ -12,11 +12,16 @@ design matrices). Two changes of arithmetic, neither of the result:
   The normal is the eigenvector of the smallest eigenvalue of the neighbours' 3 x 3 covariance,
   from the closed-form eigenvalues (Smith 1961) and the largest cross product of two rows of
   ``C - mu_3 I``; the tangent variances ``mu_1 >= mu_2`` feed the same degeneracy test;
-* the 6 x 6 normal equations are solved through their Cholesky factor; the inverse is checked
-  as the NumPy path checks it (``max |G^-1 G - I| < 1e-6``, else ``nan``).
+* the 6 x 6 normal equations are solved through their Cholesky factor and its inverse
+  ``L^-1`` (``h_i = |L^-1 b_i|^2``); the NumPy path's check of the inverse
+  (``max |G^-1 G - I| < 1e-6``, else ``nan``) runs only where it could fail, when
+  ``kappa = |G|_F tr(G^-1) >= cond_2(G)`` reaches :data:`CERTAIN` (issue 30: the check and the
+  explicit inverse were half of the fit's arithmetic).
 
 They agree with the NumPy path to rounding (tests: relative differences ~1e-12 on ``r`` and
 ``v``, identical outlier decisions). Other dimensions fall back to the NumPy path.
+:func:`patch_variances` does the same for the noise estimate's fits
+(:func:`service.core.noise.estimate.patch_variances`).
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["leave_one_out"]
+__all__ = ["CERTAIN", "leave_one_out", "patch_variances"]
 
 Array = NDArray[np.float64]
 #: Bound on ``cond_2`` of the normal equations below which their inverse needs no check.
@@ -131,6 +136,7 @@ def _surface_fits(
     z = np.empty(kk)
     G = np.empty((npar, npar))
     L = np.empty((npar, npar))
+    Li = np.zeros((npar, npar))
     Gi = np.empty((npar, npar))
     rhs = np.empty(npar)
     b0 = np.empty(npar)
@@ -196,17 +202,14 @@ def _surface_fits(
         for a in range(npar):
             for b in range(a):
                 G[a, b] = G[b, a]
-        if not _inverse(G, L, Gi, y):
+        kappa = _factor(G, L, Li, y)
+        if kappa < 0.0 or (kappa >= CERTAIN and not _inverse_ok(G, Li, Gi)):
             continue
         qx, qy, qz = P[nbr[i, 0], 0] - mx, P[nbr[i, 0], 1] - my, P[nbr[i, 0], 2] - mz
         u1 = (qx * t1x + qy * t1y + qz * t1z) / scale
         u2 = (qx * t2x + qy * t2y + qz * t2z) / scale
         b0[0], b0[1], b0[2], b0[3], b0[4], b0[5] = 1.0, u1, u2, u1 * u1, u1 * u2, u2 * u2
-        for a in range(npar):
-            ca = 0.0
-            for b in range(npar):
-                ca += Gi[a, b] * rhs[b]
-            coef[a] = ca
+        _solve(Li, rhs, y, coef)
         rss = 0.0
         for t in range(1, kk):
             e = z[t]
@@ -216,30 +219,27 @@ def _surface_fits(
         v[i] = rss / (cnt - npar)
         e0 = qx * nx + qy * ny + qz * nz
         h0 = 0.0
-        for a in range(npar):
-            gb = 0.0
-            for b in range(npar):
-                gb += Gi[a, b] * b0[b]
+        for a in range(npar):  # h0 = b0^T G^-1 b0 = |L^-1 b0|^2
             e0 -= b0[a] * coef[a]
-            h0 += b0[a] * gb
+            lb = 0.0
+            for b in range(a + 1):
+                lb += Li[a, b] * b0[b]
+            h0 += lb * lb
         r[i] = e0 * e0 / (1.0 + h0)
 
 
 @njit(cache=True)
-def _inverse(G: Array, L: Array, Gi: Array, y: Array) -> bool:  # pragma: no cover
-    """``Gi = G^-1 = L^-T L^-1`` through Cholesky (``L`` becomes ``L^-1``; ``y`` work space);
-    false when ``G`` is not (numerically) definite or the inverse fails the NumPy path's check
-    ``max |G^-1 G - I| < 1e-6``. The check runs only where it could fail: with
-    ``kappa = |G|_F |L^-1|_F^2 >= cond_2(G)`` below :data:`CERTAIN` the computed inverse's
-    ``|G^-1 G - I|`` is at most ``c n eps kappa`` (backward stable Cholesky, ``c n <= 36``):
-    below 1e-8."""
+def _factor(G: Array, L: Array, Li: Array, y: Array) -> float:  # pragma: no cover
+    """Cholesky ``G = L L^T`` and ``Li = L^-1`` (lower triangle; ``y`` work space); returns
+    ``kappa = |G|_F |L^-1|_F^2 = |G|_F tr(G^-1)``, which lies in ``[cond_2(G), 6 sqrt(6)
+    cond_2(G)]``, or -1 when ``G`` is not definite to rounding."""
     n = G.shape[0]
     for j in range(n):
         s = G[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
         if not s > 0.0:
-            return False
+            return -1.0
         L[j, j] = math.sqrt(s)
         for i in range(j + 1, n):
             s = G[i, j]
@@ -247,9 +247,7 @@ def _inverse(G: Array, L: Array, Gi: Array, y: Array) -> bool:  # pragma: no cov
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
     li2 = 0.0
-    for col in range(n):  # L^-1 column by column (lower triangular), kept in L's upper part
-        for i in range(col):
-            y[i] = 0.0
+    for col in range(n):  # L^-1 column by column
         y[col] = 1.0 / L[col, col]
         for i in range(col + 1, n):
             s = 0.0
@@ -257,24 +255,29 @@ def _inverse(G: Array, L: Array, Gi: Array, y: Array) -> bool:  # pragma: no cov
                 s -= L[i, k] * y[k]
             y[i] = s / L[i, i]
         for i in range(col, n):
-            Gi[i, col] = y[i]  # Gi holds L^-1 for now
+            Li[i, col] = y[i]
             li2 += y[i] * y[i]
     g2 = 0.0
     for a in range(n):
         for b in range(n):
             g2 += G[a, b] * G[a, b]
-    for a in range(n):  # G^-1 = L^-T L^-1, in L (its upper part is free), then back to Gi
+    return math.sqrt(g2) * li2
+
+
+@njit(cache=True)
+def _inverse_ok(G: Array, Li: Array, Gi: Array) -> bool:  # pragma: no cover
+    """The NumPy path's check of the inverse, ``max |G^-1 G - I| < 1e-6``, with
+    ``G^-1 = L^-T L^-1``. Needed only when :func:`_factor`'s ``kappa`` reaches
+    :data:`CERTAIN`: below, the computed inverse's error is at most ``c n eps kappa``
+    (backward stable Cholesky, ``c n <= 36``), under 1e-8."""
+    n = G.shape[0]
+    for a in range(n):
         for b in range(a, n):
             s = 0.0
             for k in range(b, n):
-                s += Gi[k, a] * Gi[k, b]
-            L[a, b] = s
-    for a in range(n):
-        for b in range(a, n):
-            Gi[a, b] = L[a, b]
-            Gi[b, a] = L[a, b]
-    if math.sqrt(g2) * li2 < CERTAIN:
-        return True
+                s += Li[k, a] * Li[k, b]
+            Gi[a, b] = s
+            Gi[b, a] = s
     for a in range(n):
         for b in range(n):
             s = 0.0
@@ -283,6 +286,22 @@ def _inverse(G: Array, L: Array, Gi: Array, y: Array) -> bool:  # pragma: no cov
             if not abs(s - (1.0 if a == b else 0.0)) < 1e-6:
                 return False
     return True
+
+
+@njit(cache=True)
+def _solve(Li: Array, rhs: Array, y: Array, coef: Array) -> None:  # pragma: no cover
+    """``coef = G^-1 rhs = L^-T (L^-1 rhs)``."""
+    n = Li.shape[0]
+    for a in range(n):
+        s = 0.0
+        for b in range(a + 1):
+            s += Li[a, b] * rhs[b]
+        y[a] = s
+    for a in range(n):
+        s = 0.0
+        for b in range(a, n):
+            s += Li[b, a] * y[b]
+        coef[a] = s
 
 
 def patch_variances(points: Array, neighbours: NDArray[np.int64]) -> Array:
@@ -318,9 +337,10 @@ def _patch_fits(
     z = np.empty(kk)
     G = np.empty((npar, npar))
     L = np.empty((npar, npar))
-    Gi = np.empty((npar, npar))
+    Li = np.zeros((npar, npar))
     rhs = np.empty(npar)
     y = np.empty(npar)
+    coef = np.empty(npar)
     for i in range(m):
         mx = my = mz = 0.0
         for t in range(kk):
@@ -376,28 +396,17 @@ def _patch_fits(
         for a in range(npar):
             for b in range(a):
                 G[a, b] = G[b, a]
-        if not _inverse(G, L, Gi, y):  # not definite to rounding: cond(G) ~ 1 / eps
+        kappa = _factor(G, L, Li, y)
+        if kappa < 0.0 or 1e9 <= kappa <= 1.5e11:  # not definite to rounding, or unsure
             unsure[i] = True
             continue
-        g2 = tr = 0.0
-        for a in range(npar):
-            tr += Gi[a, a]
-            for b in range(npar):
-                g2 += G[a, b] * G[a, b]
-        kappa = math.sqrt(g2) * tr
-        if kappa >= 1e9:
-            if kappa <= 1.5e11:
-                unsure[i] = True
+        if kappa > 1.5e11:
             continue
+        _solve(Li, rhs, y, coef)
         rss = 0.0
-        for a in range(npar):
-            ca = 0.0
-            for b in range(npar):
-                ca += Gi[a, b] * rhs[b]
-            y[a] = ca
         for t in range(kk):
             e = z[t]
             for a in range(npar):
-                e -= B[t, a] * y[a]
+                e -= B[t, a] * coef[a]
             rss += e * e
         v[i] = rss / (kk - npar)

@@ -11,8 +11,8 @@
 * :func:`local_sigma`: :func:`service.core.noise.uneven.local_sigma` compiled (same numbers);
 * the leave-one-out fits are :func:`service.core.noise.fast_fits.leave_one_out`.
 
-Measured (164K icosphere, one thread): the factors 2.4-2.9 s -> 0.65 s; 1M torus 12.4 s ->
-see ``benchmarks/speed/results``. Same decisions as the NumPy path (tests).
+Measured (one thread): ``benchmarks/speed/weights_stage.py``, tables in
+``benchmarks/speed/results/issue30-weights.md``. Same decisions as the NumPy path (tests).
 """
 
 from __future__ import annotations
