@@ -45,11 +45,11 @@ def leave_one_out(
     manifold_dim: int,
     use: NDArray[np.bool_] | None = None,
 ) -> tuple[Array, Array]:
-    """``(r, v)`` as :func:`service.core.noise.pointfits.leave_one_out` (same arguments)."""
+    """``(r, v)`` as :func:`service.core.noise.pointfits.leave_one_out` (same arguments) for
+    surfaces in 3-D (the only case its callers send: other dimensions are a ``ValueError``;
+    this module imports no other of the package, so the noise estimate can use it)."""
     if points.shape[1] != 3 or manifold_dim != 2:
-        from service.core.noise.pointfits import leave_one_out as numpy_path
-
-        return numpy_path(points, nbr, manifold_dim, use)
+        raise ValueError("compiled fits are for surfaces in 3-D (manifold_dim 2, 3 coordinates)")
     m = nbr.shape[0]
     r = np.full(m, np.nan)
     v = np.full(m, np.nan)
@@ -304,25 +304,22 @@ def _solve(Li: Array, rhs: Array, y: Array, coef: Array) -> None:  # pragma: no 
         coef[a] = s
 
 
-def patch_variances(points: Array, neighbours: NDArray[np.int64]) -> Array:
+def patch_variances(
+    points: Array, neighbours: NDArray[np.int64]
+) -> tuple[Array, NDArray[np.bool_]]:
     """:func:`service.core.noise.estimate.patch_variances` of surfaces in 3-D (quadratic
     height functions; the point is one of its neighbourhood's fits), one row at a time: the
     normal from :func:`_eig3`, any tangent pair (the module docstring), the normal equations
     through Cholesky. Its ``cond(G) < 1e10`` test: ``kappa = |G|_F tr(G^-1)`` lies in
     ``[cond, 6 sqrt(6) cond]``, so rows with ``kappa < 1e9`` pass and rows with
-    ``kappa > 1.5e11`` fail for sure; the rows between (and any without a normal) are
-    measured by the NumPy path itself."""
-    from service.core.noise import estimate
-
+    ``kappa > 1.5e11`` fail for sure. Returns ``v`` and the rows between (and any without a
+    normal), which the caller measures with the NumPy code."""
     P = np.ascontiguousarray(points, dtype=np.float64)
     nbr = np.ascontiguousarray(neighbours, dtype=np.int64)
     v = np.full(nbr.shape[0], np.nan)
     unsure = np.zeros(nbr.shape[0], dtype=np.bool_)
     _patch_fits(P, nbr, v, unsure)
-    rows = np.flatnonzero(unsure)
-    if rows.size:
-        v[rows] = estimate.patch_variances(P, nbr[rows], 2, compiled=False)
-    return v
+    return v, unsure
 
 
 @njit(cache=True)
