@@ -76,7 +76,9 @@ def isolated_mask(
         return (d > spacings * spacing) & (d > noise * sigma)
     E = np.ascontiguousarray(E, dtype=np.int64)
     with np.errstate(invalid="ignore"):
-        bound = np.sqrt(_box_bound(P, E)) * (1.0 + 1e-9)  # rounding of the median's lerp
+        # rounding: the median's interpolation and the differences, relative to the coordinates
+        slack = 16 * np.finfo(np.float64).eps * float(np.max(np.abs(P), initial=0.0))
+        bound = np.sqrt(_box_bound(P, E)) * (1.0 + 1e-9) + slack
         cand = np.flatnonzero((bound > spacings * spacing) & (bound > noise * sigma))
     out = np.zeros(geometry.n, dtype=np.bool_)
     if cand.size:
@@ -188,6 +190,10 @@ def local_sigma(v: Array, nbr: NDArray[np.int64], nu: int) -> Array:
     from service.core.noise.quantiles import chi2
     from service.core.noise.uneven import QUANTILE
 
+    if nbr.shape[1] > 128:  # NumPy sums longer rows in blocks: :func:`_pairwise` is one block
+        from service.core.noise.uneven import local_sigma as numpy_rule
+
+        return numpy_rule(v, nbr, nu)
     nbr = np.ascontiguousarray(nbr, dtype=np.int64)
     s2 = _row_quantiles(np.ascontiguousarray(v, dtype=np.float64), nbr, QUANTILE)
     with np.errstate(all="ignore"):
