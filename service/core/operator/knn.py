@@ -45,14 +45,14 @@ def grid_knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
     grid = _grid(P, k)
     if grid is None:
         return _tree(P, k, np.arange(n))
-    S, lo, h, order, starts, cells = grid
+    S, lo, h, order, starts, cells, _ = grid
     dist = np.empty((n, k))
     idx = np.empty((n, k), dtype=np.int64)
     ok = np.zeros(n, dtype=np.bool_)
     _grid_query(S, lo, h, order, starts, cells, k, dist, idx, ok)
     bad = np.flatnonzero(~ok)
     if bad.size:
-        dist[bad], idx[bad] = _widening(P, grid, bad, k)
+        dist[bad], idx[bad] = _widening(P, grid, bad, k, 2)
     return dist, idx
 
 
@@ -69,23 +69,24 @@ def nearest(
     grid = _grid(P, cell_k) if n >= GRID_FROM and s == 3 and k >= 2 else None
     if grid is None:
         return _tree(P, k, at)
-    return _widening(P, grid, at, k)
+    return _widening(P, grid, at, k, 1 if k <= cell_k else 2)
 
 
 def _widening(
-    P: Array, grid: tuple[Any, ...], at: NDArray[np.int64], k: int
+    P: Array, grid: tuple[Any, ...], at: NDArray[np.int64], k: int, first: int
 ) -> tuple[Array, NDArray[np.int64]]:
-    """:func:`nearest` on ``grid``: blocks of 3, 5, 7 cells a side, then the k-d tree."""
-    S, lo, h, order, starts, cells = grid
+    """:func:`nearest` on ``grid``: blocks of ``2 first + 1`` cells a side, then wider up to 7,
+    then the k-d tree (a grid made for fewer neighbours than ``k`` starts at 5)."""
+    S, lo, h, order, starts, cells, rank = grid
     dist = np.empty((at.size, k))
     idx = np.empty((at.size, k), dtype=np.int64)
     todo = np.arange(at.size)
-    for reach in range(1, 4):
+    for reach in range(first, 4):
         if not todo.size:
             break
         ok = np.zeros(todo.size, dtype=np.bool_)
         d, i = np.empty((todo.size, k)), np.empty((todo.size, k), dtype=np.int64)
-        _query_at(S, lo, h, order, starts, cells, at[todo], k, reach, d, i, ok)
+        _query_at(S, lo, h, rank, starts, cells, order, at[todo], k, reach, d, i, ok)
         dist[todo[ok]], idx[todo[ok]] = d[ok], i[ok]
         todo = todo[~ok]
     if todo.size:
@@ -99,7 +100,7 @@ _MEMO: list[tuple[weakref.ref[Array], int, Any]] = []
 
 
 def release() -> None:
-    """Forget the remembered grid and tree (their memory: ~40 bytes a point)."""
+    """Forget the remembered grid and tree (their memory: ~50 bytes a point)."""
     _MEMO.clear()
 
 
@@ -114,8 +115,8 @@ def _remembered(P: Array, k: int, make: Any) -> Any:
 
 def _grid(P: Array, k: int) -> tuple[Any, ...] | None:
     """The grid for ``k`` neighbours of ``P`` (points in cell order, origin, cell size, order,
-    run starts, cells), remembered for the last points array; ``None`` when the points span
-    nothing."""
+    run starts, cells, each point's position in the order), remembered for the last points
+    array; ``None`` when the points span nothing."""
 
     def make() -> tuple[Any, ...] | None:
         Q = np.ascontiguousarray(P, dtype=np.float64)
@@ -125,7 +126,9 @@ def _grid(P: Array, k: int) -> tuple[Any, ...] | None:
             return None
         h = _cell_size(Q, lo, span, k)
         _, order, starts, cells = _cells(Q, lo, h)
-        return np.ascontiguousarray(Q[order]), lo, h, order, starts, cells
+        rank = np.empty_like(order)  # each point's position in cell order
+        rank[order] = np.arange(order.size)
+        return np.ascontiguousarray(Q[order]), lo, h, order, starts, cells, rank
 
     return _remembered(P, k, make)  # type: ignore[no-any-return]
 
@@ -283,9 +286,10 @@ def _query_at(
     S: Array,
     lo: Array,
     h: float,
-    order: NDArray[np.int64],
+    rank: NDArray[np.int64],
     starts: NDArray[np.int64],
     cells: NDArray[np.int64],
+    order: NDArray[np.int64],
     at: NDArray[np.int64],
     k: int,
     reach: int,
@@ -297,10 +301,6 @@ def _query_at(
     (as :func:`_grid_query`'s rows); ``ok`` where that block provably holds them."""
     m = starts.size - 1
     d0, d1, d2 = cells[m], cells[m + 1], cells[m + 2]
-    n = order.size
-    rank = np.empty(n, dtype=np.int64)  # position of each point in cell order
-    for p in range(n):
-        rank[order[p]] = p
     bd = np.empty(k)
     bi = np.empty(k, dtype=np.int64)
     c = np.empty(3, dtype=np.int64)
