@@ -69,7 +69,7 @@ def nearest(
     grid = _grid(P, cell_k) if n >= GRID_FROM and s == 3 and k >= 2 else None
     if grid is None:
         return _tree(P, k, at)
-    return _widening(P, grid, at, k, 1 if k <= cell_k else 2)
+    return _widening(P, grid, at, k, 1)
 
 
 def _widening(
