@@ -95,8 +95,9 @@ def _widening(
 
 
 #: The last points array's grid and k-d tree (the noise estimate's sample and the data weights'
-#: full query share them): ``(points, cell k or 0 for the tree, structure)``.
-_MEMO: list[tuple[weakref.ref[Array], int, Any]] = []
+#: full query share them): ``(points, their sum, cell k or 0 for the tree, structure)``; the
+#: sum tells an array changed in place (as :func:`service.core.noise.estimate.estimate_noise`).
+_MEMO: list[tuple[weakref.ref[Array], float, int, Any]] = []
 
 
 def release() -> None:
@@ -105,11 +106,13 @@ def release() -> None:
 
 
 def _remembered(P: Array, k: int, make: Any) -> Any:
-    for ref, kk, got in _MEMO:
-        if ref() is P and kk == k:
+    total = float(np.sum(P))
+    for ref, tot, kk, got in _MEMO:
+        if ref() is P and kk == k and (tot == total or (np.isnan(tot) and np.isnan(total))):
             return got
     got = make()
-    _MEMO[:] = [m for m in _MEMO if m[0]() is P and m[1] != k] + [(weakref.ref(P), k, got)]
+    keep = [m for m in _MEMO if m[0]() is P and m[1] == total and m[2] != k]
+    _MEMO[:] = [*keep, (weakref.ref(P), total, k, got)]
     return got
 
 

@@ -111,3 +111,14 @@ def test_noise_estimate_on_the_grid_is_the_tree_estimate(monkeypatch: pytest.Mon
     assert got.sigma == pytest.approx(ref.sigma, rel=1e-12)
     assert got.scale_ratio == pytest.approx(ref.scale_ratio, rel=1e-12)
     np.testing.assert_allclose(got.residuals, ref.residuals, rtol=1e-9)
+
+
+def test_a_grid_is_not_reused_for_points_changed_in_place(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(knn, "GRID_FROM", 100)
+    P = _sheet(40, 0.002).points.copy()
+    at = np.arange(0, P.shape[0], 5)
+    knn.nearest(P, at, 8, 8)
+    P[:, 2] += np.random.default_rng(2).normal(0, 0.05, P.shape[0])  # same array, new points
+    got = knn.nearest(P, at, 8, 8)[1]
+    knn.release()
+    np.testing.assert_array_equal(got, cKDTree(P).query(P[at], k=8)[1])
