@@ -64,8 +64,8 @@ def warm_compiled(rng: np.random.Generator) -> None:
     passes of the finish and the shape checks, the normal system's scaling) on a tiny
     surface: without this, the first large job or upload of each process compiled them (a few
     CPU seconds each; more than a minute on a loaded machine with no numba cache yet)."""
-    from service.core.noise.fast_fits import leave_one_out
-    from service.core.noise.fast_weights import isolation_distances
+    from service.core.noise.fast_fits import leave_one_out, patch_variances
+    from service.core.noise.fast_weights import isolation_distances, local_sigma
     from service.core.operator.knn import grid_knn
     from service.core.system.fast_frames import surface_normals
 
@@ -73,12 +73,15 @@ def warm_compiled(rng: np.random.Generator) -> None:
     u, v = np.meshgrid(np.arange(side, dtype=float), np.arange(side, dtype=float))
     sheet = np.c_[u.ravel(), v.ravel(), rng.normal(0, 0.01, side * side)]
     _, nbr = grid_knn(sheet, 10)
+    grid_knn(np.r_[sheet, [[0.0, 0.0, 50.0]]], 10)  # a point far off: the widening search
     leave_one_out(sheet, nbr, 2)
     leave_one_out(sheet, nbr, 2, np.ones((nbr.shape[0], nbr.shape[1] - 1), dtype=bool))
     quad = np.arange(side * side).reshape(side, side)[:-1, :-1].ravel()
     faces = np.r_[np.c_[quad, quad + 1, quad + side], np.c_[quad + 1, quad + side + 1, quad + side]]
     isolation_distances(Geometry(sheet), nbr)
     isolation_distances(Geometry(sheet, faces=faces), nbr)
+    local_sigma(np.ones(side * side), nbr, 4)
+    patch_variances(sheet, nbr)
     normals = surface_normals(sheet, 10)[:, :, 0]
     # the neighbourhood kernels: below 50,000 points a run takes their NumPy versions
     # (operator.sized_kernels), but once this loads numba every run of the process uses these

@@ -40,7 +40,6 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
-from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
 from service.core.noise import curves
@@ -61,6 +60,9 @@ __all__ = [
 
 _CHUNK = 20000
 SAMPLE = 20000
+#: Points from which surfaces in 3-D take the compiled kernels of the noise estimate and the data
+#: weights (issue 30; below, NumPy is as fast and small inputs load no compiled code).
+COMPILED_FROM = 50_000
 #: Largest median ratio ``v_i(2k) / v_i(k)`` still read as noise (calibration half: noisy
 #: inputs <= 1.55, noise-free >= 2.21; see ``service/core/README.md``).
 NOISE_RATIO = 1.85
@@ -152,6 +154,7 @@ def patch_variances(
     neighbours: NDArray[np.int64],
     manifold_dim: int,
     degree: int = 2,
+    compiled: bool = True,
 ) -> NDArray[np.float64]:
     """Residual variance of the local quadratic fit of every neighbourhood.
 
@@ -171,7 +174,18 @@ def patch_variances(
         ``RSS_i / (c (k - p))`` with ``c = s - d`` normal directions and ``p`` coefficients:
         an unbiased estimate of ``sigma^2`` where the shape is locally a quadratic height
         function; ``nan`` where the fit is rank deficient.
+
+    Surfaces in 3-D from :data:`COMPILED_FROM` points take
+    :func:`service.core.noise.fast_fits.patch_variances` (``compiled``; same numbers to rounding).
     """
+    if compiled and points.shape[0] >= COMPILED_FROM and points.shape[1] == 3 and (
+            manifold_dim == 2 and degree == 2):  # fmt: skip
+        from service.core.noise.fast_fits import patch_variances as fast
+
+        v, unsure = fast(points, neighbours)
+        rows = np.flatnonzero(unsure)  # cond(G) near 1e10: measured as below
+        v[rows] = patch_variances(points, neighbours[rows], 2, compiled=False)
+        return v
     n, k = neighbours.shape
     d = manifold_dim
     out = np.full(n, np.nan)
@@ -282,18 +296,17 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
             full = rows.size == n  # every point, in order: kept for the data weights
             return _tracked(geometry, _kept(_estimate(P, along, k, d), along if full else None))
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
-    tree = cKDTree(P)
+    from service.core.operator.knn import nearest
+
     at = _sample(P.shape[0])
-    dist, _ = tree.query(P[at], k=2)
+    dist, _ = nearest(P, at, 2, k + 1)  # k-d tree, or the data weights' grid (issue 30)
     if np.any(dist[:, 1] == 0):  # coincident points (split normals, STL): one sample each
         P = np.unique(P, axis=0)
         if P.shape[0] < k:
             return None
-        tree = cKDTree(P)
         at = _sample(P.shape[0])
     k2 = min(2 * k, P.shape[0])
-    _, nbr = tree.query(P[at], k=k2)
-    nbr = np.asarray(nbr, dtype=np.int64).reshape(at.size, k2)
+    _, nbr = nearest(P, at, k2, k + 1)
     full = P is geometry.points and at.size == n
     return _kept(_estimate(P, nbr, k, d), nbr if full else None)
 

@@ -194,7 +194,8 @@ def _factors(
 
         fast = fast_weights.neighbours(geometry)
     if fast is not None:
-        return _from_neighbours(geometry, *fast, robust, uneven, compiled=True)
+        return _from_neighbours(geometry, fast[0], fast[1], fast[2], robust, uneven,
+                                compiled=True, dist=fast[3])  # fmt: skip
     P = geometry.points
     uniq, inv = np.unique(P, axis=0, return_inverse=True)
     if uniq.shape[0] < geometry.n:
@@ -217,11 +218,13 @@ def _factors(
 
 def _from_neighbours(
     geometry: Geometry, est: NoiseEstimate, d: int, nbr: NDArray[np.int64], robust: str,
-    uneven: str, compiled: bool,
+    uneven: str, compiled: bool, dist: Array | None = None,
 ) -> tuple[Array, Array, NDArray[np.int64], str, bool, float]:  # fmt: skip
-    """:func:`_factors` from each point's neighbours (row ``i``: ``i`` first)."""
+    """:func:`_factors` from each point's neighbours (row ``i``: ``i`` first; ``dist`` their
+    distances when known). The quantization check runs only where its answer matters."""
     P = geometry.points
-    if compiled:
+    if compiled:  # numba: only on the compiled path
+        from service.core.noise import fast_weights
         from service.core.noise.fast_fits import leave_one_out as fits
     else:
         fits = leave_one_out
@@ -230,16 +233,19 @@ def _from_neighbours(
     nu = max(c * (nbr.shape[1] - 1 - (1 + d + d * (d + 1) // 2)), 1)
     s2 = np.full(geometry.n, est.sigma**2) * _calibration(r, est.sigma**2, c)
     _, r, v = flag_outliers(P, nbr, d, r, v, s2, nu)  # fits without outliers
-    sig = local_sigma(v, nbr, nu)
+    sig = (fast_weights.local_sigma if compiled else local_sigma)(v, nbr, nu)
     finite = np.isfinite(sig) & (sig > 0)
     spread = float(np.subtract(*np.quantile(np.log(sig[finite]), [0.9, 0.1]))) if finite.any() \
         else 0.0
-    clean = (est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE) and not on_grid(P, est.sigma)
-    use_uneven = uneven == "local" or (uneven == "auto" and spread > SPREAD and clean)
+    use_uneven = uneven == "local" or (
+        uneven == "auto" and spread > SPREAD
+        and (est.scale_ratio is None or est.scale_ratio <= SHAPE_FREE)
+        and not on_grid(P, est.sigma)
+    )  # fmt: skip
     ratio = np.where(finite, sig, est.sigma) / est.sigma if use_uneven else np.ones(geometry.n)
     ratio = np.clip(ratio, 1.0 / RATIO_CAP, RATIO_CAP)
     s2 = (est.sigma * ratio) ** 2
-    far = isolated(geometry, nbr, np.sqrt(s2), compiled)
+    far = isolated(geometry, nbr, np.sqrt(s2), compiled, dist)
     rho, outliers, applied = robust_weights(
         P, d, r, v, s2 * _calibration(r, s2, c), nu, robust, far
     )
@@ -274,7 +280,8 @@ def flag_outliers(
 
 
 def isolated(
-    geometry: Geometry, nbr: NDArray[np.int64], sigma: Array, compiled: bool = False
+    geometry: Geometry, nbr: NDArray[np.int64], sigma: Array, compiled: bool = False,
+    dist: Array | None = None,
 ) -> NDArray[np.bool_]:
     """Points far from their neighbours: from the median of their graph neighbours for meshes
     and curves (coordinate-wise, so that a neighbour thrown off does not move it), their mean
@@ -283,14 +290,13 @@ def isolated(
     Gaussian extreme of the noise. A
     point thrown far off (inside a sphere, far along the surface) has neighbours that fit
     nothing, so its residual test is undecided; this catches it. ``compiled``: the distances
-    from :func:`service.core.noise.fast_weights.isolation_distances` (one pass, issue 30)."""
+    by :func:`service.core.noise.fast_weights.isolated_mask` (compiled, issue 30; from the
+    ``k``-NN's distances ``dist`` when given)."""
     z0 = float(np.sqrt(chi2.isf(ALPHA, 1)))
     if compiled:
-        from service.core.noise.fast_weights import isolation_distances
+        from service.core.noise.fast_weights import isolated_mask
 
-        d, spacing, far = isolation_distances(geometry, nbr)
-        dist = d if far is None else far
-        return (dist > ISOLATION * spacing) & (dist > 2 * z0 * sigma)
+        return isolated_mask(geometry, nbr, sigma, ISOLATION, 2 * z0, dist)
     P = geometry.points
     d = np.mean(np.linalg.norm(P[nbr[:, 1:]] - P[:, None, :], axis=2), axis=1)
     spacing = np.median(d[nbr[:, 1:]], axis=1)

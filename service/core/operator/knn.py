@@ -15,12 +15,14 @@ points: in index order).
 from __future__ import annotations
 
 import math
+import weakref
+from typing import Any
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["GRID_FROM", "grid_knn", "knn"]
+__all__ = ["GRID_FROM", "grid_knn", "knn", "nearest", "release"]
 
 Array = NDArray[np.float64]
 #: Below this many points the k-d tree is as fast (and the grid's set-up is not worth it).
@@ -40,27 +42,104 @@ def knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
 def grid_knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
     """:func:`knn` on the uniform grid whatever the size (3-D points, ``2 <= k <= n``)."""
     n = P.shape[0]
-    P = np.ascontiguousarray(P, dtype=np.float64)
-    lo = P.min(axis=0)
-    span = float(np.max(P.max(axis=0) - lo))
-    if not span > 0:
+    grid = _grid(P, k)
+    if grid is None:
         return _tree(P, k, np.arange(n))
-    h = _cell_size(P, lo, span, k)
-    keys, order, starts, cells = _cells(P, lo, h)
+    S, lo, h, order, starts, cells, _ = grid
     dist = np.empty((n, k))
     idx = np.empty((n, k), dtype=np.int64)
     ok = np.zeros(n, dtype=np.bool_)
-    _grid_query(P, lo, h, keys, order, starts, cells, k, dist, idx, ok)
+    _grid_query(S, lo, h, order, starts, cells, k, dist, idx, ok)
     bad = np.flatnonzero(~ok)
     if bad.size:
-        dist[bad], idx[bad] = _tree(P, k, bad)
+        dist[bad], idx[bad] = _widening(P, grid, bad, k, 2)
     return dist, idx
+
+
+def nearest(
+    P: Array, at: NDArray[np.int64], k: int, cell_k: int
+) -> tuple[Array, NDArray[np.int64]]:
+    """The ``k`` nearest points of the points ``at`` (rows of ``P``), as :func:`knn`'s rows:
+    on the grid made for ``cell_k`` neighbours (shared with :func:`knn` for that ``k``: made once
+    per points array) from ``GRID_FROM`` 3-D points, widening the searched block of cells until
+    the block provably holds them, else by the k-d tree."""
+    at = np.asarray(at, dtype=np.int64)
+    n, s = P.shape
+    k = min(k, n)
+    grid = _grid(P, cell_k) if n >= GRID_FROM and s == 3 and k >= 2 else None
+    if grid is None:
+        return _tree(P, k, at)
+    return _widening(P, grid, at, k, 1)
+
+
+def _widening(
+    P: Array, grid: tuple[Any, ...], at: NDArray[np.int64], k: int, first: int
+) -> tuple[Array, NDArray[np.int64]]:
+    """:func:`nearest` on ``grid``: blocks of ``2 first + 1`` cells a side, then wider up to 7,
+    then the k-d tree (a grid made for fewer neighbours than ``k`` starts at 5)."""
+    S, lo, h, order, starts, cells, rank = grid
+    dist = np.empty((at.size, k))
+    idx = np.empty((at.size, k), dtype=np.int64)
+    todo = np.arange(at.size)
+    for reach in range(first, 4):
+        if not todo.size:
+            break
+        ok = np.zeros(todo.size, dtype=np.bool_)
+        d, i = np.empty((todo.size, k)), np.empty((todo.size, k), dtype=np.int64)
+        _query_at(S, lo, h, rank, starts, cells, order, at[todo], k, reach, d, i, ok)
+        dist[todo[ok]], idx[todo[ok]] = d[ok], i[ok]
+        todo = todo[~ok]
+    if todo.size:
+        dist[todo], idx[todo] = _tree(P, k, at[todo])
+    return dist, idx
+
+
+#: The last points array's grid and k-d tree (the noise estimate's sample and the data weights'
+#: full query share them): ``(points, their sum, cell k or 0 for the tree, structure)``; the
+#: sum tells an array changed in place (as :func:`service.core.noise.estimate.estimate_noise`).
+_MEMO: list[tuple[weakref.ref[Array], float, int, Any]] = []
+
+
+def release() -> None:
+    """Forget the remembered grid and tree (their memory: ~50 bytes a point)."""
+    _MEMO.clear()
+
+
+def _remembered(P: Array, k: int, make: Any) -> Any:
+    total = float(np.sum(P))
+    for ref, tot, kk, got in _MEMO:
+        if ref() is P and kk == k and (tot == total or (np.isnan(tot) and np.isnan(total))):
+            return got
+    got = make()
+    keep = [m for m in _MEMO if m[0]() is P and m[1] == total and m[2] != k]
+    _MEMO[:] = [*keep, (weakref.ref(P), total, k, got)]
+    return got
+
+
+def _grid(P: Array, k: int) -> tuple[Any, ...] | None:
+    """The grid for ``k`` neighbours of ``P`` (points in cell order, origin, cell size, order,
+    run starts, cells, each point's position in the order), remembered for the last points
+    array; ``None`` when the points span nothing."""
+
+    def make() -> tuple[Any, ...] | None:
+        Q = np.ascontiguousarray(P, dtype=np.float64)
+        lo = Q.min(axis=0)
+        span = float(np.max(Q.max(axis=0) - lo))
+        if not span > 0:
+            return None
+        h = _cell_size(Q, lo, span, k)
+        _, order, starts, cells = _cells(Q, lo, h)
+        rank = np.empty_like(order)  # each point's position in cell order
+        rank[order] = np.arange(order.size)
+        return np.ascontiguousarray(Q[order]), lo, h, order, starts, cells, rank
+
+    return _remembered(P, k, make)  # type: ignore[no-any-return]
 
 
 def _tree(P: Array, k: int, at: NDArray[np.int64]) -> tuple[Array, NDArray[np.int64]]:
     from scipy.spatial import cKDTree
 
-    dist, idx = cKDTree(P).query(P[at], k=k)
+    dist, idx = _remembered(P, 0, lambda: cKDTree(P)).query(P[at], k=k)
     return (np.asarray(dist).reshape(at.size, k),
             np.asarray(idx, dtype=np.int64).reshape(at.size, k))  # fmt: skip
 
@@ -108,12 +187,38 @@ def _find(cells: NDArray[np.int64], m: int, key: int) -> int:  # pragma: no cove
     return a if a < m and cells[a] == key else -1
 
 
+#: The 26 neighbouring cells' offsets, faces first, then edges, then corners: the k-th distance
+#: shrinks before the far cells come, which are then skipped whole.
+_OFFSETS = np.array(
+    sorted(
+        ((dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)
+         if (dx, dy, dz) != (0, 0, 0)),
+        key=lambda o: abs(o[0]) + abs(o[1]) + abs(o[2]),
+    ),
+    dtype=np.int64,
+)  # fmt: skip
+
+
+@njit(cache=True)
+def _insert(
+    bd: Array, bi: NDArray[np.int64], filled: int, k: int, dd: float, q: int
+) -> int:  # pragma: no cover
+    """Insert ``(dd, q)`` into the sorted ``k`` best (ties by index); the new count."""
+    if filled == k and (dd > bd[k - 1] or (dd == bd[k - 1] and q > bi[k - 1])):
+        return filled
+    pos = filled if filled < k else k - 1
+    while pos > 0 and (bd[pos - 1] > dd or (bd[pos - 1] == dd and bi[pos - 1] > q)):
+        bd[pos], bi[pos] = bd[pos - 1], bi[pos - 1]
+        pos -= 1
+    bd[pos], bi[pos] = dd, q
+    return filled + 1 if filled < k else k
+
+
 @njit(cache=True)
 def _grid_query(
-    P: Array,
+    S: Array,
     lo: Array,
     h: float,
-    keys: NDArray[np.int64],
     order: NDArray[np.int64],
     starts: NDArray[np.int64],
     cells: NDArray[np.int64],
@@ -122,15 +227,13 @@ def _grid_query(
     idx: NDArray[np.int64],
     ok: NDArray[np.bool_],
 ) -> None:  # pragma: no cover
-    """For every occupied cell: its block's runs of candidates, then each of its points' ``k``
-    nearest (sorted by distance, ties by index); ``ok`` where the block provably holds them.
-    Works on the points in cell order (contiguous candidates)."""
+    """For every occupied cell: its block's runs of candidates (its own cell, then
+    :data:`_OFFSETS`' order), then each of its points' ``k`` nearest (sorted by distance, ties
+    by index); ``ok`` where the block provably holds them. ``S``: the points in cell order
+    (contiguous candidates)."""
     m = starts.size - 1
     d1, d2 = cells[m + 1], cells[m + 2]
-    n = P.shape[0]
-    S = np.empty((n, 3))
-    for p in range(n):
-        S[p, 0], S[p, 1], S[p, 2] = P[order[p], 0], P[order[p], 1], P[order[p], 2]
+    offsets = _OFFSETS
     run_a = np.empty(27, dtype=np.int64)
     run_b = np.empty(27, dtype=np.int64)
     run_o = np.zeros((27, 3), dtype=np.int64)  # offset of the run's cell from the point's
@@ -141,18 +244,13 @@ def _grid_query(
         key = cells[cell]
         run_a[0], run_b[0] = starts[cell], starts[cell + 1]  # its own cell first
         nr = 1
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    j = (
-                        -1
-                        if dx == dy == dz == 0
-                        else _find(cells, m, key + (dx * d1 + dy) * d2 + dz)
-                    )
-                    if j >= 0:
-                        run_a[nr], run_b[nr] = starts[j], starts[j + 1]
-                        run_o[nr, 0], run_o[nr, 1], run_o[nr, 2] = dx, dy, dz
-                        nr += 1
+        for o in range(26):
+            dx, dy, dz = offsets[o, 0], offsets[o, 1], offsets[o, 2]
+            j = _find(cells, m, key + (dx * d1 + dy) * d2 + dz)
+            if j >= 0:
+                run_a[nr], run_b[nr] = starts[j], starts[j + 1]
+                run_o[nr, 0], run_o[nr, 1], run_o[nr, 2] = dx, dy, dz
+                nr += 1
         for p in range(starts[cell], starts[cell + 1]):
             i = order[p]
             x0, y0, z0 = S[p, 0], S[p, 1], S[p, 2]
@@ -171,18 +269,7 @@ def _grid_query(
                     dd = (S[t, 0] - x0) ** 2 + (S[t, 1] - y0) ** 2 + (S[t, 2] - z0) ** 2
                     if dd > worst:
                         continue
-                    q = order[t]
-                    if t == p:
-                        dd = -1.0  # the point itself first
-                    if filled == k and dd == worst and q > bi[k - 1]:
-                        continue
-                    pos = filled if filled < k else k - 1
-                    while pos > 0 and (bd[pos - 1] > dd or (bd[pos - 1] == dd and bi[pos - 1] > q)):
-                        bd[pos], bi[pos] = bd[pos - 1], bi[pos - 1]
-                        pos -= 1
-                    bd[pos], bi[pos] = dd, q
-                    if filled < k:
-                        filled += 1
+                    filled = _insert(bd, bi, filled, k, -1.0 if t == p else dd, order[t])
                     if filled == k:
                         worst = bd[k - 1]
             # distance from the point to the outside of its 3 x 3 x 3 block
@@ -195,3 +282,58 @@ def _grid_query(
             for t in range(filled):
                 dist[i, t] = math.sqrt(max(bd[t], 0.0))
                 idx[i, t] = bi[t]
+
+
+@njit(cache=True)
+def _query_at(
+    S: Array,
+    lo: Array,
+    h: float,
+    rank: NDArray[np.int64],
+    starts: NDArray[np.int64],
+    cells: NDArray[np.int64],
+    order: NDArray[np.int64],
+    at: NDArray[np.int64],
+    k: int,
+    reach: int,
+    dist: Array,
+    idx: NDArray[np.int64],
+    ok: NDArray[np.bool_],
+) -> None:  # pragma: no cover
+    """The ``k`` nearest of the points ``at`` from the ``(2 reach + 1)^3`` cells around each
+    (as :func:`_grid_query`'s rows); ``ok`` where that block provably holds them."""
+    m = starts.size - 1
+    d0, d1, d2 = cells[m], cells[m + 1], cells[m + 2]
+    bd = np.empty(k)
+    bi = np.empty(k, dtype=np.int64)
+    c = np.empty(3, dtype=np.int64)
+    for q in range(at.size):
+        i = at[q]
+        p = rank[i]
+        margin = np.inf
+        for a in range(3):
+            x = (S[p, a] - lo[a]) / h
+            c[a] = math.floor(x) + 1
+            f = x - math.floor(x)
+            margin = min(margin, h * (reach + min(f, 1.0 - f)))
+        filled = 0
+        for dx in range(-reach, reach + 1):
+            if c[0] + dx < 0 or c[0] + dx >= d0:
+                continue
+            for dy in range(-reach, reach + 1):
+                if c[1] + dy < 0 or c[1] + dy >= d1:
+                    continue
+                for dz in range(-reach, reach + 1):
+                    if c[2] + dz < 0 or c[2] + dz >= d2:
+                        continue
+                    j = _find(cells, m, ((c[0] + dx) * d1 + c[1] + dy) * d2 + c[2] + dz)
+                    if j < 0:
+                        continue
+                    for t in range(starts[j], starts[j + 1]):
+                        dd = ((S[t, 0] - S[p, 0]) ** 2 + (S[t, 1] - S[p, 1]) ** 2
+                              + (S[t, 2] - S[p, 2]) ** 2)  # fmt: skip
+                        filled = _insert(bd, bi, filled, k, -1.0 if t == p else dd, order[t])
+        ok[q] = filled == k and bd[k - 1] <= margin * margin
+        for t in range(filled):
+            dist[q, t] = math.sqrt(max(bd[t], 0.0))
+            idx[q, t] = bi[t]
