@@ -31,6 +31,8 @@ for name in sys.argv[1:]:
         if inspect.isfunction(func) and func.__module__ == name:
             for used in set(func.__code__.co_names) & set(kernels):
                 out[f"{name}.{used}"] = len(kernels[used].signatures)
+    for public in set(getattr(mod, "__all__", ())) & set(kernels):
+        out[f"{name}.{public}"] = len(kernels[public].signatures)
 print(json.dumps(out))
 """
 
@@ -42,7 +44,8 @@ def test_every_kernel_called_from_python_is_compiled_by_the_warm_up() -> None:
     )  # fmt: skip
     called = json.loads(done.stdout.strip().splitlines()[-1])
     # the entry points of each module (callees inlined into them have no signature of their own)
-    assert {"service.core.operator.knn._grid_query", "service.core.noise.fast_fits._surface_fits",
+    assert {"service.core.operator.knn_kernels.grid_query",
+            "service.core.noise.fast_fits._surface_fits",
             "service.core.noise.fast_weights._isolation",
             "service.core.system.fast_frames._normals"} <= set(called)  # fmt: skip
     cold = sorted(k for k, count in called.items() if count == 0)
