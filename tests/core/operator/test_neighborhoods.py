@@ -61,6 +61,28 @@ def test_knn_excludes_self_even_with_duplicates() -> None:
         assert len(_nbrs(nb.adjacency, i)) == 2
 
 
+def test_knn_of_a_large_cloud_is_the_tree_query_with_self_dropped() -> None:
+    """From GRID_FROM points the grid search answers; it must equal the k-d tree's answer
+    (random coordinates: no ties), duplicates included (self dropped wherever it comes)."""
+    from service.core.operator.knn import GRID_FROM
+    from service.core.operator.neighborhoods import knn
+
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(GRID_FROM + 5000, 3))
+    P[:, 2] *= 0.05  # a thick sheet
+    P[100:110] = P[0]  # ten copies of point 0: the self-drop path
+    dist, idx = knn(P, 8)
+    tree_i = cKDTree(P).query(P, k=10)[1]
+    rows = np.arange(P.shape[0])
+    copies = {0, *range(100, 110)}
+    for i in rng.choice(np.setdiff1d(rows, list(copies)), 2000, replace=False).tolist():
+        assert idx[i].tolist() == [j for j in tree_i[i].tolist() if j != i][:8]
+    for i in copies:  # 10 others at distance 0: any 8 of them (a tie)
+        assert set(idx[i].tolist()) <= copies - {i} and not dist[i].any()
+    assert not np.any(idx == rows[:, None])
+    np.testing.assert_allclose(dist, np.linalg.norm(P[idx] - P[:, None], axis=2), rtol=1e-12)
+
+
 def test_mesh_boundary_nonmanifold_and_duplicates() -> None:
     F = np.array([[0, 1, 2], [0, 2, 3], [2, 1, 0], [0, 1, 4]])  # duplicate + third face on 0-1
     nb = mesh_neighborhoods(F, 6)
