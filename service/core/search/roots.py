@@ -233,6 +233,25 @@ def estimate_lambda(
     return lam, lower, upper, steps
 
 
+#: Relative rise of ``phi`` with ``lambda`` taken as rounding, not as a resolved ``phi``.
+MONOTONE_RTOL = 1e-6
+
+
+def _monotone(history: list[tuple[float, float]]) -> bool:
+    """Whether the last ``phi`` keeps ``phi(lambda)`` non-increasing (eq. 15: ``phi' < 0``)
+    against every earlier evaluation, within :data:`MONOTONE_RTOL`. It does not at lambdas so
+    small that the solve's rounding swamps ``phi`` (an 800K-point curve at ``lambda ~ 5e-13``:
+    0.69, 0.34, 5.78, 0.10 at falling lambdas; the search ran its 50 evaluations, ~6 CPU
+    minutes): then no evaluation can bring the root closer."""
+    lam, phi = history[-1]
+    for other, value in history[:-1]:
+        if (other < lam and value < phi * (1 - MONOTONE_RTOL)) or (
+            other > lam and value > phi * (1 + MONOTONE_RTOL)
+        ):
+            return False
+    return True
+
+
 def newton_search(
     dev: Callable[[float], float],
     derivative: Callable[[float], float],
@@ -287,6 +306,8 @@ def newton_search(
             best = (lam, phi)
         if abs(phi - tau) <= tolerance * tau:
             return LambdaSearch(lam, phi, True, history)
+        if not _monotone(history):
+            break  # phi unresolved at these lambdas (rounding): no closer root to find
         if phi > tau:
             lo = lam
         else:

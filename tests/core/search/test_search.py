@@ -41,6 +41,25 @@ def test_newton_never_leaves_the_bracket_and_is_monotone_from_the_left(order: in
         assert left == sorted(left) and all(lam <= root * (1 + 1e-9) for lam in left)
 
 
+def test_newton_stops_when_rounding_swamps_phi() -> None:
+    """A ``phi`` that is not monotone in lambda (a solve's rounding at tiny lambdas) ends the
+    search as soon as it shows (not converged, the closest value kept) instead of running the
+    evaluation cap; on a resolved ``phi`` the guard never fires (test above)."""
+    mu = np.geomspace(1e-6, 4, 300)
+    exact = _spectral_phi(mu, mu**2)
+    rng = np.random.default_rng(0)
+    noisy = lambda lam: exact(lam) * float(rng.uniform(0.1, 10))  # noqa: E731
+    dphi = lambda lam: float(-2 * np.sum(mu**2 / (mu + lam) ** 3))  # noqa: E731
+    tau = 0.5 * exact(1e-3)
+    res = newton_search(noisy, dphi, tau, 1e-3, 1e-12, 1e6, tolerance=1e-10, max_iterations=50)
+    assert not res.converged
+    assert len(res.history) < 10
+    assert abs(res.phi - tau) == min(abs(p - tau) for _, p in res.history)
+    lams, phis = zip(*res.history, strict=True)
+    order = np.argsort(lams)
+    assert np.any(np.diff(np.asarray(phis)[order]) > 0)  # the rise that stopped it
+
+
 def test_quadrature_bounds_bracket_lambda_star() -> None:
     """Gauss (lower) and Gauss-Radau (upper) bounds of lambda* from Lanczos on M_t."""
     P, F = noisy_icosphere(2, 0.05, seed=3)
