@@ -15,7 +15,7 @@ from service.core.checks.guards import (
     ShapeChecks,
     fold_note,
     guard_warnings,
-    noise_ratio,
+    renoised_measure,
     shape_checks,
 )
 from service.core.checks.spectrum import (
@@ -131,8 +131,10 @@ def _kept(dw: DataWeights | None, fin: Finished, notes: list[str]) -> DataWeight
     kept = fin.outliers
     if dw is None or kept is None or kept.size <= dw.outliers.size:
         return dw
-    notes.append(f"{kept.size - dw.outliers.size} more points the solve moved far from their "
-                 "input (beyond twice the outliers' threshold) were kept in place as outliers too")
+    notes.append(
+        f"{kept.size - dw.outliers.size} more points the solve moved far from their "
+        "input (beyond twice the outliers' threshold) were kept in place as outliers too"
+    )
     return replace(dw, outliers=kept)
 
 
@@ -178,9 +180,9 @@ def _shape(
     """
     checks = shape_checks(geometry, X)
     sigma = _noise_for_checks(geometry, params, target, rms)
-    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
+    back = lambda: renoised_measure(geometry, X, sigma)  # noqa: E731 (only called when needed)
     moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
-    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
+    shape_warnings = guard_warnings(checks, params.tau_rule, back, moves)
     if shape_warnings and params.strict:
         raise ShapeLost(shape_warnings, checks.to_dict())
     notes.extend(shape_warnings)
@@ -213,7 +215,8 @@ def _data_weights(dw: DataWeights | None, mode: str) -> dict[str, Any]:
     if dw is None:
         return {}
     kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
-        ["noise"] if dw.uneven else [])
+        ["noise"] if dw.uneven else []
+    )
     return {
         "outliers": dw.outliers,
         "data_weights": " + ".join(kinds) or None,
