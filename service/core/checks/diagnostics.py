@@ -15,7 +15,7 @@ from service.core.checks.guards import (
     ShapeChecks,
     fold_note,
     guard_warnings,
-    noise_ratio,
+    renoised_measure,
     shape_checks,
 )
 from service.core.checks.spectrum import (
@@ -26,10 +26,11 @@ from service.core.checks.spectrum import (
 )
 from service.core.errors import ShapeLost, SolverError
 from service.core.finish.finished import Finished
+from service.core.finish.outliers import beyond_noise
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.noise.estimate import codimension, estimate_noise
-from service.core.noise.robust import DataWeights
+from service.core.noise.robust import DataWeights, outlier_note
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
 from service.core.run import Run
@@ -74,6 +75,7 @@ def diagnostics(
     stats = dev.stats if dev is not None else None
     rms = float(np.sqrt(np.mean(dev_pt**2)))
     weights = _kept(weights, fin, run.notes)
+    weights = _measured(weights, geometry, X, target.sigma, params.outliers, run.notes)
     checks, shape_warnings, sigma = _shape(
         geometry, params, target, X, _bulk_rms(dev_pt, weights), run.notes
     )
@@ -131,9 +133,38 @@ def _kept(dw: DataWeights | None, fin: Finished, notes: list[str]) -> DataWeight
     kept = fin.outliers
     if dw is None or kept is None or kept.size <= dw.outliers.size:
         return dw
-    notes.append(f"{kept.size - dw.outliers.size} more points the solve moved far from their "
-                 "input (beyond twice the outliers' threshold) were kept in place as outliers too")
+    notes.append(
+        f"{kept.size - dw.outliers.size} more points the solve moved far from their "
+        "input (beyond twice the outliers' threshold) were kept in place as outliers too"
+    )
     return replace(dw, outliers=kept)
+
+
+def _measured(
+    dw: DataWeights | None,
+    geometry: Geometry,
+    X: Array,
+    sigma: float | None,
+    mode: str,
+    notes: list[str],
+) -> DataWeights | None:
+    """The data weights with only the pulled-in outliers whose move is beyond what the noise
+    and the smoothing explain (:func:`~service.core.finish.outliers.beyond_noise`, issue 31),
+    and their note counting those (none: no note). The rest are the Gaussian tail of shape
+    detail; the weights the residual test set stay (``data_weights`` still says ``robust``)."""
+    if dw is None or mode != "pull" or dw.outliers.size == 0:
+        return dw
+    kept = beyond_noise(geometry.points, X, dw.outliers, sigma, codimension(geometry))
+    if kept.size == dw.outliers.size:
+        return dw
+    note = outlier_note(int(dw.outliers.size), mode, dw.robust)
+    if note in notes:
+        at = notes.index(note)
+        if kept.size:
+            notes[at] = outlier_note(int(kept.size), mode, dw.robust)
+        else:
+            del notes[at]
+    return replace(dw, outliers=kept, pulled=np.intersect1d(dw.pulled, kept))
 
 
 def _bulk_rms(dev_pt: Array, dw: DataWeights | None) -> float:
@@ -178,9 +209,9 @@ def _shape(
     """
     checks = shape_checks(geometry, X)
     sigma = _noise_for_checks(geometry, params, target, rms)
-    ratio = lambda: noise_ratio(geometry, sigma)  # noqa: E731 (only called when needed)
+    back = lambda: renoised_measure(geometry, X, sigma)  # noqa: E731 (only called when needed)
     moves = rms / (sigma * np.sqrt(max(codimension(geometry), 1))) if sigma else None
-    shape_warnings = guard_warnings(checks, params.tau_rule, ratio, moves)
+    shape_warnings = guard_warnings(checks, params.tau_rule, back, moves)
     if shape_warnings and params.strict:
         raise ShapeLost(shape_warnings, checks.to_dict())
     notes.extend(shape_warnings)
@@ -213,7 +244,8 @@ def _data_weights(dw: DataWeights | None, mode: str) -> dict[str, Any]:
     if dw is None:
         return {}
     kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
-        ["noise"] if dw.uneven else [])
+        ["noise"] if dw.uneven else []
+    )
     return {
         "outliers": dw.outliers,
         "data_weights": " + ".join(kinds) or None,

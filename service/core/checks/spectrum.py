@@ -20,7 +20,6 @@ from service.core.params import SPECTRUM_MAX_POINTS
 __all__ = ["SPECTRUM_MAX_POINTS", "Spectrum", "filter_factors", "singular_values"]
 
 
-
 def _scaled(L: sp.spmatrix, omega: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.asarray((sp.csr_matrix(L) @ sp.diags(1.0 / omega)).toarray())
 
