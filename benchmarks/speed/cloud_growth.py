@@ -69,6 +69,8 @@ def run_size(n: int) -> dict[str, Any]:
         "sigma": sigma, "sigma_hat": report.get("sigma_estimate"),
         "surface": {"ours": _rms(np.linalg.norm(res.points, axis=1) - 1),
                     "input": _rms(np.linalg.norm(g.points, axis=1) - 1)},
+        "vertex": {"ours": _rms(np.linalg.norm(res.points - truth, axis=1)),
+                   "input": _rms(np.linalg.norm(g.points - truth, axis=1))},
         "outliers": report.get("outlier_count"), "solver": res.solver,
         "matvecs": res.matvecs, "profile": _profile_stages(prof),
         "open3d_estimate_normals_cpu": _open3d_normals(g.points),
