@@ -255,7 +255,11 @@ def run(ns: argparse.Namespace, err: TextIO) -> int:
     from service.core.params import TOLERANCE
 
     started = time.perf_counter()
-    progress = display_for(ns, err, getattr(ns, "tolerance", None) or TOLERANCE)
+    try:  # the option's raw text (its validation comes with the parameters', below)
+        tolerance = float(getattr(ns, "tolerance", None) or TOLERANCE)
+    except ValueError:
+        tolerance = TOLERANCE
+    progress = display_for(ns, err, tolerance)
     try:
         params, done = smooth_one(ns, progress)
         _report(ns, params, done, started, progress)

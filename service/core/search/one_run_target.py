@@ -8,8 +8,10 @@ recurrence on ``M_t`` (:func:`~service.core.search.one_run.one_run`, with the pr
 solver so that they are counted) decides the knee, finds lambda and gives ``E_k(lambda)``,
 which the :class:`~service.core.system.deviation.Deviation` adopts: no factorization. When the
 cost model finds a factorized solve cheaper than finishing the recurrence
-(:func:`~service.core.search.one_run.direct_cost`), or the run ends without meeting its bounds,
-only the target is kept and the usual search runs (CHOLMOD, as before).
+(:func:`~service.core.search.one_run.direct_cost`), or the run ends without meeting its bounds
+or the tolerance asked (``phi`` of the adopted vectors within ``tolerance`` of tau: a 20K cloud
+with ``tolerance = 1e-9`` stopped at 1.8e-7, not converged), only the target is kept and the
+usual search runs from there (CHOLMOD or CG, as before).
 
 Smaller systems keep the old path: below :data:`ONE_RUN_FROM` unknowns a factorization and
 two solves cost under 0.3 s (10K: 0.1 s, 830 products' worth; ``direct_cost``), and the
@@ -75,8 +77,9 @@ def knee_and_solve(
     dev.adopt(res.lam, res.E)
     phi = dev(res.lam)  # phi of the vectors adopted (recorded, reported to the listener)
     tau = frame.tau_in(aim.tau) if aim.tau is not None else phi
-    search = LambdaSearch(res.lam, phi, abs(phi - tau) <= tolerance * tau, list(dev.history))
-    return aim, search
+    if not abs(phi - tau) <= tolerance * tau:
+        return aim, None  # a tolerance finer than the run resolves: the lambda search finishes
+    return aim, LambdaSearch(res.lam, phi, True, list(dev.history))
 
 
 def _knee_target(aim: Target, res: OneRun, frame: Frame) -> Target:
