@@ -42,6 +42,7 @@ __all__ = [
     "newton_search",
     "rational_step",
     "search_lambda",
+    "unresolved_below",
 ]
 
 
@@ -250,6 +251,17 @@ def _monotone(history: list[tuple[float, float]]) -> bool:
         ):
             return False
     return True
+
+
+def unresolved_below(history: list[tuple[float, float]]) -> float | None:
+    """The largest lambda of ``history`` at which ``phi`` rose with lambda (see
+    :func:`_monotone`), ``None`` when ``phi`` was non-increasing throughout."""
+    worst = None
+    for i in range(1, len(history) + 1):
+        if not _monotone(history[:i]):
+            lam = max(history[i - 1][0], *(other for other, _ in history[: i - 1]))
+            worst = lam if worst is None else max(worst, lam)
+    return worst
 
 
 def newton_search(

@@ -28,6 +28,7 @@ from service.core.search.roots import (
     initial_lambda,
     newton_search,
     search_lambda,
+    unresolved_below,
 )
 from service.core.system.deviation import Deviation
 from service.core.system.elimination import phi_at_zero
@@ -186,6 +187,14 @@ def find_lambda(
     )
     if not search.converged and search.phi < tau:
         in_range()
+    unresolved = None if search.converged else unresolved_below(search.history)
+    if unresolved is not None:
+        notes.append(
+            f"tau is not met (phi = {frame.phi_out(search.phi):.4g}, relative error "
+            f"{abs(search.phi - tau) / tau:.2g}): it needs a lambda so small (about "
+            f"{frame.lam_out(search.lam):.3g}) that the solve's rounding swamps phi, which no "
+            "longer falls as lambda grows; give a smaller tau or rms"
+        )
     return search
 
 

@@ -11,7 +11,7 @@ import pytest
 from service.core import Geometry, SmoothingParams, smooth
 from service.core.linalg.krylov import lanczos, log_bisect
 from service.core.operator.build import build_laplacian
-from service.core.search.roots import estimate_lambda, newton_search
+from service.core.search.roots import estimate_lambda, newton_search, unresolved_below
 from tests.core.core_fixtures import noisy_icosphere, polyline_edges
 
 
@@ -58,6 +58,10 @@ def test_newton_stops_when_rounding_swamps_phi() -> None:
     lams, phis = zip(*res.history, strict=True)
     order = np.argsort(lams)
     assert np.any(np.diff(np.asarray(phis)[order]) > 0)  # the rise that stopped it
+    worst = unresolved_below(res.history)
+    assert worst is not None and worst in lams
+    assert unresolved_below([(1.0, 3.0), (2.0, 2.0), (4.0, 1.0)]) is None
+    assert unresolved_below([(1.0, 3.0), (2.0, 2.0), (1.5, 1.0)]) == 2.0  # rose below 2.0
 
 
 def test_quadrature_bounds_bracket_lambda_star() -> None:
