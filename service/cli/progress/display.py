@@ -98,7 +98,11 @@ class ProgressDisplay:
         self.last_iteration = max(self.last_iteration, iteration)
         if not self.enabled:
             return
-        text = self.line(iteration, lam, phi)
+        self.put(self.line(iteration, lam, phi))
+
+    def put(self, text: str) -> None:
+        """``text`` as the updating line: rewritten in place on a terminal, a line of its own
+        in a log."""
         if self.tty:
             pad = max(0, self._width - len(text))
             self.stream.write("\r" + text + " " * pad)

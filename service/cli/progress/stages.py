@@ -217,14 +217,7 @@ class StageDisplay(ProgressDisplay):
             self.stream.write(json.dumps(self.record(kind, now)) + "\n")
             self.stream.flush()
             return
-        text = self.text(kind, now)
-        if self.tty:
-            pad = max(0, self._width - len(text))
-            self.stream.write("\r" + text + " " * pad)
-            self._width = len(text)
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
+        self.put(self.text(kind, now))
 
     def note(self, text: str) -> None:
         """A line of its own (the summary): ``{"event": "summary", "text": ...}`` in JSON mode."""

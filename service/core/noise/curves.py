@@ -206,7 +206,7 @@ def chain_windows(
     ``budget / K`` are returned (evenly spread: neighbouring windows share most of their
     points). The neighbourhoods of
     eq. (1)'s larger scales, without the hop-by-hop search of
-    :func:`service.core.noise.estimate.curve_neighbours`."""
+    :func:`service.core.noise.pointfits.curve_neighbours`."""
     E = np.asarray(geometry.edges)
     n = geometry.n
     chains = _chains(E, np.bincount(E.ravel(), minlength=n), n)

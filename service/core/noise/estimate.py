@@ -37,32 +37,26 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from service.core.geometry import Geometry
 from service.core.noise import curves
 from service.core.noise.curves import TrackNoise
+from service.core.noise.pointfits import curve_neighbours, patch_variances
 
 __all__ = [
     "NOISE_RATIO",
     "NoiseEstimate",
     "codimension",
-    "curve_neighbours",
     "estimate_noise",
     "hutchinson_trace",
     "log_mode",
     "manifold_dim",
     "noise_of",
-    "patch_variances",
 ]
 
-_CHUNK = 20000
 SAMPLE = 20000
-#: Points from which surfaces in 3-D take the compiled kernels of the noise estimate and the data
-#: weights (issue 30; below, NumPy is as fast and small inputs load no compiled code).
-COMPILED_FROM = 50_000
 #: Largest median ratio ``v_i(2k) / v_i(k)`` still read as noise (calibration half: noisy
 #: inputs <= 1.55, noise-free >= 2.21; see ``service/core/README.md``).
 NOISE_RATIO = 1.85
@@ -121,12 +115,19 @@ class NoiseEstimate:
         """One line for the report: the estimate and the evidence behind it."""
         if self.track is not None:
             t = self.track
-            return (f"noise found: sigma = {self.sigma:.6g}, correlated along the curve (AR(1), "
-                    f"phi = {t.phi:.2f}; {len(t.modes)} scales, misfit {t.misfit:.3f})")
+            return (
+                f"noise found: sigma = {self.sigma:.6g}, correlated along the curve (AR(1), "
+                f"phi = {t.phi:.2f}; {len(t.modes)} scales, misfit {t.misfit:.3f})"
+            )
         if self.sigma > 0:
-            ratio = "" if self.scale_ratio is None else (
-                f"; residuals x{self.scale_ratio:.2f} from {self.k} to {2 * self.k} neighbours: "
-                "noise"
+            ratio = (
+                ""
+                if self.scale_ratio is None
+                else (
+                    f"; residuals x{self.scale_ratio:.2f} from {self.k} to {2 * self.k} "
+                    "neighbours: "
+                    "noise"
+                )
             )
             return f"noise found: sigma = {self.sigma:.6g}{ratio}"
         if self.roughness == 0 or self.scale_ratio is None:
@@ -136,78 +137,6 @@ class NoiseEstimate:
             f"neighbourhood (x{self.scale_ratio:.2f} from {self.k} to {2 * self.k} neighbours, "
             f"noise would stay near x1, above x{NOISE_RATIO} it is the shape's own detail)"
         )
-
-
-def _design(u: NDArray[np.float64], degree: int = 2) -> NDArray[np.float64]:
-    """``[1, u, quadratic (and cubic) monomials of u]`` for ``u`` of shape (..., k, d)."""
-    d = u.shape[-1]
-    cols = [np.ones(u.shape[:-1]), *(u[..., a] for a in range(d))]
-    cols += [u[..., a] * u[..., b] for a in range(d) for b in range(a, d)]
-    if degree >= 3:
-        cols += [u[..., a] * u[..., b] * u[..., c]
-                 for a in range(d) for b in range(a, d) for c in range(b, d)]
-    return np.stack(cols, axis=-1)
-
-
-def patch_variances(
-    points: NDArray[np.float64],
-    neighbours: NDArray[np.int64],
-    manifold_dim: int,
-    degree: int = 2,
-    compiled: bool = True,
-) -> NDArray[np.float64]:
-    """Residual variance of the local quadratic fit of every neighbourhood.
-
-    Parameters
-    ----------
-    points : ndarray, shape (n, s)
-    neighbours : ndarray, shape (n, k)
-        Indices of each point's neighbourhood (the point itself included).
-    manifold_dim : int
-        ``d``: tangent dimensions of the local fit.
-    degree : int
-        Of the height function: 2 (quadratic, the estimate) or 3 (cubic, the scale test).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        ``RSS_i / (c (k - p))`` with ``c = s - d`` normal directions and ``p`` coefficients:
-        an unbiased estimate of ``sigma^2`` where the shape is locally a quadratic height
-        function; ``nan`` where the fit is rank deficient.
-
-    Surfaces in 3-D from :data:`COMPILED_FROM` points take
-    :func:`service.core.noise.fast_fits.patch_variances` (``compiled``; same numbers to rounding).
-    """
-    if compiled and points.shape[0] >= COMPILED_FROM and points.shape[1] == 3 and (
-            manifold_dim == 2 and degree == 2):  # fmt: skip
-        from service.core.noise.fast_fits import patch_variances as fast
-
-        v, unsure = fast(points, neighbours)
-        rows = np.flatnonzero(unsure)  # cond(G) near 1e10: measured as below
-        v[rows] = patch_variances(points, neighbours[rows], 2, compiled=False)
-        return v
-    n, k = neighbours.shape
-    d = manifold_dim
-    out = np.full(n, np.nan)
-    for start in range(0, n, _CHUNK):
-        idx = neighbours[start : start + _CHUNK]
-        Q = points[idx]
-        Q = Q - Q.mean(axis=1, keepdims=True)
-        _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q))
-        local = np.einsum("nki,nij->nkj", Q, vecs[:, :, ::-1])  # tangents first, then normals
-        u = local[..., :d]
-        scale = np.sqrt(np.mean(u**2, axis=(1, 2)))
-        B = _design(u / np.where(scale > 0, scale, 1.0)[:, None, None], degree)
-        z = local[..., d:]
-        G = np.einsum("nkp,nkq->npq", B, B)
-        ok = np.linalg.cond(G) < 1e10
-        coef = np.linalg.solve(G[ok], np.einsum("nkp,nkc->npc", B[ok], z[ok]))
-        res = z[ok] - np.einsum("nkp,npc->nkc", B[ok], coef)
-        p = B.shape[2]
-        v = np.full(len(idx), np.nan)
-        v[ok] = np.sum(res**2, axis=(1, 2)) / (z.shape[2] * (k - p))
-        out[start : start + len(idx)] = v
-    return out
 
 
 def log_mode(values: NDArray[np.float64], bins: int = 512) -> float:
@@ -291,7 +220,7 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
         return None
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None:
-        rows, along = curve_neighbours(geometry, 2 * k)
+        rows, along = curve_neighbours(geometry, 2 * k, _sample(geometry.n))
         if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
             full = rows.size == n  # every point, in order: kept for the data weights
             return _tracked(geometry, _kept(_estimate(P, along, k, d), along if full else None))
@@ -331,40 +260,6 @@ def _tracked(geometry: Geometry, est: NoiseEstimate | None) -> NoiseEstimate | N
     return est if t is None else replace(est, sigma=t.sigma, track=t)
 
 
-def curve_neighbours(
-    geometry: Geometry, K: int, at: NDArray[np.int64] | None = None
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """The ``K`` nearest points along the curves (hops over the edges, then distance) of
-    sampled points (or of the points ``at``) whose curve has that many; nearest in space would
-    take points of the next turn of a helix or of a neighbouring strand for the curve's own (a
-    helix with 100 points a turn and pitch 0.63: 20 nearest in space span two turns).
-
-    Returns the points kept (those with ``K`` such neighbours) and their neighbours."""
-    n = geometry.n
-    E = np.asarray(geometry.edges)
-    A = sp.csr_matrix((np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                      shape=(n, n))
-    A = (A + sp.identity(n, format="csr")).astype(bool).astype(np.float64)
-    at = _sample(n) if at is None else at
-    R = sp.csr_matrix((np.ones(at.size), (np.arange(at.size), at)), shape=(at.size, n))
-    score = R.copy()
-    for _ in range(K):  # each hop adds 1 to every point reached so far: nearer, higher
-        R = (R @ A).astype(bool).astype(np.float64)
-        score = score + R
-    score = score.tocsr()
-    P = geometry.points
-    rows, kept = [], []
-    for i in range(at.size):
-        lo, hi = score.indptr[i], score.indptr[i + 1]
-        if hi - lo < K:
-            continue
-        cols = score.indices[lo:hi]
-        dist = np.linalg.norm(P[cols] - P[at[i]], axis=1)
-        rows.append(cols[np.lexsort((dist, -score.data[lo:hi]))[:K]])
-        kept.append(at[i])
-    return np.array(kept, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, K)
-
-
 def _estimate(P: Array, nbr: NDArray[np.int64], k: int, d: int) -> NoiseEstimate | None:
     """The estimate from neighbourhoods ``nbr`` (nearest first, ``k`` or more per row)."""
     k2 = nbr.shape[1]
@@ -383,9 +278,7 @@ def _estimate(P: Array, nbr: NDArray[np.int64], k: int, d: int) -> NoiseEstimate
     return NoiseEstimate(sigma, d, k, int(ok.sum()), v, float(np.sqrt(sigma2)), ratio)
 
 
-def _scale_ratio(
-    P: Array, nbr: NDArray[np.int64], v: Array, mode: float, d: int
-) -> float | None:
+def _scale_ratio(P: Array, nbr: NDArray[np.int64], v: Array, mode: float, d: int) -> float | None:
     """Median of ``v_i(K) / v_i(k)`` (``K`` = ``nbr``'s width) over the points whose
     ``v_i(k)`` is within a factor ``e`` of the mode: about 1 for noise, larger for shape."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -400,6 +293,7 @@ def _scale_ratio(
 
 
 # --- tau from the noise: discrepancy principle, generalized cross-validation --------------------
+
 
 def codimension(geometry: Geometry) -> int:
     """Normal directions per point: ``s - 2`` for meshes, ``s - 1`` for curves and clouds."""

@@ -21,7 +21,7 @@ design matrices). Two changes of arithmetic, neither of the result:
 They agree with the NumPy path to rounding (tests: relative differences ~1e-12 on ``r`` and
 ``v``, identical outlier decisions). Other dimensions fall back to the NumPy path.
 :func:`patch_variances` does the same for the noise estimate's fits
-(:func:`service.core.noise.estimate.patch_variances`).
+(:func:`service.core.noise.pointfits.patch_variances`).
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ import math
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+
+from service.core.noise.local3 import centred_covariance, eig3, tangent_pair
 
 __all__ = ["CERTAIN", "leave_one_out", "patch_variances"]
 
@@ -57,70 +59,6 @@ def leave_one_out(
     P = np.ascontiguousarray(points, dtype=np.float64)
     _surface_fits(P, np.ascontiguousarray(nbr, dtype=np.int64), np.ascontiguousarray(W), r, v)
     return r, v
-
-
-@njit(cache=True)
-def _eig3(
-    c00: float, c01: float, c02: float, c11: float, c12: float, c22: float
-) -> tuple[float, float, float, float, float]:  # pragma: no cover
-    """``mu_1 >= mu_2`` of a symmetric 3 x 3 and the unit eigenvector of its smallest
-    eigenvalue (zero when it is not defined)."""
-    p1 = c01 * c01 + c02 * c02 + c12 * c12
-    q = (c00 + c11 + c22) / 3.0
-    p2 = (c00 - q) ** 2 + (c11 - q) ** 2 + (c22 - q) ** 2 + 2.0 * p1
-    if p2 <= 0.0:
-        return q, q, 0.0, 0.0, 0.0
-    p = math.sqrt(p2 / 6.0)
-    b00, b11, b22 = (c00 - q) / p, (c11 - q) / p, (c22 - q) / p
-    b01, b02, b12 = c01 / p, c02 / p, c12 / p
-    det = (
-        b00 * (b11 * b22 - b12 * b12)
-        - b01 * (b01 * b22 - b12 * b02)
-        + b02 * (b01 * b12 - b11 * b02)
-    )
-    h = min(max(det / 2.0, -1.0), 1.0)
-    phi = math.acos(h) / 3.0
-    mu1 = q + 2.0 * p * math.cos(phi)
-    mu3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
-    mu2 = 3.0 * q - mu1 - mu3
-    x, y, z = _null3(c00, c01, c02, c11, c12, c22, mu3)
-    if x == y == z == 0.0:
-        return mu1, mu2, 0.0, 0.0, 0.0
-    # the trigonometric mu3 is only sqrt(eps)-accurate when mu1 ~ mu2 (acos near +-1, an
-    # isotropic tangent plane): one Rayleigh quotient makes it eps-accurate, then again
-    mu3 = (x * (c00 * x + c01 * y + c02 * z) + y * (c01 * x + c11 * y + c12 * z)
-           + z * (c02 * x + c12 * y + c22 * z))  # fmt: skip
-    x2, y2, z2 = _null3(c00, c01, c02, c11, c12, c22, mu3)
-    if not x2 == y2 == z2 == 0.0:
-        x, y, z = x2, y2, z2
-    return mu1, mu2, x, y, z
-
-
-@njit(cache=True)
-def _null3(
-    c00: float, c01: float, c02: float, c11: float, c12: float, c22: float, mu: float
-) -> tuple[float, float, float]:  # pragma: no cover
-    """Unit null vector of ``C - mu I`` from the largest cross product of two of its rows
-    (zero when they are all zero)."""
-    a00, a11, a22 = c00 - mu, c11 - mu, c22 - mu
-    x1, y1, z1 = c01 * c12 - c02 * a11, c02 * c01 - a00 * c12, a00 * a11 - c01 * c01
-    x2, y2, z2 = c01 * a22 - c02 * c12, c02 * c02 - a00 * a22, a00 * c12 - c01 * c02
-    x3, y3, z3 = a11 * a22 - c12 * c12, c12 * c02 - c01 * a22, c01 * c12 - a11 * c02
-    n1, n2, n3 = (
-        x1 * x1 + y1 * y1 + z1 * z1,
-        x2 * x2 + y2 * y2 + z2 * z2,
-        x3 * x3 + y3 * y3 + z3 * z3,
-    )
-    if n1 >= n2 and n1 >= n3:
-        x, y, z, nn = x1, y1, z1, n1
-    elif n2 >= n3:
-        x, y, z, nn = x2, y2, z2, n2
-    else:
-        x, y, z, nn = x3, y3, z3, n3
-    if not nn > 0.0:
-        return 0.0, 0.0, 0.0
-    s = 1.0 / math.sqrt(nn)
-    return x * s, y * s, z * s
 
 
 @njit(cache=True)
@@ -162,19 +100,10 @@ def _surface_fits(
             c11 += w * qy * qy
             c12 += w * qy * qz
             c22 += w * qz * qz
-        mu1, mu2, nx, ny, nz = _eig3(c00, c01, c02, c11, c12, c22)
+        mu1, mu2, nx, ny, nz = eig3(c00, c01, c02, c11, c12, c22)
         if not (cnt - npar >= 1.0 and mu2 > 1e-8 * max(mu1, 1e-300)) or nx == ny == nz == 0.0:
             continue
-        # a tangent pair: n x e_k for the axis least aligned with n, then n x t1
-        if abs(nx) <= abs(ny) and abs(nx) <= abs(nz):
-            ax, ay, az = 0.0, nz, -ny
-        elif abs(ny) <= abs(nz):
-            ax, ay, az = -nz, 0.0, nx
-        else:
-            ax, ay, az = ny, -nx, 0.0
-        s = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
-        t1x, t1y, t1z = ax * s, ay * s, az * s
-        t2x, t2y, t2z = ny * t1z - nz * t1y, nz * t1x - nx * t1z, nx * t1y - ny * t1x
+        t1x, t1y, t1z, t2x, t2y, t2z = tangent_pair(nx, ny, nz)
         ss = 0.0
         for t in range(1, kk):
             j = nbr[i, t]
@@ -307,13 +236,13 @@ def _solve(Li: Array, rhs: Array, y: Array, coef: Array) -> None:  # pragma: no 
 def patch_variances(
     points: Array, neighbours: NDArray[np.int64]
 ) -> tuple[Array, NDArray[np.bool_]]:
-    """:func:`service.core.noise.estimate.patch_variances` of surfaces in 3-D (quadratic
+    """:func:`service.core.noise.pointfits.patch_variances` of surfaces in 3-D (quadratic
     height functions; the point is one of its neighbourhood's fits), one row at a time: the
-    normal from :func:`_eig3`, any tangent pair (the module docstring), the normal equations
-    through Cholesky. Its ``cond(G) < 1e10`` test: ``kappa = |G|_F tr(G^-1)`` lies in
-    ``[cond, 6 sqrt(6) cond]``, so rows with ``kappa < 1e9`` pass and rows with
-    ``kappa > 1.5e11`` fail for sure. Returns ``v`` and the rows between (and any without a
-    normal), which the caller measures with the NumPy code."""
+    normal from :func:`~service.core.noise.local3.eig3`, any tangent pair (the module
+    docstring), the normal equations through Cholesky. Its ``cond(G) < 1e10`` test:
+    ``kappa = |G|_F tr(G^-1)`` lies in ``[cond, 6 sqrt(6) cond]``, so rows with
+    ``kappa < 1e9`` pass and rows with ``kappa > 1.5e11`` fail for sure. Returns ``v`` and the
+    rows between (and any without a normal), which the caller measures with the NumPy code."""
     P = np.ascontiguousarray(points, dtype=np.float64)
     nbr = np.ascontiguousarray(neighbours, dtype=np.int64)
     v = np.full(nbr.shape[0], np.nan)
@@ -339,36 +268,12 @@ def _patch_fits(
     y = np.empty(npar)
     coef = np.empty(npar)
     for i in range(m):
-        mx = my = mz = 0.0
-        for t in range(kk):
-            j = nbr[i, t]
-            mx += P[j, 0]
-            my += P[j, 1]
-            mz += P[j, 2]
-        mx, my, mz = mx / kk, my / kk, mz / kk
-        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-        for t in range(kk):
-            j = nbr[i, t]
-            qx, qy, qz = P[j, 0] - mx, P[j, 1] - my, P[j, 2] - mz
-            c00 += qx * qx
-            c01 += qx * qy
-            c02 += qx * qz
-            c11 += qy * qy
-            c12 += qy * qz
-            c22 += qz * qz
-        _, _, nx, ny, nz = _eig3(c00, c01, c02, c11, c12, c22)
+        mx, my, mz, c00, c01, c02, c11, c12, c22 = centred_covariance(P, nbr[i], kk)
+        _, _, nx, ny, nz = eig3(c00, c01, c02, c11, c12, c22)
         if nx == ny == nz == 0.0:
             unsure[i] = True
             continue
-        if abs(nx) <= abs(ny) and abs(nx) <= abs(nz):
-            ax, ay, az = 0.0, nz, -ny
-        elif abs(ny) <= abs(nz):
-            ax, ay, az = -nz, 0.0, nx
-        else:
-            ax, ay, az = ny, -nx, 0.0
-        s = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
-        t1x, t1y, t1z = ax * s, ay * s, az * s
-        t2x, t2y, t2z = ny * t1z - nz * t1y, nz * t1x - nx * t1z, nx * t1y - ny * t1x
+        t1x, t1y, t1z, t2x, t2y, t2z = tangent_pair(nx, ny, nz)
         ss = 0.0
         for t in range(kk):
             j = nbr[i, t]

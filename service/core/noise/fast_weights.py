@@ -22,7 +22,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from service.core.geometry import Geometry
-from service.core.noise.estimate import COMPILED_FROM, NoiseEstimate, estimate_noise, manifold_dim
+from service.core.noise.estimate import NoiseEstimate, estimate_noise, manifold_dim
+from service.core.noise.pointfits import COMPILED_FROM
 from service.core.operator.knn import knn, release
 
 __all__ = ["COMPILED_FROM", "isolated_mask", "isolation_distances", "local_sigma", "neighbours"]

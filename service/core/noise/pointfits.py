@@ -1,8 +1,10 @@
-"""Per-point local fits: every point against the quadratic fit of its neighbours without it.
+"""Local fits: the residual variance of each neighbourhood's quadratic fit
+(:func:`patch_variances`, the noise estimate's), and every point against the quadratic fit of
+its neighbours without it (:func:`leave_one_out`, the data weights').
 
 For point ``i`` with neighbours ``N_i`` (``k`` nearest, ``i`` excluded) the local frame comes
 from principal component analysis of ``N_i`` alone and a quadratic height function ``z(u)`` is
-fitted to them by least squares (as in :func:`service.core.noise.estimate.patch_variances`). Two
+fitted to them by least squares (as in :func:`patch_variances`). Two
 numbers per point follow, both free of point ``i`` itself:
 
 * ``v_i = RSS_i / (c (m - p))``: the residual variance of the neighbours' fit, unbiased for
@@ -21,38 +23,151 @@ is undecided (:mod:`service.core.noise.robust`).
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
+from service.core.operator.knn import GRID_FROM
 
-__all__ = ["leave_one_out", "point_neighbours"]
+__all__ = [
+    "COMPILED_FROM",
+    "curve_neighbours",
+    "design",
+    "leave_one_out",
+    "patch_variances",
+    "point_neighbours",
+]
 
 Array = NDArray[np.float64]
 _CHUNK = 20000
+#: Points from which surfaces in 3-D take the compiled kernels of the noise estimate and the data
+#: weights (issue 30; below, NumPy is as fast and small inputs load no compiled code): where the
+#: grid k-NN takes over.
+COMPILED_FROM = GRID_FROM
 
 
-def _design(u: Array) -> Array:
-    """``[1, u, quadratic monomials of u]`` for ``u`` of shape (..., d)."""
+def design(u: Array, degree: int = 2) -> Array:
+    """``[1, u, quadratic (and cubic) monomials of u]`` for ``u`` of shape (..., k, d)."""
     d = u.shape[-1]
     cols = [np.ones(u.shape[:-1]), *(u[..., a] for a in range(d))]
     cols += [u[..., a] * u[..., b] for a in range(d) for b in range(a, d)]
+    if degree >= 3:
+        cols += [
+            u[..., a] * u[..., b] * u[..., c]
+            for a in range(d)
+            for b in range(a, d)
+            for c in range(b, d)
+        ]
     return np.stack(cols, axis=-1)
+
+
+def patch_variances(
+    points: NDArray[np.float64],
+    neighbours: NDArray[np.int64],
+    manifold_dim: int,
+    degree: int = 2,
+    compiled: bool = True,
+) -> NDArray[np.float64]:
+    """Residual variance of the local quadratic fit of every neighbourhood.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, s)
+    neighbours : ndarray, shape (n, k)
+        Indices of each point's neighbourhood (the point itself included).
+    manifold_dim : int
+        ``d``: tangent dimensions of the local fit.
+    degree : int
+        Of the height function: 2 (quadratic, the estimate) or 3 (cubic, the scale test).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``RSS_i / (c (k - p))`` with ``c = s - d`` normal directions and ``p`` coefficients:
+        an unbiased estimate of ``sigma^2`` where the shape is locally a quadratic height
+        function; ``nan`` where the fit is rank deficient.
+
+    Surfaces in 3-D from :data:`COMPILED_FROM` points take
+    :func:`service.core.noise.fast_fits.patch_variances` (``compiled``; same numbers to rounding).
+    """
+    if compiled and points.shape[0] >= COMPILED_FROM and points.shape[1] == 3 and (
+            manifold_dim == 2 and degree == 2):  # fmt: skip
+        from service.core.noise.fast_fits import patch_variances as fast
+
+        v, unsure = fast(points, neighbours)
+        rows = np.flatnonzero(unsure)  # cond(G) near 1e10: measured as below
+        v[rows] = patch_variances(points, neighbours[rows], 2, compiled=False)
+        return v
+    n, k = neighbours.shape
+    d = manifold_dim
+    out = np.full(n, np.nan)
+    for start in range(0, n, _CHUNK):
+        idx = neighbours[start : start + _CHUNK]
+        Q = points[idx]
+        Q = Q - Q.mean(axis=1, keepdims=True)
+        _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q))
+        local = np.einsum("nki,nij->nkj", Q, vecs[:, :, ::-1])  # tangents first, then normals
+        u = local[..., :d]
+        scale = np.sqrt(np.mean(u**2, axis=(1, 2)))
+        B = design(u / np.where(scale > 0, scale, 1.0)[:, None, None], degree)
+        z = local[..., d:]
+        G = np.einsum("nkp,nkq->npq", B, B)
+        ok = np.linalg.cond(G) < 1e10
+        coef = np.linalg.solve(G[ok], np.einsum("nkp,nkc->npc", B[ok], z[ok]))
+        res = z[ok] - np.einsum("nkp,npc->nkc", B[ok], coef)
+        p = B.shape[2]
+        v = np.full(len(idx), np.nan)
+        v[ok] = np.sum(res**2, axis=(1, 2)) / (z.shape[2] * (k - p))
+        out[start : start + len(idx)] = v
+    return out
+
+
+def curve_neighbours(
+    geometry: Geometry, K: int, at: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The ``K`` nearest points along the curves (hops over the edges, then distance) of the
+    points ``at`` whose curve has that many; nearest in space would
+    take points of the next turn of a helix or of a neighbouring strand for the curve's own (a
+    helix with 100 points a turn and pitch 0.63: 20 nearest in space span two turns).
+
+    Returns the points kept (those with ``K`` such neighbours) and their neighbours."""
+    n = geometry.n
+    E = np.asarray(geometry.edges)
+    A = sp.csr_matrix(
+        (np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n)
+    )
+    A = (A + sp.identity(n, format="csr")).astype(bool).astype(np.float64)
+    R = sp.csr_matrix((np.ones(at.size), (np.arange(at.size), at)), shape=(at.size, n))
+    score = R.copy()
+    for _ in range(K):  # each hop adds 1 to every point reached so far: nearer, higher
+        R = (R @ A).astype(bool).astype(np.float64)
+        score = score + R
+    score = score.tocsr()
+    P = geometry.points
+    rows, kept = [], []
+    for i in range(at.size):
+        lo, hi = score.indptr[i], score.indptr[i + 1]
+        if hi - lo < K:
+            continue
+        cols = score.indices[lo:hi]
+        dist = np.linalg.norm(P[cols] - P[at[i]], axis=1)
+        rows.append(cols[np.lexsort((dist, -score.data[lo:hi]))[:K]])
+        kept.append(at[i])
+    return np.array(kept, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, K)
 
 
 def point_neighbours(
     geometry: Geometry, k: int, manifold_dim: int, known: NDArray[np.int64] | None = None
 ) -> NDArray[np.int64]:
     """Each point (column 0) and its ``k`` nearest neighbours: along the curves for polylines
-    (:func:`service.core.noise.estimate.curve_neighbours`), in space otherwise; the first
+    (:func:`curve_neighbours`), in space otherwise; the first
     ``k + 1`` columns of ``known`` (the noise estimate's, same rule) when given."""
     n = geometry.n
     if known is not None and known.shape == (n, known.shape[1]) and known.shape[1] > k:
         return _self_first(known[:, : k + 1], np.arange(n))
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None and manifold_dim == 1:
-        from service.core.noise.estimate import curve_neighbours
-
         rows, nbr = curve_neighbours(geometry, k + 1, np.arange(n))
         if rows.size == n:
             return _self_first(nbr, np.arange(n))
@@ -122,8 +237,8 @@ def _fit(P: Array, nbr: NDArray[np.int64], d: int, W: Array | None) -> tuple[Arr
     u, z = local[..., :d], local[..., d:]
     scale = np.sqrt(np.sum(W * np.sum(u**2, axis=2), axis=1) / np.maximum(cnt * d, 1.0))
     scale = np.where(scale > 0, scale, 1.0)
-    B = _design(u / scale[:, None, None])
-    b0 = _design(local0[:, :d] / scale[:, None])
+    B = design(u / scale[:, None, None])
+    b0 = design(local0[:, :d] / scale[:, None])
     p, c = B.shape[2], z.shape[2]
     BW = (Wc * B).transpose(0, 2, 1)
     G = np.matmul(BW, B)
@@ -136,7 +251,8 @@ def _fit(P: Array, nbr: NDArray[np.int64], d: int, W: Array | None) -> tuple[Arr
     except np.linalg.LinAlgError:  # a singular one among them: the pseudo-inverse, checked
         Gi = np.linalg.pinv(G[ok])
     good = np.all(np.isfinite(Gi), axis=(1, 2)) & (
-        np.abs(np.matmul(Gi, G[ok]) - np.eye(p)).max(axis=(1, 2)) < 1e-6)
+        np.abs(np.matmul(Gi, G[ok]) - np.eye(p)).max(axis=(1, 2)) < 1e-6
+    )
     ok[ok] = good
     Gi = Gi[good]
     if not ok.any():

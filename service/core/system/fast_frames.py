@@ -5,7 +5,7 @@ variance of the ``k`` nearest neighbours after :data:`~.displacement.FRAME_STEPS
 steps) with two costs replaced for one normal direction in 3-D: the neighbours come from the
 exact grid search :func:`service.core.operator.knn.knn` instead of a k-d tree, and the normal
 from the closed-form eigenvalues of each 3 x 3 covariance and the largest cross product of two
-rows of ``C - mu_3 I`` (:func:`service.core.noise.fast_fits._eig3`) instead of a batched
+rows of ``C - mu_3 I`` (:func:`service.core.noise.local3.eig3`) instead of a batched
 ``eigh``. The sign of a normal is arbitrary on both paths (the normal system is invariant
 under ``n_i -> -n_i``: ``t_i`` changes sign, ``p_i + n_i t_i`` does not); directions agree to
 rounding (tests). :func:`service.core.system.displacement.normal_frames` takes this path for
@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from service.core.noise.fast_fits import _eig3
+from service.core.noise.local3 import centred_covariance, eig3
 from service.core.operator.knn import knn
 
 __all__ = ["scale_by_normals", "surface_normals"]
@@ -43,24 +43,8 @@ def _normals(X: Array, idx: NDArray[np.int64]) -> Array:  # pragma: no cover
     n, k = idx.shape
     out = np.zeros((n, 3))
     for p in range(n):
-        mx = my = mz = 0.0
-        for a in range(k):
-            q = idx[p, a]
-            mx += X[q, 0]
-            my += X[q, 1]
-            mz += X[q, 2]
-        mx, my, mz = mx / k, my / k, mz / k
-        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-        for a in range(k):
-            q = idx[p, a]
-            dx, dy, dz = X[q, 0] - mx, X[q, 1] - my, X[q, 2] - mz
-            c00 += dx * dx
-            c01 += dx * dy
-            c02 += dx * dz
-            c11 += dy * dy
-            c12 += dy * dz
-            c22 += dz * dz
-        _, _, nx, ny, nz = _eig3(c00, c01, c02, c11, c12, c22)
+        _, _, _, c00, c01, c02, c11, c12, c22 = centred_covariance(X, idx[p], k)
+        _, _, nx, ny, nz = eig3(c00, c01, c02, c11, c12, c22)
         if nx == ny == nz == 0.0:  # isotropic or empty: any direction (eigh returns e_1)
             nx = 1.0
         out[p, 0], out[p, 1], out[p, 2] = nx, ny, nz

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from service.core import Geometry
-from service.core.noise.estimate import estimate_noise, log_mode, patch_variances
+from service.core.noise.estimate import estimate_noise, log_mode
+from service.core.noise.pointfits import patch_variances
 from tests.core.core_fixtures import polyline_edges
 
 

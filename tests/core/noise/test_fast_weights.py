@@ -1,5 +1,5 @@
 """Issue 30, item 3: the data weights' compiled pieces against the NumPy/SciPy code they stand
-for (the k-d tree, ``uneven.local_sigma``, ``robust.isolated``, ``estimate.patch_variances``)."""
+for (the k-d tree, ``uneven.local_sigma``, ``robust.isolated``, ``pointfits.patch_variances``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
-from service.core.noise import estimate, fast_fits, fast_weights, robust, uneven
+from service.core.noise import estimate, fast_fits, fast_weights, pointfits, robust, uneven
 from service.core.operator import knn
 
 
@@ -73,12 +73,12 @@ def test_patch_variances_compiled_agree(monkeypatch: pytest.MonkeyPatch, width: 
     P[:60, 2] = 0.0  # one grid row flat and collinear: rank-deficient fits (the NumPy rows)
     P[:60, 1] = 0.0
     _, nbr = cKDTree(P).query(P, k=width)
-    a = estimate.patch_variances(P, nbr, 2, compiled=False)
+    a = pointfits.patch_variances(P, nbr, 2, compiled=False)
     b, unsure = fast_fits.patch_variances(P, nbr)
-    b[unsure] = a[unsure]  # those rows are the NumPy code's (estimate.patch_variances)
+    b[unsure] = a[unsure]  # those rows are the NumPy code's (pointfits.patch_variances)
     assert np.array_equal(np.isnan(a), np.isnan(b))
-    monkeypatch.setattr(estimate, "COMPILED_FROM", 100)
-    c = estimate.patch_variances(P, nbr, 2)
+    monkeypatch.setattr(pointfits, "COMPILED_FROM", 100)
+    c = pointfits.patch_variances(P, nbr, 2)
     np.testing.assert_allclose(c, b, rtol=1e-12)
     ok = ~np.isnan(a)
     np.testing.assert_allclose(b[ok], a[ok], rtol=1e-9, atol=1e-14 * np.nanmax(a))
@@ -103,7 +103,7 @@ def test_noise_estimate_on_the_grid_is_the_tree_estimate(monkeypatch: pytest.Mon
     g = _sheet(120, 0.002)
     ref = estimate.noise_of(g)
     monkeypatch.setattr(knn, "GRID_FROM", 100)
-    monkeypatch.setattr(estimate, "COMPILED_FROM", 100)
+    monkeypatch.setattr(pointfits, "COMPILED_FROM", 100)
     knn.release()
     got = estimate.noise_of(g)
     knn.release()
