@@ -8,6 +8,7 @@ upper end of the valid range of ``tau`` (section 6.1), and estimates the noise l
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -70,25 +71,29 @@ def valid_range(geometry: Geometry, params: SmoothingParams) -> tuple[float, flo
     return phi0, weight_sum
 
 
-def _knee(problem: Problem, tau0: float) -> float:
-    """The automatic tau as :func:`~service.core.pipeline.smooth_one` chooses it: the knee of
-    ``phi(lambda)`` near the discrepancy estimate ``tau0`` (Lanczos, no factorization)."""
-    from service.core.search.autotau import knee_tau
+def _automatic(problem: Problem, tau0: float, sigma: float) -> tuple[float, str]:
+    """The tau the automatic rule would meet (:mod:`~service.core.search.risk_rule`: phi at
+    lambda*, by the rule's recurrence with no solve) and its words."""
+    from service.core.pipeline import noise_model
+    from service.core.search.one_run_target import ONE_RUN_FROM, choose
+    from service.core.search.target import Target
     from service.core.system.deviation import Deviation
 
     params, frame = problem.params, problem.frame
     dev = Deviation(problem.system, solver=_solver(params), order=params.order)
-    tau = knee_tau(dev, frame.tau_in(tau0))
-    return tau0 if tau is None else frame.phi_out(tau)
+    small = problem.system.size < ONE_RUN_FROM
+    choice = choose(dev, noise_model(problem, Target(tau0, sigma=sigma)), refine=small)
+    tau = frame.phi_out(choice.phi)
+    used = math.sqrt(choice.sigma2) * frame.scale
+    return tau, (f"; the automatic rule: lambda = {frame.lam_out(choice.lam):.6g} minimises "
+                 f"the unbiased predictive risk with sigma = {used:.6g}, tau = {tau:.6g}")
 
 
-def _at_knee(noise: str, rule_tau: float, tau: float) -> str:
-    """The rule's sentence quoting the tau it suggests (``suggested_tau``): the discrepancy
-    principle's tau moved to the knee of ``phi(lambda)`` (issue 32 item 8)."""
-    said = f"tau = {rule_tau:.6g} ("
-    if f"{tau:.6g}" == f"{rule_tau:.6g}" or said not in noise:
-        return noise
-    return noise.replace(said, f"tau = {tau:.6g} at the knee of phi(lambda), from {rule_tau:.6g} (")
+def _risk(problem: Problem) -> bool:
+    """Whether the automatic rule is the risk estimate (not a track's discrepancy budget)."""
+    from service.core.problem import is_track
+
+    return not is_track(problem.geometry, problem.params.tau_rule)
 
 
 def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[str, Any]:
@@ -135,11 +140,13 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
             auto = None
         if auto is not None:
             sigma, noise = auto.sigma, auto.rule.removeprefix("automatic: ")
-            tau = _knee(problem, auto.tau) if auto.tau > 0 else auto.tau
+            tau = auto.tau
+            if auto.tau > 0 and not problem.system.empty and _risk(problem):
+                tau, words = _automatic(problem, auto.tau, auto.sigma)
+                noise += words
             if 0 < tau < phi0:
                 suggested_tau = tau
                 suggested_rms = tau_to_rms(tau, weight_sum)
-                noise = _at_knee(noise, auto.tau, tau)
     return {
         "n_points": geometry.n,
         "dimension": geometry.dim,

@@ -11,9 +11,12 @@ notes. The public ``smooth()`` (untiled or tiled) is :func:`service.core.entry.s
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
+
+import numpy as np
 
 from service.core.checks.diagnostics import diagnostics
 from service.core.errors import TauOutOfRange
@@ -22,6 +25,7 @@ from service.core.finish.finished import Finished
 from service.core.finish.outliers import far_moved, place_outliers
 from service.core.finish.tangential import relax_tangential
 from service.core.finish.volume import preserve_measure
+from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.linalg.cache import analysis_of
 from service.core.linalg.resources import choose_solver
@@ -34,9 +38,17 @@ from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
 from service.core.run import Run
 from service.core.search.maxnorm import bound_deviation
+from service.core.search.one_run_target import (
+    NoiseModel,
+    choose_and_solve,
+    progress,
+    sigma_of,
+    solve_tau,
+)
 from service.core.search.one_run_target import applies as one_run_applies
-from service.core.search.one_run_target import knee_and_solve
 from service.core.search.polyfilter import filter_system
+from service.core.search.risk import invariant_radius
+from service.core.search.risk_rule import RiskChoice
 from service.core.search.roots import LambdaSearch
 from service.core.search.target import (
     Solution,
@@ -44,7 +56,6 @@ from service.core.search.target import (
     check_range,
     find_lambda,
     gcv_search,
-    knee,
     resolve_tau,
 )
 from service.core.system.deviation import Deviation
@@ -127,8 +138,9 @@ def solve(
 def tikhonov(
     problem: Problem, plan: Plan, aim: Target, run: Run, memory_limit: int | None
 ) -> Solution:
-    """Eq. (4) of order ``k``: the automatic tau moved to the knee of ``phi(lambda)``, lambda
-    found (section 6.3) or by GCV, the solution ``U`` (max-norm bounded, section 9)."""
+    """Eq. (4) of order ``k``: lambda chosen by the automatic rule (the minimiser of the
+    unbiased predictive risk, :mod:`~service.core.search.risk_rule`), found for a tau
+    (section 6.3) or by GCV, the solution ``U`` (max-norm bounded, section 9)."""
     params, frame = problem.params, problem.frame
     solver = choose_solver(problem.system, params, memory_limit, run.notes)
     dev = Deviation(
@@ -140,15 +152,20 @@ def tikhonov(
     )
     dev.listener = run.listener(frame, aim.tau)
     seconds = 0.0
+    one = one_run_applies(params, problem.system.size)
     try:
         search: LambdaSearch | None = None
         t0 = time.perf_counter()
-        if one_run_applies(params, problem.system.size):  # issue 30: knee, lambda, solution
-            aim, search = knee_and_solve(dev, aim, frame, plan.automatic_tau, params.tolerance)
-            dev.listener = run.listener(frame, aim.tau)
-        elif plan.automatic_tau:
-            aim = knee(dev, aim, frame)
-            dev.listener = run.listener(frame, aim.tau)
+        if plan.tau_rule.value == "risk":
+            choice, search = choose_and_solve(dev, noise_model(problem, aim), one, progress(dev))
+            if choice.lam > FULL_SMOOTHING * dev.floor:
+                aim = risk_target(aim, choice, frame, search.phi)
+            else:  # the risk's minimum at full smoothing: the discrepancy budget instead
+                aim, search = aim.noted(FALLBACK), None
+                dev = Deviation(problem.system, solver=solver, order=params.order,
+                                symbolic=analysis_of)  # fmt: skip
+        if search is None and one and aim.tau is not None and params.tau_rule != "gcv":
+            search = solve_tau(dev, frame.tau_in(aim.tau), params.tolerance, progress(dev))
         if params.tau_rule == "gcv":
             search, aim = gcv_search(dev, problem.geometry, params, problem.fixed, frame)
         elif search is None:
@@ -158,13 +175,55 @@ def tikhonov(
         if not plan.automatic_tau:
             raise
         aim = aim.noted(
-            f"; this tau is not below phi(0) = {exc.tau_max:.6g}, the deviation of the fully "
-            "smoothed shape: the estimated noise is as large as the shape"
+            f"; no lambda above the floor meets it: phi(0) = {exc.tau_max:.6g}, the deviation "
+            "of the fully smoothed shape, is within the estimated noise (the noise is as "
+            "large as the shape)"
         )
         return unchanged(problem, plan, replace(aim, tau=None), run)
     run.emit("postprocess", tau=aim.tau, iteration=len(dev.history))
     dev.listener = run.listener(frame, aim.tau)
     return _bounded(problem, dev, Solution(aim, search, None, dev, None, seconds), run)
+
+
+#: lambda* within this factor of the floor is full smoothing (the shape's own detail read as
+#: risk): a 2-D track at 2 edges of noise went 332x the oracle's error there.
+FULL_SMOOTHING = 10.0
+FALLBACK = (
+    "; the unbiased risk estimate is least at full smoothing (no lambda above the floor), "
+    "which would flatten the shape: the discrepancy budget is used instead"
+)
+
+
+def noise_model(problem: Problem, aim: Target) -> NoiseModel:
+    """The automatic rule's noise model per unknown of the system (internal frame): the
+    scale ``omega_i sigma_i / sigma``, the points' invariant radius (the probes' phase), the
+    local fits' sigma^2 and the discrepancy budget."""
+    system, frame = problem.system, problem.frame
+    free = np.flatnonzero(~problem.fixed)
+    rows = np.repeat(free, max(system.size // max(free.size, 1), 1))
+    ts = problem.weights.tau_scale[rows] if problem.weights is not None else 1.0
+    S = np.sqrt(system.d2) * ts
+    sigma = (aim.sigma or 0.0) / frame.scale
+    assert aim.tau is not None
+    return NoiseModel(S, invariant_radius(problem.geometry.points[rows]), sigma**2,
+                      frame.tau_in(aim.tau))  # fmt: skip
+
+
+def risk_target(aim: Target, choice: RiskChoice, frame: Frame, phi: float) -> Target:
+    """The target the automatic rule met: ``phi`` at lambda*, with the rule's words."""
+    sigma = sigma_of(choice, frame.scale)
+    local = math.sqrt(choice.sigma2_local) * frame.scale
+    wahba = math.sqrt(choice.sigma2_wahba) * frame.scale
+    tau = frame.phi_out(phi)
+    how = (
+        f"{aim.how}; lambda = {frame.lam_out(choice.lam):.6g} minimises the unbiased "
+        f"predictive risk with sigma = {sigma:.6g}, the larger of the local fits' "
+        f"{local:.6g} and Wahba's {wahba:.6g} (at the GCV minimiser); tau = phi there = "
+        f"{tau:.6g} ({tau / aim.tau:.3g} x the discrepancy budget)"
+        if aim.tau else f"{aim.how}; lambda by the unbiased predictive risk"
+    )  # fmt: skip
+    evidence = choice.evidence(lambda s2: math.sqrt(s2) * frame.scale, frame.lam_out)
+    return Target(tau, how, sigma, evidence)
 
 
 def _bounded(problem: Problem, dev: Deviation, sol: Solution, run: Run) -> Solution:

@@ -88,8 +88,9 @@ class Plan:
 
     @property
     def automatic_tau(self) -> bool:
-        """Whether tau comes from the noise estimate (section 7's discrepancy principle)."""
-        return bool(self.tau_rule.value == "auto")
+        """Whether the run chooses its own budget: the automatic rule (``"risk"``, issue 37)
+        or, for a track with correlated noise, the discrepancy principle."""
+        return bool(self.tau_rule.value in ("risk", "discrepancy"))
 
     def to_dict(self) -> dict[str, Any]:
         """The report's ``plan``: ``{choice: {"value", "why", "evidence"}}`` (JSON-ready)."""
@@ -178,15 +179,33 @@ def _outliers(params: SmoothingParams, geometry: Geometry) -> Choice:
                   "no further than the ring reaches", evidence)
 
 
-def _budget_choices(params: SmoothingParams) -> tuple[Choice, Choice, Choice, Choice]:
+#: Why the automatic rule (issue 37; the comparison in service/core/README.md).
+RISK_WHY = (
+    "lambda minimising the unbiased predictive risk (Mallows C_L / Stein) with the larger of "
+    "the local fits' and Wahba's noise estimates: within 1-4 % of the oracle lambda's error "
+    "on the calibration half, where the discrepancy budget lost up to 3.5x and the knee up "
+    "to 1.26x"
+)
+TRACK_WHY = (
+    "a track's noise is correlated along it, which the risk estimate (white noise) does not "
+    "model: the discrepancy budget of the track's own noise estimate (issue 31)"
+)
+
+
+def _budget_choices(
+    params: SmoothingParams, track: bool
+) -> tuple[Choice, Choice, Choice, Choice]:  # fmt: skip
     """The tau rule (eq. 3), the method, the lambda search (section 6.3), the solver."""
-    rule = params.tau_rule
+    rule: str = params.tau_rule
+    if rule == "auto":
+        rule = "discrepancy" if track else "risk"
     tau_why = {
         "lam": "lambda given",
         "tau": "tau given",
         "rms": "rms given: tau = rms^2 sum omega_i^2 over the free points",
         "gcv": "generalized cross-validation (tau = phi at its lambda)",
-        "auto": "from the estimated noise (discrepancy principle), then the knee of phi(lambda)",
+        "risk": RISK_WHY,
+        "discrepancy": TRACK_WHY,
     }[rule]
     method = Choice(params.method, _given(params, "method"))
     if params.lam is not None or params.method == "windowed-sinc":
@@ -218,7 +237,8 @@ def make_plan(geometry: Geometry, params: SmoothingParams, tracks: bool = True) 
         "weights": weights.value, "ends": ends.value, "boundary": boundary.value,
         "outliers": outliers.value,
     })  # fmt: skip
-    tau_rule, method, search, solver = _budget_choices(params)
+    track = params.tau_rule == "auto" and is_track(geometry, params.tau_rule)
+    tau_rule, method, search, solver = _budget_choices(params, track)
     return Plan(
         params=resolved,
         displacement=_displacement(params, geometry, resolved.displacement),
@@ -273,7 +293,8 @@ def with_problem(plan: Plan, problem: Problem) -> Plan:
 def with_solution(plan: Plan, target: Target, solver: str, notes: list[str]) -> Plan:
     """The plan completed after the solve: the target the run met (knee, GCV) and the
     solver path taken (with the reasons the path notes give)."""
-    evidence = {"tau": target.tau, "sigma": target.sigma, "knee_factor": target.knee}
+    evidence: dict[str, Any] = {"tau": target.tau, "sigma": target.sigma,
+                                **(target.evidence or {})}  # fmt: skip
     tau_rule = replace(plan.tau_rule, evidence=evidence)
     reasons = [note for note in notes if note.startswith("matrix-free path")]
     if plan.solver.value != "auto":
@@ -281,7 +302,7 @@ def with_solution(plan: Plan, target: Target, solver: str, notes: list[str]) -> 
     elif solver == "none":
         why = "no system solved"
     elif solver == "lanczos":
-        why = "one Lanczos run: the knee, lambda and the solution without a factorization"
+        why = "one Lanczos run: lambda and the solution without a factorization"
     else:
         why = "; ".join(reasons) or "direct: nothing selected the matrix-free path"
     return replace(plan, tau_rule=tau_rule, solver=Choice(solver, why, plan.solver.evidence))

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +23,6 @@ from numpy.typing import NDArray
 
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
-from service.core.linalg.krylov import Quadrature, _models, log_bisect
 from service.core.noise.estimate import (
     codimension,
     estimate_noise,
@@ -184,129 +182,3 @@ def gcv_lambda(
             "generalized cross-validation found no finite score", field="params.tau"
         )
     return best
-
-
-#: The window of tau around the discrepancy estimate where the knee is looked for.
-KNEE_WINDOW = (0.4, 2.0)
-KNEE_STEPS = (40, 400)
-KNEE_CHECKPOINTS = (40, 60, 90, 135, 200, 300)
-#: Checkpoints without a knee before giving up: a sharp plateau (40K-vertex sphere and torus,
-#: anisotropic 0.5 h) is flat up to the window's edge in the 40- and 60-step models and only
-#: resolved at 90: giving up after two left the discrepancy estimate (distance to the surface
-#: 0.20 / 0.22 against the oracle's 0.067 / 0.075); after four, the knee gives 0.068 / 0.076.
-KNEE_GIVE_UP = 3
-#: Up to this many unknowns phi(lambda) is evaluated from the exact spectrum of ``M_t`` (dense
-#: eigendecomposition, ~0.1 s): the Lanczos models of a curve's clustered spectrum need more
-#: steps than the unknowns allow (circle 2-D, 0.25 h: vertex error 0.73 with them, 0.20 exact).
-DENSE_KNEE = 1200
-
-
-def _lanczos_checkpoints(
-    apply: Callable[[Array], Array], c: Array, checkpoints: list[int], order: int
-) -> Iterator[tuple[Quadrature, Quadrature]]:
-    """Lanczos on ``apply`` from the columns of ``c``; the Gauss and Gauss-Radau models of
-    ``phi`` at the given step counts only (building them costs O(j^3) per column, so not after
-    every step as :func:`service.core.linalg.krylov.lanczos` does for its short runs)."""
-    beta0 = np.linalg.norm(c, axis=0)
-    live = beta0 > 0
-    beta0 = beta0[live]
-    V = c[:, live] / beta0
-    V_prev = np.zeros_like(V)
-    b_prev = np.zeros(V.shape[1])
-    alphas: list[Array] = []
-    betas: list[Array] = []
-    steps = checkpoints[-1]
-    for j in range(1, steps + 1):
-        W = apply(V) - V_prev * b_prev
-        a = np.einsum("ij,ij->j", V, W)
-        W -= V * a
-        b = np.linalg.norm(W, axis=0)
-        alphas.append(a)
-        betas.append(b)
-        broke = not np.all(b > 1e-14 * np.abs(a).max())
-        if j in checkpoints or broke:
-            yield _models(alphas, betas, beta0, order)
-        if broke:
-            return
-        V_prev, V, b_prev = V, W / b, b
-
-
-def _flattest(lams: Array, phis: Array) -> int | None:
-    """Index of the flattest point of ``log phi`` against ``log lambda`` (interior only)."""
-    slope = np.gradient(np.log(np.maximum(phis, 1e-300)), np.log(lams))
-    i = int(np.argmax(slope))
-    return i if 2 <= i <= lams.size - 3 else None
-
-
-def _dense_knee(dev: Deviation, lo_tau: float, hi_tau: float) -> float | None:
-    """The knee from the exact ``phi(lambda) = sum_i c_i^2 mu_i^(2k-2) / (mu_i + lambda)^(2k)``
-    (generalized eigenpairs of ``(M, D^2)``, small systems)."""
-    s = dev.system
-    d = np.sqrt(s.d2)[:, None]
-    Mt = dev.solver.matvec(np.eye(s.size) / d) / d
-    mu, V = np.linalg.eigh(0.5 * (Mt + Mt.T))
-    mu = np.maximum(mu, 0.0)
-    c2 = np.sum((V.T @ (s.r / d)) ** 2, axis=1)
-    k = dev.order
-
-    def phi(lam: float) -> float:
-        return float(np.sum(c2 * mu ** (2 * k - 2) / (mu + lam) ** (2 * k)))
-
-    lo, hi = dev.floor, max(s.lambda_ceiling(lo_tau), dev.floor)
-    lam_hi = log_bisect(phi, lo_tau, lo, hi)
-    lam_lo = log_bisect(phi, hi_tau, lo, hi)
-    if not lam_lo < lam_hi:
-        return None
-    grid = np.geomspace(lam_lo, lam_hi, 400)
-    phis = np.array([phi(x) for x in grid])
-    i = _flattest(grid, phis)
-    return None if i is None else float(phis[i])
-
-
-def knee_tau(dev: Deviation, tau0: float) -> float | None:
-    """The knee of ``phi(lambda)`` near ``tau0`` (internal frame), or ``None``.
-
-    ``log phi`` against ``log lambda`` rises steeply while the noise is being removed and then
-    flattens where only the noise is gone and the shape itself is not yet smoothed; the
-    flattest point in ``KNEE_WINDOW x tau0`` (the estimated noise energy) is where the error
-    against the clean shape is smallest on the quality benchmark's smooth shapes (within 4 %
-    of the oracle). ``phi`` comes from the Gauss and Gauss-Radau quadrature models of Lanczos
-    on ``M_t`` (products with ``M`` only, no factorization, as in
-    :func:`service.core.linalg.krylov.lanczos`), checked after 40, 60, 90, ... steps until the knee
-    moves less than 1 % (at most ``KNEE_STEPS[1]`` steps, or half the unknowns). ``None``
-    when the window holds no interior knee (then the discrepancy estimate is used).
-    """
-    s = dev.system
-    inv_d = 1.0 / np.sqrt(s.d2)[:, None]
-    lo_tau, hi_tau = KNEE_WINDOW[0] * tau0, KNEE_WINDOW[1] * tau0
-
-    if s.size <= DENSE_KNEE:
-        return _dense_knee(dev, lo_tau, hi_tau)
-
-    def knee(gauss: Quadrature, radau: Quadrature) -> float | None:
-        lo, hi = dev.floor, max(s.lambda_ceiling(lo_tau), dev.floor)
-        lam_hi, lam_lo = gauss.root(lo_tau, lo, hi), gauss.root(hi_tau, lo, hi)
-        if not lam_lo < lam_hi:
-            return None
-        grid = np.geomspace(lam_lo, lam_hi, 240)
-        phi = np.array([math.sqrt(max(gauss.phi(x), 1e-300) * max(radau.phi(x), 1e-300))
-                        for x in grid])
-        i = _flattest(grid, phi)
-        return None if i is None else float(grid[i])
-
-    cap = max(KNEE_STEPS[0], min(KNEE_STEPS[1], s.size // 2))
-    checkpoints = [j for j in KNEE_CHECKPOINTS if j < cap] + [cap]
-    lam: float | None = None
-    previous: float | None = None
-    for checks, (gauss, radau) in enumerate(_lanczos_checkpoints(
-        lambda V: inv_d * dev.solver.matvec(inv_d * V), inv_d * s.r, checkpoints, dev.order
-    )):
-        lam = knee(gauss, radau)
-        if lam is None and checks >= KNEE_GIVE_UP and previous is None:
-            break  # no knee after KNEE_GIVE_UP + 1 checkpoints: there is none to find
-        if lam is not None and previous is not None and abs(math.log(lam / previous)) < 0.01:
-            break
-        previous = lam
-    if lam is None:
-        return None
-    return math.sqrt(gauss.phi(lam) * radau.phi(lam))

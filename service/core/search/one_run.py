@@ -1,16 +1,17 @@
-"""The knee, lambda and the solution of the default path from one Lanczos run (issue 30).
+"""lambda, the solution and (for the automatic rule) the choice of lambda from one Lanczos
+run (issues 30, 37).
 
 One recurrence on ``M_t = D^-1 M D^-1`` from ``c = D^-1 r`` (:mod:`service.core.linalg.lanczos_run`,
 one product per step for all coordinate columns) is checked every few steps:
 
-1. **Knee** (automatic tau only): :mod:`service.core.search.knee_run` (decided from converged
-   quantities: where the Gauss and Gauss-Radau models of ``phi`` agree). The new target is
-   :func:`~service.core.search.knee_run.knee_target`, 1 % below ``phi`` at the knee.
-2. **lambda**: the root ``lambda_G`` of the Gauss model's ``phi = tau`` and ``lambda_R`` of the
-   Radau model's; for order 1 they bracket the root of the exact ``phi`` (Golub and Meurant).
-   Stop when ``lambda_R / lambda_G - 1 <= LAMBDA_RTOL`` **and** the model's bound of the solution
-   error at ``lambda_G`` (:meth:`~service.core.linalg.lanczos_run.TikhonovModel.error_bound`)
-   is at most ``rtol`` of the solution.
+1. **lambda***: with the automatic rule, :class:`~service.core.search.risk_rule.RiskRule` (its
+   probe recurrence stepped alongside) decides lambda from converged quantities; else the
+   root ``lambda_G`` of the Gauss model's ``phi = tau`` and ``lambda_R`` of the Radau
+   model's, which for order 1 bracket the root of the exact ``phi`` (Golub and Meurant).
+2. Stop when lambda is decided (``lambda_R / lambda_G - 1 <= LAMBDA_RTOL`` for a root) **and**
+   the model's bound of the solution error at it
+   (:meth:`~service.core.linalg.lanczos_run.TikhonovModel.error_bound`) is at most ``rtol`` of
+   the solution.
 3. **Solution** ``E_k = D^-1 V a_k`` at ``lambda_G`` from the kept basis (or a second pass), then
    verified with its true residuals (one product with the block of the chain's vectors,
    :func:`~service.core.linalg.lanczos_run.true_residual_bound`): ``||D (E - E*)||_F <=
@@ -37,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,7 +50,7 @@ from service.core.linalg.lanczos_run import (
     TikhonovModel,
     true_residual_bound,
 )
-from service.core.search.knee_run import KneeRule, converged_knee, knee_target
+from service.core.search.risk_rule import RiskRule
 
 __all__ = ["LAMBDA_RTOL", "SOLUTION_RTOL", "OneRun", "direct_cost", "one_run"]
 
@@ -65,12 +66,10 @@ class OneRun:
     Attributes
     ----------
     lam : float
-        ``lambda_G``, where the solution is the Galerkin (then verified) solution.
+        ``lambda_G``, where the solution is the Galerkin (then verified) solution (the
+        rule's lambda* when a rule decided it).
     tau : float
-        The target met (the knee's ``phi`` when one was found).
-    knee : float or None
-        ``phi`` at the knee (``tau`` is then :func:`~.knee_run.knee_target` of it); ``None``
-        when none was asked or found.
+        The target met (with a rule: the model's ``phi`` at lambda*).
     E : ndarray, shape (m, s), or None
         The deviation ``E_k(lambda)``; ``None`` when the cost model left the solve to the
         caller (``lam`` is then the model's root).
@@ -87,15 +86,14 @@ class OneRun:
         Lanczos steps and products with ``M`` (second pass, check and polish included).
     converged : bool
         Both stopping rules met within ``max_steps``.
-    knee_steps : int or None
-        Steps at which the knee was decided.
-    notes : list of str
-        How the knee was decided, a polish.
+    decided_at : int
+        Steps at which the rule decided lambda (0 without a rule).
+    polished : int
+        Products of a conjugate-gradient polish of the vectors (0: none was needed).
     """
 
     lam: float
     tau: float
-    knee: float | None
     E: Array | None
     seeds: dict[str, Array]
     phi: float
@@ -104,8 +102,8 @@ class OneRun:
     steps: int
     products: int
     converged: bool
-    knee_steps: int | None = None
-    notes: list[str] = field(default_factory=list)
+    decided_at: int = 0
+    polished: int = 0
 
 
 def direct_cost(size: int) -> int:
@@ -143,7 +141,7 @@ def one_run(
     lo: float,
     *,
     order: int = 1,
-    knee: bool = False,
+    rule: RiskRule | None = None,
     ceiling: Callable[[float], float] | None = None,
     rtol: float = SOLUTION_RTOL,
     max_steps: int = 5000,
@@ -152,7 +150,8 @@ def one_run(
     basis_dtype: type = np.float32,
     report: Callable[[float, float, int], None] | None = None,
 ) -> OneRun:
-    """Knee (when ``knee``), lambda and ``E_k`` from one Lanczos run (module docstring).
+    """lambda* (with a ``rule``) or the lambda of ``phi = tau``, and ``E_k``, from one
+    Lanczos run (module docstring).
 
     Parameters
     ----------
@@ -163,47 +162,48 @@ def one_run(
     d : ndarray, shape (m, 1)
         The diagonal of ``D``.
     tau : float
-        The target (internal frame); with ``knee`` the discrepancy estimate ``tau0``.
+        The target (internal frame); ignored with a ``rule``.
     lo : float
         The lambda floor (:meth:`~service.core.system.deviation.SmoothingSystem.lambda_floor`).
     order : int
         Iterated Tikhonov order ``k``.
+    rule : RiskRule, optional
+        The automatic lambda (:mod:`~service.core.search.risk_rule`), stepped alongside and
+        asked at every checkpoint until it decides; lambda is then fixed.
     ceiling : callable, optional
         ``tau -> ||c||_F / sqrt(tau)`` (``phi <= ||c||^2 / lambda^2``), by default from ``c``.
     budget : int, optional
-        Products after the target is set beyond which the solve is left to the caller
+        Products after lambda is set beyond which the solve is left to the caller
         (module docstring; :func:`direct_cost` estimates a factorized solve's).
     report : callable, optional
-        ``report(lambda, phi, checkpoint)`` at every checkpoint once the target is set (the
-        model's root and its Gauss-rule phi: progress only, nothing is decided from it).
+        ``report(lambda, phi, checkpoint)`` at every checkpoint once lambda is set (progress
+        only, nothing is decided from it).
     """
     run = LanczosRun(apply_mt, c, keep_bytes, basis_dtype)
     if ceiling is None:
         cnorm = float(np.linalg.norm(c))
         ceiling = lambda t: cnorm / math.sqrt(t)  # noqa: E731
     top = lambda t: max(ceiling(t), lo)  # noqa: E731
-    rule = KneeRule(tau, lo, ceiling, c.shape[0]) if knee else None
-    target: float | None = None if knee else tau
-    knee_tau: float | None = None
-    knee_steps: int | None = None
+    fixed: float | None = None
+    decided_at = 0
     lam_g = lam_r = top(tau)
     trail: list[tuple[int, float]] = []
     stop = ""
     check = _checkpoint(0, [], rtol)
     while run.steps < max_steps and not run.done and not stop:
         run.step()
+        if rule is not None and fixed is None:
+            rule.step()
         if run.steps < check and not run.done:
             continue
         model = run.model(order)
-        if target is None:
-            assert rule is not None
-            decided, knee_tau = rule.update(run, model)
+        if rule is not None and fixed is None:
             check = _checkpoint(run.steps, [], rtol)
-            if not decided:
+            if not rule.update(_rules(model), order, run.steps, run.done):
                 continue
-            target = tau if knee_tau is None else knee_target(knee_tau)
-            knee_steps = run.steps
-        lam_g = model.root(target, lo, top(target))
+            assert rule.choice is not None
+            fixed, decided_at = rule.choice.lam, run.steps
+        lam_g = fixed if fixed is not None else model.root(tau, lo, top(tau))
         size = math.sqrt(max(float(model.phi(lam_g)), 1e-300))
         err = model.error_bound(lam_g) / size
         trail.append((run.steps, err))
@@ -211,29 +211,34 @@ def one_run(
         if report is not None:
             report(lam_g, size * size, len(trail))
         if err <= rtol:  # the Radau rule (a second eigendecomposition) only when needed
-            lam_r = model.root(target, lo, top(target), radau=True)
+            lam_r = lam_g if fixed is not None else model.root(tau, lo, top(tau), radau=True)
             if abs(lam_r / lam_g - 1) <= LAMBDA_RTOL:
                 stop = "converged"
-        elif budget is not None and _over_budget(trail, rtol, run, knee_steps or 0, budget):
+        elif budget is not None and _over_budget(trail, rtol, run, decided_at, budget):
             stop = "budget"
-    notes = [f"knee: {rule.how}"] if rule is not None and rule.how else []
     model = run.model(order)
-    if target is None:  # max_steps before the knee was decided: the last models decide
-        assert rule is not None
-        knee_tau, ok, _ = converged_knee(model, tau, lo, ceiling)
-        knee_tau = knee_tau if ok else None
-        target = tau if knee_tau is None else knee_target(knee_tau)
-        knee_steps = run.steps
-        lam_g = model.root(target, lo, top(target))
+    if rule is not None and fixed is None:  # max_steps before the rule decided: the last curves
+        rule.update(_rules(model), order, run.steps, True)
+        assert rule.choice is not None
+        fixed, decided_at = rule.choice.lam, run.steps
+        lam_g = lam_r = fixed
+    target = float(model.phi(lam_g)) if fixed is not None else tau
+    products = run.products + (rule.probes.products if rule is not None else 0)
     if stop == "budget":
-        return OneRun(lam_g, target, knee_tau, None, {}, math.nan, math.inf, (lam_g, lam_r),
-                      run.steps, run.products, False, knee_steps, notes)  # fmt: skip
-    if stop == "converged":  # the fewest steps whose solution meets the bound (the knee may
+        return OneRun(lam_g, target, None, {}, math.nan, math.inf, (lam_g, lam_r), run.steps,
+                      products, False, decided_at)  # fmt: skip
+    if stop == "converged":  # the fewest steps whose solution meets the bound (the rule may
         # have run the recurrence past the solution's convergence: a shorter second pass)
         above = [j for j, e in trail if e > rtol]  # the last checkpoint short of the bound
         model = _shortest(run, order, lam_g, rtol, above[-1] + 1 if above else 1)
-    return _solution(run, model, c, d, lam_g, lam_r, target, knee_tau, knee_steps, rtol,
-                     stop == "converged", notes)  # fmt: skip
+    res = _solution(run, model, c, d, lam_g, lam_r, target, decided_at, rtol,
+                    stop == "converged")  # fmt: skip
+    return replace(res, products=res.products + products - run.products)
+
+
+def _rules(model: TikhonovModel) -> Callable[[bool], tuple[Array, Array]]:
+    """The data columns' Gauss (``radau=False``) or Gauss-Radau rule of ``model``."""
+    return lambda radau: model._rule(radau)
 
 
 def _shortest(run: LanczosRun, order: int, lam: float, rtol: float, lo: int = 1) -> TikhonovModel:
@@ -278,8 +283,7 @@ def _over_budget(
 
 def _solution(
     run: LanczosRun, model: TikhonovModel, c: Array, d: Array, lam_g: float, lam_r: float,
-    target: float, knee_tau: float | None, knee_steps: int | None, rtol: float,
-    converged: bool, notes: list[str],
+    target: float, decided_at: int, rtol: float, converged: bool,
 ) -> OneRun:  # fmt: skip
     """``E_k`` at ``lam_g`` from the basis, verified by its true residuals (polished if
     needed)."""
@@ -287,18 +291,18 @@ def _solution(
     bound = true_residual_bound(run.apply_mt, c, Y, lam_g)
     products = run.products + 1
     size = float(np.sqrt(np.einsum("ij,ij->", Y[-1], Y[-1])))
+    extra = 0
     if bound > rtol * size:
         Y, bound, extra = _polish(run.apply_mt, c, Y, lam_g, rtol)
         products += extra
         size = float(np.sqrt(np.einsum("ij,ij->", Y[-1], Y[-1])))
-        notes.append(f"Lanczos solution polished by conjugate gradients ({extra} products)")
     E = Y[-1] / d
     seeds = {("E1" if i == 0 else f"Z{i + 1}"): y / d for i, y in enumerate(Y[:-1])}
     return OneRun(
-        lam=lam_g, tau=target, knee=knee_tau, E=E, seeds=seeds, phi=size**2,
+        lam=lam_g, tau=target, E=E, seeds=seeds, phi=size**2,
         bound=bound / max(size, 1e-300), bracket=(lam_g, lam_r), steps=run.steps,
         products=products, converged=converged and bound <= rtol * size,
-        knee_steps=knee_steps, notes=notes,
+        decided_at=decided_at, polished=extra,
     )  # fmt: skip
 
 

@@ -20,7 +20,7 @@ from service.core.linalg.resources import prefer_matrix_free
 from service.core.noise.robust import DataWeights
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.search.autotau import auto_tau, gcv_lambda, knee_tau
+from service.core.search.autotau import auto_tau, gcv_lambda
 from service.core.search.budget import free_weight, rms_to_tau
 from service.core.search.roots import (
     LambdaSearch,
@@ -39,7 +39,6 @@ __all__ = [
     "check_range",
     "find_lambda",
     "gcv_search",
-    "knee",
     "phi_at_zero_of",
     "resolve_tau",
 ]
@@ -47,7 +46,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Target:
-    """The target of a run (input frame), resolved once; the knee and GCV return new ones.
+    """The target of a run (input frame), resolved once; the automatic rule and GCV return
+    new ones.
 
     Attributes
     ----------
@@ -57,15 +57,17 @@ class Target:
     how : str or None
         How the automatic tau (or GCV) chose it, in words (the report's ``tau_how``).
     sigma : float or None
-        The automatic tau's noise estimate (0 when no noise was found).
-    knee : float or None
-        The factor the knee of ``phi(lambda)`` moved the discrepancy estimate by.
+        The automatic rule's noise level (0 when no noise was found): the local fits'
+        estimate, then the larger of it and Wahba's once the rule decided lambda.
+    evidence : dict or None
+        The automatic rule's evidence (:meth:`~service.core.search.risk_rule.RiskChoice.evidence`,
+        input frame).
     """
 
     tau: float | None
     how: str | None = None
     sigma: float | None = None
-    knee: float | None = None
+    evidence: dict[str, Any] | None = None
 
     def noted(self, text: str) -> Target:
         """This target with ``text`` appended to :attr:`how`."""
@@ -79,7 +81,7 @@ class Solution:
     Attributes
     ----------
     target : Target
-        The target the run met (moved by the knee, or set by GCV).
+        The target the run met (set by the automatic rule or GCV: phi at their lambda).
     search : LambdaSearch
         lambda, phi (internal frame), convergence and every ``(lambda, phi)`` tried.
     U : ndarray or None
@@ -256,20 +258,6 @@ def gcv_search(
     phi = dev(lam)
     how = f"generalized cross-validation (trace of I - H by probes, order {dev.order})"
     return LambdaSearch(lam, phi, True, list(dev.history)), Target(frame.phi_out(phi), how)
-
-
-def knee(dev: Deviation, target: Target, frame: Frame) -> Target:
-    """Automatic tau: the target moved from the discrepancy estimate to the knee of
-    ``phi(lambda)`` near it (:func:`~service.core.search.autotau.knee_tau`)."""
-    assert target.tau is not None
-    tau = knee_tau(dev, frame.tau_in(target.tau))
-    if tau is None:
-        return target.noted("; no knee of phi(lambda) near it: used as is")
-    moved = frame.phi_out(tau) / target.tau
-    noted = target.noted(
-        f"; moved to the knee of phi(lambda) at tau = {frame.phi_out(tau):.6g} ({moved:.3g} x)"
-    )
-    return replace(noted, tau=frame.phi_out(tau), knee=moved)
 
 
 def _fro(M: sp.spmatrix) -> float:
