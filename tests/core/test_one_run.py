@@ -12,11 +12,12 @@ import math
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy.optimize import minimize_scalar
 
 from service.core.linalg.lanczos_run import LanczosRun, true_residual_bound
-from service.core.search.autotau import KNEE_WINDOW, _flattest
-from service.core.search.knee_run import knee_target
 from service.core.search.one_run import one_run
+from service.core.search.risk import invariant_radius, probe_block
+from service.core.search.risk_rule import RiskRule
 
 
 def _grid_laplacian(nu: int, nv: int) -> sp.csr_matrix:
@@ -178,30 +179,58 @@ def test_polished_when_the_bound_is_not_met() -> None:
     s = _free()
     tau = 0.3 * s.phi(s.floor, 1)
     got = one_run(s.apply, s.c, s.d, tau, s.floor, order=1, rtol=1e-12, max_steps=8)
-    assert got.notes and "polished" in got.notes[0]
+    assert got.polished > 0
     assert got.bound <= 1e-12 * 1.01
     E = s.exact_e(got.lam, 1)
     assert np.linalg.norm(s.d * (got.E - E)) <= 1e-9 * np.linalg.norm(s.d * E)
 
 
+def _dense_upre_min(s: System, W: np.ndarray, sigma2: float, k: int) -> tuple[float, float]:
+    """The exact minimisers of GCV and of U with the same probes ``W`` (dense spectrum): a
+    fine log grid, then bisection on the derivative's sign (the reference)."""
+    cw = (s.Q.T @ s.c) ** 2  # data weights per eigenvalue
+    pw = np.sum((s.Q.T @ W) ** 2, axis=1) / W.shape[1]
+    cols = s.c.shape[1]
+
+    def parts(lam: float) -> tuple[float, float]:
+        g = (s.mu / (s.mu + lam)) ** k
+        f = s.mu ** (2 * k - 2) / (s.mu + lam) ** (2 * k)
+        return float(np.sum(f[:, None] * cw)), float(np.sum(g * pw))
+
+    def best(score: object) -> float:
+        grid = np.geomspace(s.floor * 10, 1e3, 2000)
+        vals = [score(x) for x in grid]  # type: ignore[operator]
+        i = int(np.argmin(vals))
+        if i in (0, grid.size - 1):
+            return float(grid[i])
+        res = minimize_scalar(lambda x: score(math.exp(x)), method="bounded",  # type: ignore[operator]
+                              bounds=(math.log(grid[i - 1]), math.log(grid[i + 1])),
+                              options={"xatol": 1e-10})  # fmt: skip
+        return float(math.exp(res.x))
+
+    lam_g = best(lambda x: parts(x)[0] / parts(x)[1] ** 2)
+    phi, t = parts(lam_g)
+    s2 = max(sigma2, phi / (cols * t))
+    return lam_g, best(lambda x: parts(x)[0] - 2 * cols * s2 * parts(x)[1])
+
+
 @pytest.mark.parametrize("k", [1, 2])
-def test_knee_matches_the_dense_rule(k: int) -> None:
+def test_risk_rule_matches_the_dense_minimiser(k: int) -> None:
+    """The rule's lambda* on converged curves is the exact minimiser of the unbiased risk
+    with the same probes (to the reference grid's resolution, 0.5 %), and the solution there
+    is the exact one (``rtol``)."""
     s = _free(nu=16, nv=12)
-    tau0 = 0.02 * s.phi(s.floor, k)
-    got = one_run(s.apply, s.c, s.d, tau0, s.floor, order=k, knee=True)
-    hi = np.linalg.norm(s.c) / math.sqrt(KNEE_WINDOW[0] * tau0)
-    lam_hi = min(s.root(KNEE_WINDOW[0] * tau0, k), hi)
-    lam_lo = s.root(KNEE_WINDOW[1] * tau0, k)
-    grid = np.geomspace(lam_lo, lam_hi, 240)
-    phis = np.array([s.phi(x, k) for x in grid])
-    i = _flattest(grid, phis)
-    if i is None:
-        assert got.knee is None and got.tau == tau0
-    else:
-        assert got.knee == pytest.approx(phis[i], rel=1e-2)
-        assert got.tau == pytest.approx(knee_target(got.knee), rel=1e-12)
-        assert got.tau < got.knee
-    assert abs(got.phi - got.tau) <= 1e-3 * got.tau
+    rho = invariant_radius(_torus_points(16, 12, 0.0)[: s.c.shape[0]])
+    S = np.ravel(s.d)
+    sigma2 = 0.3 * float(np.sum(s.c**2)) / s.c.size
+    rule = RiskRule(s.apply, S, rho, s.c.shape[1], sigma2, s.floor * 10, 1e3, 5000)
+    got = one_run(s.apply, s.c, s.d, 0.0, s.floor, order=k, rule=rule, basis_dtype=np.float64)
+    assert rule.choice is not None and rule.choice.converged
+    lam_g, lam = _dense_upre_min(s, probe_block(rho, rule.count) * S[:, None], sigma2, k)
+    assert rule.choice.lam_gcv == pytest.approx(lam_g, rel=2e-3)
+    assert got.lam == rule.choice.lam == pytest.approx(lam, rel=2e-3)
+    E = s.exact_e(got.lam, k)
+    assert np.linalg.norm(s.d * (got.E - E)) <= 1e-3 * np.linalg.norm(s.d * E)
 
 
 def test_second_pass_resumes_after_the_kept_vectors() -> None:
@@ -219,29 +248,30 @@ def test_second_pass_resumes_after_the_kept_vectors() -> None:
 
 
 @pytest.mark.parametrize("k", [1, 2])
-def test_knee_on_a_plateau_matches_the_closed_form(k: int) -> None:
-    """A designed spectrum (diagonal ``M_t``, ``d = 1``): noise in ``mu in [1e-2, 4]``, a
-    signal 100 times stronger in ``[1e-8, 1e-6]``, nothing between: ``phi`` has a plateau at
-    the noise energy. The knee and the solution against ``phi`` and ``y`` in closed form."""
+def test_risk_on_a_designed_spectrum_matches_the_closed_form(k: int) -> None:
+    """A designed spectrum (diagonal ``M_t``, ``d = 1``): noise of variance sigma^2 = 1 in
+    every mode, a signal 100 times stronger in ``mu in [1e-8, 1e-6]``. The rule's lambda*
+    and the solution against U and ``y`` in closed form (the probes' projections on the
+    eigenvectors are their entries)."""
     mu = np.concatenate([np.geomspace(1e-8, 1e-6, 100), np.geomspace(1e-2, 4.0, 900)])
-    p = np.concatenate([np.full(100, 10.0), np.random.default_rng(4).normal(0, 1, 900)])
+    rng = np.random.default_rng(4)
+    p = np.concatenate([np.full(100, 10.0), np.zeros(900)]) + rng.normal(0, 1, 1000)
     c = (mu * p)[:, None]
     d = np.ones((mu.size, 1))
-
-    def phi(lam: float) -> float:
-        return float(np.sum(c[:, 0] ** 2 * mu ** (2 * k - 2) / (mu + lam) ** (2 * k)))
-
-    tau0 = float(np.sum(p[100:] ** 2))
+    rho = np.linspace(0.0, 2.0, mu.size) + 1e-3 * rng.random(mu.size)
     floor = 1e-13 * mu.max()
-    got = one_run(lambda V: mu[:, None] * V, c, d, tau0, floor, order=k, knee=True,
+    rule = RiskRule(lambda V: mu[:, None] * V, np.ones(mu.size), rho, 1, 1.0, 1e-9, 1e3, 5000)
+    got = one_run(lambda V: mu[:, None] * V, c, d, 0.0, floor, order=k, rule=rule,
                   basis_dtype=np.float64)  # fmt: skip
-    lams = np.geomspace(1e-9, 10.0, 4000)
-    phis = np.array([phi(x) for x in lams])
-    inside = (phis >= KNEE_WINDOW[0] * tau0) & (phis <= KNEE_WINDOW[1] * tau0)
-    i = _flattest(lams[inside], phis[inside])
-    assert i is not None and got.knee is not None
-    assert got.knee == pytest.approx(phis[inside][i], rel=1e-2)
-    assert got.tau == pytest.approx(knee_target(got.knee), rel=1e-12)
-    assert abs(phi(got.lam) - got.tau) <= 1e-3 * got.tau
+    W = probe_block(rho, rule.count)
+    pw = np.mean(W**2, axis=1)
+    lams = np.geomspace(1e-9, 1e3, 20000)
+    phi = np.array([np.sum(c[:, 0] ** 2 * mu ** (2 * k - 2) / (mu + x) ** (2 * k)) for x in lams])
+    t = np.array([np.sum(pw * (mu / (mu + x)) ** k) for x in lams])
+    gcv = lams[int(np.argmin(phi / t**2))]
+    s2 = max(1.0, float(np.interp(np.log(gcv), np.log(lams), phi / t)))
+    best = lams[int(np.argmin(phi - 2 * s2 * t))]
+    assert rule.choice is not None
+    assert rule.choice.lam == pytest.approx(best, rel=1e-2)
     y = c[:, 0] * mu ** (k - 1) / (mu + got.lam) ** k  # the exact minimiser at lambda
     assert np.linalg.norm(got.E[:, 0] - y) <= 1e-3 * np.linalg.norm(y)

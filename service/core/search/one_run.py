@@ -186,7 +186,7 @@ def one_run(
     top = lambda t: max(ceiling(t), lo)  # noqa: E731
     fixed: float | None = None
     decided_at = 0
-    lam_g = lam_r = top(tau)
+    lam_g = lam_r = top(tau) if tau > 0 else lo
     trail: list[tuple[int, float]] = []
     stop = ""
     check = _checkpoint(0, [], rtol)
@@ -223,7 +223,8 @@ def one_run(
         fixed, decided_at = rule.choice.lam, run.steps
         lam_g = lam_r = fixed
     target = float(model.phi(lam_g)) if fixed is not None else tau
-    products = run.products + (rule.probes.products if rule is not None else 0)
+    probes = rule.probes.products if rule is not None else 0
+    products = run.products + probes
     if stop == "budget":
         return OneRun(lam_g, target, None, {}, math.nan, math.inf, (lam_g, lam_r), run.steps,
                       products, False, decided_at)  # fmt: skip
@@ -233,7 +234,7 @@ def one_run(
         model = _shortest(run, order, lam_g, rtol, above[-1] + 1 if above else 1)
     res = _solution(run, model, c, d, lam_g, lam_r, target, decided_at, rtol,
                     stop == "converged")  # fmt: skip
-    return replace(res, products=res.products + products - run.products)
+    return replace(res, products=res.products + probes)
 
 
 def _rules(model: TikhonovModel) -> Callable[[bool], tuple[Array, Array]]:
