@@ -174,6 +174,8 @@ def main(argv: list[str] | None = None) -> int:
         print(_line(r), flush=True)
     path = Path(a.out) if a.out else RESULTS / f"lambda-rules-{a.half}-{dt.date.today()}.json"
     path.write_text(json.dumps(rows, indent=1, default=float))
+    path.with_suffix(".md").write_text(f"# lambda rules, {a.half}\n\n" + table(rows))
+    print(table(rows))
     return 0
 
 
@@ -190,3 +192,24 @@ def _line(r: dict[str, Any]) -> str:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    """Markdown: per candidate, the error over the oracle lambda's (vertex / surface), median
+    and worst over the cases, and the count within 5 % of the oracle."""
+    done = [r for r in rows if "scores" in r]
+    names = list(done[0]["scores"]) if done else []
+    out = ["| candidate | vertex median | vertex worst | surface median | surface worst | "
+           "within 5 % (v) |", "|---|---|---|---|---|---|"]
+    for name in names:
+        v = np.array([r["scores"][name][0] / r["oracle_vertex"][1] for r in done
+                      if name in r["scores"]])
+        s = np.array([r["scores"][name][1] / r["oracle_surface"][2] for r in done
+                      if name in r["scores"]])
+        out.append(f"| {name} | {np.median(v):.3f} | {v.max():.3f} | {np.median(s):.3f} | "
+                   f"{s.max():.3f} | {int(np.sum(v <= 1.05))}/{v.size} |")
+    skipped = [r["key"] for r in rows if "scores" not in r]
+    if skipped:
+        out.append(f"\nNot smoothed by the default (no noise found, or an error): "
+                   f"{', '.join(skipped)}.")
+    return "\n".join(out) + "\n"

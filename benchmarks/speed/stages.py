@@ -23,7 +23,7 @@ STAGES = {
     "mesh_neighborhoods": "1-ring build",
     "build_operator": "operator (all)",
     "normal_mode": "normal-displacement system",
-    "knee_tau": "automatic tau knee",
+    "choose_and_solve": "automatic lambda and solution",
     "find_lambda": "lambda search + solves",
     "diagnostics": "diagnostics + shape checks",
     "factor": "CHOLMOD factorizations",

@@ -71,7 +71,7 @@ def valid_range(geometry: Geometry, params: SmoothingParams) -> tuple[float, flo
     return phi0, weight_sum
 
 
-def _automatic(problem: Problem, tau0: float, sigma: float) -> tuple[float, str]:
+def _automatic(problem: Problem, tau0: float, sigma: float) -> tuple[float, float, str]:
     """The tau the automatic rule would meet (:mod:`~service.core.search.risk_rule`: phi at
     lambda*, by the rule's recurrence with no solve) and its words."""
     from service.core.pipeline import noise_model
@@ -85,8 +85,9 @@ def _automatic(problem: Problem, tau0: float, sigma: float) -> tuple[float, str]
     choice = choose(dev, noise_model(problem, Target(tau0, sigma=sigma)), refine=small)
     tau = frame.phi_out(choice.phi)
     used = math.sqrt(choice.sigma2) * frame.scale
-    return tau, (f"; the automatic rule: lambda = {frame.lam_out(choice.lam):.6g} minimises "
-                 f"the unbiased predictive risk with sigma = {used:.6g}, tau = {tau:.6g}")
+    return tau, used, (f"; the automatic rule: lambda = {frame.lam_out(choice.lam):.6g} "
+                       f"minimises the unbiased predictive risk with sigma = {used:.6g}, the "
+                       f"larger of the local fits' and Wahba's: tau = {tau:.6g}")
 
 
 def _risk(problem: Problem) -> bool:
@@ -142,7 +143,7 @@ def describe(geometry: Geometry, params: SmoothingParams | None = None) -> dict[
             sigma, noise = auto.sigma, auto.rule.removeprefix("automatic: ")
             tau = auto.tau
             if auto.tau > 0 and not problem.system.empty and _risk(problem):
-                tau, words = _automatic(problem, auto.tau, auto.sigma)
+                tau, sigma, words = _automatic(problem, auto.tau, auto.sigma)
                 noise += words
             if 0 < tau < phi0:
                 suggested_tau = tau

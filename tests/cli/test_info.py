@@ -60,8 +60,8 @@ def test_info_errors_are_one_line(cli: Run, tmp_path: Path) -> None:
 
 
 def test_info_prose_quotes_the_suggested_tau(cli: Run) -> None:
-    """The noise sentence names the tau of ``suggested_tau`` (the knee's), not the rule's
-    before it moved (issue 32 item 8); on the sphere sample the knee moves it by 6 %."""
+    """The noise sentence names the tau of ``suggested_tau`` (phi at the automatic rule's
+    lambda, issue 37), not only the discrepancy budget it starts from (issue 32 item 8)."""
     sphere = HELIX.parent / "noisy-sphere.ply"
     for path in (HELIX, sphere):
         res = cli(["info", path, "--compact"])

@@ -84,7 +84,7 @@ def test_a_single_huge_outlier_gets_weight_near_zero_and_leaves_the_budget() -> 
     expected = codimension(g) * est.sigma**2 * w2
     assert res.report()["outlier_count"] == 1 and res.report()["outliers"] == [555]
     assert res.data_weights == "robust (auto)"
-    # the discrepancy tau (before the knee moves it) counts the inliers only
+    # the discrepancy tau (the rule's starting budget) counts the inliers only
     assert f"{expected:.6g}" in (res.tau_how or "")
     # the outlier is pulled in: it ends within a few sigma of the smooth sheet
     x, y = res.points[555, :2]
