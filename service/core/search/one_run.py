@@ -50,6 +50,7 @@ from service.core.linalg.lanczos_run import (
     TikhonovModel,
     true_residual_bound,
 )
+from service.core.search.risk import run_rules
 from service.core.search.risk_rule import RiskRule
 
 __all__ = ["LAMBDA_RTOL", "SOLUTION_RTOL", "OneRun", "direct_cost", "one_run"]
@@ -196,13 +197,13 @@ def one_run(
             rule.step()
         if run.steps < check and not run.done:
             continue
-        model = run.model(order)
-        if rule is not None and fixed is None:
+        if rule is not None and fixed is None:  # the rules only: no eigenvectors until decided
             check = _checkpoint(run.steps, [], rtol)
-            if not rule.update(_rules(model), order, run.steps, run.done):
+            if not rule.update(_rules(run), order, run.steps, run.done):
                 continue
             assert rule.choice is not None
             fixed, decided_at = rule.choice.lam, run.steps
+        model = run.model(order)
         lam_g = fixed if fixed is not None else model.root(tau, lo, top(tau))
         size = math.sqrt(max(float(model.phi(lam_g)), 1e-300))
         err = model.error_bound(lam_g) / size
@@ -216,12 +217,12 @@ def one_run(
                 stop = "converged"
         elif budget is not None and _over_budget(trail, rtol, run, decided_at, budget):
             stop = "budget"
-    model = run.model(order)
     if rule is not None and fixed is None:  # max_steps before the rule decided: the last curves
-        rule.update(_rules(model), order, run.steps, True)
+        rule.update(_rules(run), order, run.steps, True)
         assert rule.choice is not None
         fixed, decided_at = rule.choice.lam, run.steps
         lam_g = lam_r = fixed
+    model = run.model(order)
     target = float(model.phi(lam_g)) if fixed is not None else tau
     probes = rule.probes.products if rule is not None else 0
     products = run.products + probes
@@ -237,9 +238,10 @@ def one_run(
     return replace(res, products=res.products + probes)
 
 
-def _rules(model: TikhonovModel) -> Callable[[bool], tuple[Array, Array]]:
-    """The data columns' Gauss (``radau=False``) or Gauss-Radau rule of ``model``."""
-    return lambda radau: model._rule(radau)
+def _rules(run: LanczosRun) -> Callable[[bool], tuple[Array, Array]]:
+    """The data columns' Gauss (``radau=False``) or Gauss-Radau rule after the steps done
+    (nodes and weights only: :func:`~service.core.search.risk.run_rules`)."""
+    return lambda radau: run_rules(run.alphas, run.betas, run.beta0, run.length, radau)
 
 
 def _shortest(run: LanczosRun, order: int, lam: float, rtol: float, lo: int = 1) -> TikhonovModel:

@@ -29,8 +29,8 @@ from numpy.typing import NDArray
 from service.core.linalg.lanczos_run import LanczosRun
 from service.core.linalg.solver import Direct
 from service.core.params import SmoothingParams
-from service.core.search.one_run import direct_cost, one_run
-from service.core.search.risk import RiskCurves, Rule, run_rules
+from service.core.search.one_run import _rules, direct_cost, one_run
+from service.core.search.risk import RiskCurves
 from service.core.search.risk_rule import STABLE, RiskChoice, RiskRule, polish
 from service.core.search.roots import LambdaSearch
 from service.core.system.deviation import Deviation
@@ -88,9 +88,15 @@ class NoiseModel:
 
 
 def _mt(dev: Deviation) -> tuple[Callable[[Array], Array], Array, Array]:
+    """``V -> M_t V``, ``c = D^-1 r`` and ``D`` (one scaling of the product when the weights
+    are uniform)."""
     d = np.sqrt(dev.system.d2)[:, None]
     inv_d = 1.0 / d
-    return (lambda V: inv_d * dev.solver.matvec(inv_d * V)), inv_d * dev.system.r, d
+    c = inv_d * dev.system.r
+    if d.size and np.all(d == d[0, 0]):
+        w = float(inv_d[0, 0]) ** 2
+        return (lambda V: dev.solver.matvec(V) * w), c, d
+    return (lambda V: inv_d * dev.solver.matvec(inv_d * V)), c, d
 
 
 def _rule(dev: Deviation, noise: NoiseModel, cap: int) -> RiskRule:
@@ -145,17 +151,12 @@ def choose(dev: Deviation, noise: NoiseModel, refine: bool = True) -> RiskChoice
         if run.steps >= check or run.done:
             check = run.steps + (40 if direct else max(10, run.steps // 10))
             tol = SMALL_STABLE if direct else STABLE
-            rule.update(_run_rules(run), dev.order, run.steps, run.done, tol, not direct)
+            rule.update(_rules(run), dev.order, run.steps, run.done, tol, not direct)
     assert rule.choice is not None
     if not direct or not refine:
         return rule.choice
     return polish(_solver_y(dev, d), c, rule.Z, dev.order, rule.choice, c.shape[1], rule.lo,
                   rule.hi)  # fmt: skip
-
-
-def _run_rules(run: LanczosRun) -> Callable[[bool], Rule]:
-    """The Gauss (``radau=False``) or Gauss-Radau rule of ``run``'s columns."""
-    return lambda radau: run_rules(run.alphas, run.betas, run.beta0, run.length, radau)
 
 
 def _solver_y(dev: Deviation, d: Array) -> Callable[[float, Array], Array]:
