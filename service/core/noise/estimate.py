@@ -57,6 +57,9 @@ __all__ = [
 ]
 
 SAMPLE = 20000
+#: The sample key's frequency (in RMS radii): neighbours differ by thousands of radians, so
+#: the sample is spread over the shape like a random one.
+SAMPLE_FREQUENCY = 7919.0 * 13.0
 #: Largest median ratio ``v_i(2k) / v_i(k)`` still read as noise (calibration half: noisy
 #: inputs <= 1.55, noise-free >= 2.21; see ``service/core/README.md``).
 NOISE_RATIO = 1.85
@@ -159,12 +162,21 @@ def log_mode(values: NDArray[np.float64], bins: int = 512) -> float:
     return float(np.exp(centres[int(np.argmax(dens))]))
 
 
-def _sample(n: int) -> NDArray[np.int64]:
-    """The points whose neighbourhoods are fitted: all, or :data:`SAMPLE` of them (fixed
-    seed) on large inputs (the mode of 20000 variances is as sharp as that of more)."""
+def _sample(P: Array) -> NDArray[np.int64]:
+    """The points whose neighbourhoods are fitted: all, or :data:`SAMPLE` of them on large
+    inputs (the mode of 20000 variances is as sharp as that of more), chosen by a key that is
+    a function of the geometry, not of the index order (issue 38: a renumbered mesh sampled
+    by index got another sigma^): the fractional part of ``K rho_i`` with ``rho_i`` the
+    distance to the centroid over the RMS radius (invariant under rigid motions, scaling and
+    renumbering; :func:`~service.core.search.risk.invariant_radius` computes the same)."""
+    n = P.shape[0]
     if n <= SAMPLE:
         return np.arange(n)
-    return np.sort(np.random.default_rng(0).choice(n, SAMPLE, replace=False))
+    centred = P - P.mean(axis=0)
+    rho = np.sqrt(np.einsum("ij,ij->i", centred, centred))
+    rho /= max(float(np.sqrt(np.mean(rho**2))), 1e-300)
+    key = np.modf(rho * SAMPLE_FREQUENCY)[0]
+    return np.sort(np.argsort(key, kind="stable")[:SAMPLE])
 
 
 def manifold_dim(geometry: Geometry) -> int:
@@ -220,20 +232,20 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
         return None
     P = geometry.points
     if geometry.faces is None and geometry.edges is not None:
-        rows, along = curve_neighbours(geometry, 2 * k, _sample(geometry.n))
+        rows, along = curve_neighbours(geometry, 2 * k, _sample(geometry.points))
         if along.shape[0] >= max(10, min(P.shape[0], SAMPLE) // 10):
             full = rows.size == n  # every point, in order: kept for the data weights
             return _tracked(geometry, _kept(_estimate(P, along, k, d), along if full else None))
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
     from service.core.operator.knn import nearest
 
-    at = _sample(P.shape[0])
+    at = _sample(P)
     dist, _ = nearest(P, at, 2, k + 1)  # k-d tree, or the data weights' grid (issue 30)
     if np.any(dist[:, 1] == 0):  # coincident points (split normals, STL): one sample each
         P = np.unique(P, axis=0)
         if P.shape[0] < k:
             return None
-        at = _sample(P.shape[0])
+        at = _sample(P)
     k2 = min(2 * k, P.shape[0])
     _, nbr = nearest(P, at, k2, k + 1)
     full = P is geometry.points and at.size == n

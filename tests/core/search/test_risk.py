@@ -221,3 +221,20 @@ def test_rule_alone_runs_on_a_recurrence() -> None:
                                         np.array([1]), radau), 1, 400, True)  # fmt: skip
     assert rule.choice is not None and rule.choice.products == 400
     del c
+
+
+def test_the_noise_estimate_does_not_depend_on_the_numbering() -> None:
+    """Above the sample size the fitted points are chosen by a key of the geometry: a
+    renumbered, rotated copy of a 41K-vertex mesh gets the same sigma^ (to rounding)."""
+    from service.core.noise.estimate import SAMPLE, noise_of
+
+    g = _noisy_sphere(6, 0.2, seed=3)
+    assert g.n > SAMPLE
+    perm = np.random.default_rng(5).permutation(g.n)
+    inv = np.argsort(perm)
+    Q, _ = np.linalg.qr(np.random.default_rng(6).normal(size=(3, 3)))
+    assert g.faces is not None
+    moved = Geometry(g.points[perm] @ Q.T, faces=inv[g.faces])
+    a, b = noise_of(g), noise_of(moved)
+    assert a is not None and b is not None
+    assert b.sigma == pytest.approx(a.sigma, rel=1e-9)
