@@ -39,7 +39,7 @@ from service.io._shared.assemble import assemble
 from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
-from service.io.errors import FormatError
+from service.io.errors import FormatError, MissingDependency
 from service.io.limits import check_points
 from service.io.source import Source
 
@@ -73,6 +73,8 @@ def _laspy_errors(fmt: str) -> Any:
         raise
     except MemoryError:
         raise
+    except ImportError as exc:  # the server's installation, not the file (issue 41)
+        raise MissingDependency.of(exc, fmt) from exc
     except Exception as exc:  # laspy and lazrs raise many kinds on bad files; report one line
         text = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise FormatError(f"{fmt.upper()}: {text}", fmt=fmt) from None
