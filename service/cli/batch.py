@@ -146,7 +146,12 @@ def _extension(source: str, out_fmt: str | None, in_fmt: str | None) -> str | No
 
 
 def output_names(
-    inputs: Sequence[str], directory: str, template: str, out_fmt: str | None, in_fmt: str | None
+    inputs: Sequence[str],
+    directory: str,
+    template: str,
+    out_fmt: str | None,
+    in_fmt: str | None,
+    overwrite: bool = False,
 ) -> list[str]:
     """The output path of each input (``template`` rendered in ``directory``).
 
@@ -154,8 +159,10 @@ def output_names(
     ------
     CliError
         Exit status 2: a bad template, two inputs with the same output, an output that is
-        its own input.
+        its own input (a link to it too) without ``overwrite``.
     """
+    from service.cli.output import refuse_own_input
+
     names: list[str] = []
     for source in inputs:
         path = Path(source)
@@ -177,9 +184,7 @@ def output_names(
     seen: dict[str, str] = {}
     for source, target in zip(inputs, names, strict=True):
         real = os.path.realpath(target)
-        if real == os.path.realpath(source):
-            raise CliError(f"{source} would be overwritten by its own output {target}; give "
-                           "another -o DIR/ or --name", EXIT_USAGE)  # fmt: skip
+        refuse_own_input(source, target, overwrite)
         if real in seen:
             raise CliError(f"{seen[real]} and {source} would both be written to {target}; "
                            "give --name with {parent}", EXIT_USAGE)  # fmt: skip
@@ -301,7 +306,8 @@ def _prepare(ns: argparse.Namespace, inputs: Sequence[str]) -> list[argparse.Nam
     check_crs(ns.crs)
     if ns.report:
         check_writable(ns.report, "report")
-    names = output_names(inputs, ns.output, ns.name or DEFAULT_NAME, out_fmt, ns.input_format)
+    names = output_names(inputs, ns.output, ns.name or DEFAULT_NAME, out_fmt, ns.input_format,
+                         getattr(ns, "overwrite", False))  # fmt: skip
     try:
         os.makedirs(ns.output, exist_ok=True)
     except OSError as exc:

@@ -115,6 +115,12 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
         "[default: 3600, the server's job time limit; 'none': no bound]",
     )  # fmt: skip
     more.add_argument(
+        "--overwrite", action="store_true",
+        help="allow an output that is the input itself (the same path, a symbolic or hard "
+        "link): without it such an output is refused with exit status 2 (single files and "
+        "batches alike), so a raw scan is never replaced by mistake",
+    )  # fmt: skip
+    more.add_argument(
         "--exit-unchanged", type=_exit_status, default=0, metavar="N",
         help="exit status when nothing was smoothed (the output is the input: copied, or "
         "converted to another format), so a batch can branch on it [default: 0]",

@@ -27,6 +27,7 @@ from service.cli.output import (
     check_writable,
     given_writer_options,
     output_format,
+    refuse_own_input,
     write_json_report,
     write_output,
 )
@@ -166,6 +167,7 @@ def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]
     if ns.xyz_dims is not None and ns.xyz_dims < 1:
         raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
     out_fmt = output_format(ns.output, ns.format)
+    refuse_own_input(ns.input, ns.output, getattr(ns, "overwrite", False))
     check_writable(ns.output, "output")
     if ns.report:
         check_writable(ns.report, "report")
