@@ -231,8 +231,8 @@ def _scaled(values: NDArray[np.float64], scale: float, offset: float, axis: str)
 def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: bool) -> None:
     import laspy
 
-    header = layout.header
     pts = plain.points
+    header = layout.header if plain.georef is None else _reprojected(layout.header, plain)
     with (
         _laspy_errors("las"),
         layout.source.open() as fh,
@@ -242,6 +242,10 @@ def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: 
         at = 0
         for chunk in reader.chunk_iterator(CHUNK):
             k = len(chunk)
+            if header is not layout.header:  # new offsets: the record scaled by the new header
+                chunk = laspy.ScaleAwarePointRecord(
+                    chunk.array, header.point_format, header.scales, header.offsets
+                )
             if "classification" in plain.attributes:  # outliers flagged as class 7 (issue 31)
                 chunk["classification"] = plain.attributes["classification"][at : at + k]
             if plain.moved:
@@ -252,6 +256,16 @@ def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: 
             at += k
         if header.evlrs:
             writer.write_evlrs(header.evlrs)
+
+
+def _reprojected(header: Any, plain: PlainDocument) -> Any:
+    """The input's header for the reprojected points of ``plain`` (:mod:`.las_meta`)."""
+    import pyproj
+
+    from service.io.formats.las_meta import reprojected_header
+
+    crs = pyproj.CRS.from_user_input(plain.georef.crs)
+    return reprojected_header(header, crs, as_xyz(plain.points, "las"))
 
 
 def _new_header(plain: PlainDocument) -> Any:
