@@ -95,6 +95,16 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
         "whitespace, commas or newlines; '#' starts a comment",
     )  # fmt: skip
     more.add_argument(
+        "--where", metavar="EXPR",
+        help="smooth only the points EXPR selects, PDAL's 'where' grammar: 'Classification == "
+        "2', 'Intensity > 100 and ReturnNumber == 1', and/or/not, parentheses; the others are "
+        "held fixed (bit-identical) and anchor the smoothing",
+    )  # fmt: skip
+    more.add_argument(
+        "--fix-classes", metavar="LIST",
+        help="hold the points of these classes fixed, e.g. 6,9 (buildings, water)",
+    )  # fmt: skip
+    more.add_argument(
         "--input-format", metavar=formats(),
         help="input format when the INPUT extension does not say",
     )  # fmt: skip

@@ -160,12 +160,39 @@ def _details(doc: GeometryDocument) -> list[str]:
     return out
 
 
+def _selects(ns: argparse.Namespace) -> bool:
+    return bool(getattr(ns, "where", None) or getattr(ns, "fix_classes", None))
+
+
+def _selection(ns: argparse.Namespace, doc: GeometryDocument | None) -> list[int] | None:
+    """The file indices ``--where`` / ``--fix-classes`` hold fixed (``None``: no selection);
+    with ``doc`` ``None`` only the expressions are checked. Exit status 2 for a bad one."""
+    if not _selects(ns):
+        return None
+    from service.workflows.selection import SelectionError, class_list, fixed_outside, parse_where
+
+    try:
+        classes = class_list(ns.fix_classes) if getattr(ns, "fix_classes", None) else None
+        if doc is None:
+            if ns.where:
+                parse_where(ns.where)
+            return None
+        g = doc.geometry
+        pts = g.points if doc.weld is None else g.points[doc.weld.index]  # the file's numbering
+        out = fixed_outside(pts, doc.attributes, ns.where, classes)
+    except SelectionError as exc:
+        raise CliError(exc.message, EXIT_USAGE) from exc
+    ns.selection_counts = (len(pts) - len(out), len(pts))
+    return [int(i) for i in out]
+
+
 def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]:
     """Everything that needs no input file: parameters, formats, outputs."""
     params = params_from_args(ns)
     check_format(ns.input_format, "--input-format")
     if ns.xyz_dims is not None and ns.xyz_dims < 1:
         raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
+    _selection(ns, None)  # a bad expression before anything is read
     out_fmt = output_format(ns.output, ns.format)
     refuse_own_input(ns.input, ns.output, getattr(ns, "overwrite", False))
     check_writable(ns.output, "output")
@@ -180,7 +207,7 @@ def _streamed(
     """The format of a tiled run read and written in chunks (issue 23), else ``None``: a file
     to a file, no ``--fixed``, no writer option
     (:func:`service.workflows.smooth_file.streamed_format_of`)."""
-    if ns.fixed or "-" in (ns.input, ns.output):
+    if ns.fixed or _selects(ns) or "-" in (ns.input, ns.output):
         return None
     from service.workflows.smooth_file import streamed_format_of
 
@@ -299,6 +326,9 @@ def _smooth_one(
         fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
         progress.stage("reading")
         source = doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+        outside = _selection(ns, doc)
+        if outside is not None:
+            fixed = (fixed or []) + outside
         geometry = _with_fixed(doc, fixed)
         progress.expect(_model_seconds(geometry, params))
         target = lambda _result, data: write_output(ns.output, data, "output")  # noqa: E731
@@ -347,5 +377,8 @@ def _report(
         write_json_report(ns.report, report)
     doc = done.document
     details = ["streamed"] if doc is None else _details(doc)
+    if getattr(ns, "selection_counts", None):
+        chosen, total = ns.selection_counts
+        details.append(f"{chosen} of {total} points selected, {total - chosen} held fixed")
     notes = [] if doc is None else output_notes(doc, done.output_format, ns.crs)
     show_summary(progress, report, ns, params, started, details=details, notes=notes)
