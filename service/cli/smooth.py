@@ -31,7 +31,7 @@ from service.cli.output import (
     write_json_report,
     write_output,
 )
-from service.cli.params import params_from_args
+from service.cli.params import PIPELINE_OPTIONS, params_from_args
 from service.cli.parser_base import version
 from service.cli.progress import ProgressDisplay, show_summary
 from service.core.params import SmoothingParams
@@ -369,6 +369,7 @@ def _report(
             output=ns.output,
             output_format=done.output_format,
             params=params.model_dump(mode="json"),
+            **{k: getattr(ns, k) for k in PIPELINE_OPTIONS if getattr(ns, k, None) is not None},
             geosmooth_version=version(),
             wall_seconds=time.perf_counter() - started,
         )

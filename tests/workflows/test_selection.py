@@ -25,7 +25,7 @@ ATTRS = {
     "intensity": RNG.integers(0, 400, N).astype(np.uint16),
     "return_number": RNG.integers(1, 4, N).astype(np.uint8),
 }
-C, I, R = ATTRS["classification"], ATTRS["intensity"], ATTRS["return_number"]
+C, INT, R = ATTRS["classification"], ATTRS["intensity"], ATTRS["return_number"]
 
 
 @pytest.mark.parametrize(
@@ -33,11 +33,14 @@ C, I, R = ATTRS["classification"], ATTRS["intensity"], ATTRS["return_number"]
     [
         ("Classification == 2", C == 2),
         ("classification != 2", C != 2),
-        ("Intensity > 100 and ReturnNumber == 1", (I > 100) & (R == 1)),
-        ("Intensity <= 50 || Classification >= 6", (I <= 50) | (C >= 6)),
+        ("Intensity > 100 and ReturnNumber == 1", (INT > 100) & (R == 1)),
+        ("Intensity <= 50 || Classification >= 6", (INT <= 50) | (C >= 6)),
         ("not (Classification == 7 or Classification == 2)", ~((C == 7) | (C == 2))),
         ("!(Z < 50) && return_number == 2", ~(PTS[:, 2] < 50) & (R == 2)),
-        ("X > 10 and X < 2.5e1 or Y >= 99.5", ((PTS[:, 0] > 10) & (PTS[:, 0] < 25)) | (PTS[:, 1] >= 99.5)),
+        (
+            "X > 10 and X < 2.5e1 or Y >= 99.5",
+            ((PTS[:, 0] > 10) & (PTS[:, 0] < 25)) | (PTS[:, 1] >= 99.5),
+        ),
         ("Intensity > -1", np.ones(N, dtype=bool)),
     ],
 )
@@ -67,7 +70,7 @@ def test_a_bad_expression_is_one_line_naming_the_problem(text: str, words: str) 
 
 def test_fix_classes_and_where_combine() -> None:
     got = fixed_outside(PTS, ATTRS, "Intensity > 100", class_list("6, 7"))
-    assert np.array_equal(got, np.flatnonzero(~((I > 100) & ~np.isin(C, [6, 7]))))
+    assert np.array_equal(got, np.flatnonzero(~((INT > 100) & ~np.isin(C, [6, 7]))))
     with pytest.raises(SelectionError, match="0-255"):
         class_list("300")
     with pytest.raises(SelectionError, match="no classification"):
