@@ -60,8 +60,8 @@ def add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
     if local:
         files.add_argument(
             "--progress", choices=("auto", "text", "json"), default="auto",
-            help="the stages on stderr (read, neighbourhoods, weights, noise, search, finish, "
-            "write) with progress and an estimate, updated every second on a terminal: text "
+            help="the stages on stderr (reading, neighborhoods, analysis, search, postprocess, "
+            "writing: a job's stage names) with progress and an estimate, updated every second on a terminal: text "
             "lines, or one JSON object per line; auto: text lines for an input of 1 MiB or "
             "more, else only the lambda search [default: auto]",
         )  # fmt: skip

@@ -61,6 +61,18 @@ class ProgressDisplay:
         self.calls = 0
         self.last_iteration = 0
         self._width = 0
+        self._shown: tuple[str, str] | None = None
+
+    def repeats(self, lam: float, phi: float) -> bool:
+        """Whether ``(lam, phi)`` reads as the point shown last, to the digits shown (the
+        engine evaluating the same lambda again to refine a converged search): then no new
+        line, so a converged search prints no further iterations (issue 41); the summary
+        still counts every evaluation."""
+        shown = (fmt_g(lam), fmt_g(phi))
+        if self._shown == shown:
+            return True
+        self._shown = shown
+        return False
 
     def line(self, iteration: int, lam: float, phi: float) -> str:
         """The text shown for one iteration (without line ending).
@@ -96,7 +108,7 @@ class ProgressDisplay:
             self.tau = tau
         self.calls += 1
         self.last_iteration = max(self.last_iteration, iteration)
-        if not self.enabled:
+        if not self.enabled or self.repeats(lam, phi):
             return
         self.put(self.line(iteration, lam, phi))
 

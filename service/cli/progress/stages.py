@@ -39,18 +39,13 @@ if TYPE_CHECKING:
 
 __all__ = ["LOG_TICK", "STAGES", "STAGES_FROM_BYTES", "TICK", "StageDisplay", "display_for"]
 
-#: The stages of ``smooth`` in run order (the names on stderr).
-STAGES = ("read", "neighbourhoods", "weights", "noise", "search", "finish", "write")
-#: Engine / use-case stage -> stage shown (``analysis``: tau is known, the search starts).
-_SHOWN = {
-    "reading": "read",
-    "neighborhoods": "neighbourhoods",
-    "laplacian": "neighbourhoods",
-    "analysis": "search",
-    "search": "search",
-    "postprocess": "finish",
-    "writing": "write",
-}
+#: The stages of ``smooth`` in run order: the names a job's events and ``GET /v1/jobs/{id}``
+#: give (:data:`service.core.progress.STAGES`, issue 41), less ``queued`` and ``done`` and the
+#: ``laplacian`` the engine builds inside ``neighborhoods``. The engine's ``step`` inside
+#: ``neighborhoods`` (``weights``, ``noise``) is shown as ``neighborhoods: weights``.
+STAGES = ("reading", "neighborhoods", "analysis", "search", "postprocess", "writing")
+#: Stages the display folds into the one before (no event of their own in a run).
+_FOLDED = {"laplacian": "neighborhoods"}
 #: Seconds between updates on a terminal and in JSON mode while a stage is silent.
 TICK = 1.0
 #: The same into a file or pipe (plain lines: a log is not flooded).
@@ -123,6 +118,7 @@ class StageDisplay(ProgressDisplay):
         self._t0 = time.perf_counter()
         self._lock = threading.RLock()
         self._stage: str | None = None
+        self._base: str | None = None  # the stage of STAGES (without the step)
         self._stage_t0 = self._t0
         self._last_out = self._t0
         self._data: dict[str, Any] = {}
@@ -137,7 +133,7 @@ class StageDisplay(ProgressDisplay):
 
     def _eta_seconds(self, now: float) -> float | None:
         eta = self._data.get("eta_seconds")
-        before = self._stage in ("read", "neighbourhoods", "weights", "noise")
+        before = self._base in ("reading", "neighborhoods")
         if before and self._expected is not None:
             seconds, start = self._expected
             return max(seconds - (now - start), 0.0)
@@ -160,7 +156,10 @@ class StageDisplay(ProgressDisplay):
             return
         if event.tau is not None:
             self.tau = event.tau
-        shown = event.step or _SHOWN.get(event.stage)
+        base = _FOLDED.get(event.stage, event.stage)
+        shown = f"{base}: {event.step}" if event.step else base
+        if base not in STAGES:
+            shown = None
         with self._lock:
             now = time.perf_counter()
             timed = dataclasses.replace(event, elapsed=now - self._t0)  # reading included
@@ -168,11 +167,13 @@ class StageDisplay(ProgressDisplay):
             if shown is not None and shown != self._stage:
                 self.finish()  # a terminal keeps the stage just ended on its own line
                 self._stage, self._stage_t0 = shown, now
+                self._base = base
                 self._out("stage", now)
             if event.lam is not None and event.phi is not None:
                 self.calls += 1
                 self.last_iteration = max(self.last_iteration, event.iteration)
-                self._out("iteration", now)
+                if self.json_lines or not self.repeats(event.lam, event.phi):  # data: every one
+                    self._out("iteration", now)
         self._start_ticker()
 
     # -- output -----------------------------------------------------------------------------
@@ -180,10 +181,12 @@ class StageDisplay(ProgressDisplay):
         """The JSON object of one line: ``event`` (``stage``, ``iteration``, ``tick``), the
         stage shown and its number, the clocks and the jobs' progress numbers."""
         d = self._data
-        stage = self._stage or ""
+        stage = self._base or ""
+        step = (self._stage or "").partition(": ")[2] or None
         return {
             "event": kind,
             "stage": stage,
+            "step": step,
             "index": STAGES.index(stage) + 1 if stage in STAGES else None,
             "stages": len(STAGES),
             "elapsed_seconds": round(now - self._t0, 3),
@@ -200,7 +203,7 @@ class StageDisplay(ProgressDisplay):
     def text(self, kind: str, now: float) -> str:
         """The text of one line (without line ending)."""
         d = self._data
-        where = f"[{STAGES.index(self._stage) + 1}/{len(STAGES)}] " if self._stage in STAGES else ""
+        where = f"[{STAGES.index(self._base) + 1}/{len(STAGES)}] " if self._base in STAGES else ""
         eta = _eta(self._eta_seconds(now))
         clock = f"{now - self._t0:.1f} s, {d.get('percent', 0.0):.0f} %{eta}"
         if kind == "iteration" and d.get("lambda") is not None and d.get("phi") is not None:
