@@ -61,9 +61,9 @@ def add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
         files.add_argument(
             "--progress", choices=("auto", "text", "json"), default="auto",
             help="the stages on stderr (reading, neighborhoods, analysis, search, postprocess, "
-            "writing: a job's stage names) with progress and an estimate, updated every second on a terminal: text "
-            "lines, or one JSON object per line; auto: text lines for an input of 1 MiB or "
-            "more, else only the lambda search [default: auto]",
+            "writing: a job's stage names) with progress and an estimate, updated every "
+            "second on a terminal: text lines, or one JSON object per line; auto: text lines "
+            "for an input of 1 MiB or more, else only the lambda search [default: auto]",
         )  # fmt: skip
 
 
