@@ -331,6 +331,7 @@ def _smooth_one(
             fixed = (fixed or []) + outside
         geometry = _with_fixed(doc, fixed)
         progress.expect(_model_seconds(geometry, params))
+        progress.sized(geometry.n)
         target = lambda _result, data: write_output(ns.output, data, "output")  # noqa: E731
     with _cli_errors(params, progress), _tile_map(streamed) as run_map:
         if doc is not None:

@@ -96,6 +96,7 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
         return list(doc.notes) + crs_notes(doc, spec, crs)
     lost = [name for name in doc.attributes if not spec.keeps(name)]
     notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
+    notes = [n for n in notes if not n.endswith("waypoints as they are")] + _gpx_notes(doc, spec)
     if lost:
         notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
     from service.io._shared.texture import keeps_uv
@@ -126,6 +127,23 @@ def source_crs(doc: GeometryDocument) -> object | None:
     from service.io.formats.las_meta import file_crs
 
     return file_crs(header)
+
+
+def _gpx_notes(doc: GeometryDocument, spec: Format) -> list[str]:
+    """What a GPX input loses in another format: its waypoints and its points' times (issue
+    41: a LAS's gps_time is 0 for them, so say so)."""
+    gpx = getattr(doc.layout, "gpx", None)
+    if gpx is None or doc.source_format != "gpx":
+        return []
+    out = []
+    if gpx.waypoints:
+        out.append(f"{spec.title} keeps no GPX waypoints: {len(gpx.waypoints)} not written")
+    points = [p for trk in gpx.tracks for seg in trk.segments for p in seg.points]
+    points += [p for rte in gpx.routes for p in rte.points]
+    timed = sum(p.time is not None for p in points)
+    if timed:
+        out.append(f"{spec.title} gets no GPX times: the <time> of {timed} points not written")
+    return out
 
 
 def crs_notes(doc: GeometryDocument, spec: Format, crs: CrsOption) -> list[str]:

@@ -115,3 +115,21 @@ def test_a_smoothed_las_records_what_smoothed_it(tmp_path: Path) -> None:
     assert header.generating_software.startswith("geosmooth ")
     assert header.system_identifier == "geosmooth smoothing"
     assert header.creation_date == datetime.date.today()
+
+
+def test_notes_are_true_for_the_output_format() -> None:
+    """Issue 41 item 8: a GPX's waypoints and times are named as not written to a LAS (its
+    gps_time stays 0), not "kept" there; a GPX output keeps them."""
+    gpx = (b'<?xml version="1.0"?><gpx version="1.1" creator="t" '
+           b'xmlns="http://www.topografix.com/GPX/1/1"><wpt lat="50.5" lon="4.5"/><trk><trkseg>'
+           + b"".join(b'<trkpt lat="50.%d" lon="4.%d"><time>2026-01-01T00:00:0%dZ</time>'
+                      b"</trkpt>" % (i, i, i) for i in range(1, 6))
+           + b"</trkseg></trk></gpx>")  # fmt: skip
+    doc = read_geometry(gpx, "gpx")
+    las = output_notes(doc, "las")
+    assert "LAS keeps no GPX waypoints: 1 not written" in las
+    assert "LAS gets no GPX times: the <time> of 5 points not written" in las
+    assert not any("kept" in n and "waypoint" in n for n in las)
+    assert "kept 1 waypoints as they are" in output_notes(doc, "gpx")
+    out = laspy.read(io.BytesIO(write_geometry(doc, "las")))
+    assert "gps_time" not in out.point_format.dimension_names or not np.any(out.gps_time)

@@ -146,6 +146,9 @@ class ProgressDisplay:
     def expect(self, seconds: float) -> None:
         """The engine's model of the run's time (used by the stage lines only)."""
 
+    def sized(self, n: int) -> None:
+        """The input's point count, once read (the stage lines' progress model)."""
+
     def close(self) -> None:
         """The run is over (or failed): end the terminal line."""
         self.finish()

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 from service.cli.progress.display import ProgressDisplay
 
 if TYPE_CHECKING:
-    from service.core.progress import ProgressEvent
+    from service.core.progress import ProgressEvent, ProgressModel
 
 __all__ = ["LOG_TICK", "STAGES", "STAGES_FROM_BYTES", "TICK", "StageDisplay", "display_for"]
 
@@ -125,13 +125,32 @@ class StageDisplay(ProgressDisplay):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._expected: tuple[float, float] | None = None  # (model seconds, clock at start)
+        self._model: ProgressModel | None = None
+        self._phases: list[tuple[str, float]] = []  # (phase, elapsed) entered so far
+
+    def sized(self, n: int) -> None:
+        """The input's point count: from now on the percent and the time left are the
+        measured cost model's (:class:`service.core.progress.ProgressModel`, issue 41)."""
+        from service.core.progress import ProgressModel
+
+        with self._lock:
+            self._model = ProgressModel(n)
+            for phase, at in self._phases:
+                self._model.enter(phase, at)
 
     def expect(self, seconds: float) -> None:
         """The engine's model of the run's time (from now on), for the estimate before the
         search."""
         self._expected = (float(seconds), time.perf_counter())
 
+    def _percent(self, now: float) -> float:
+        if self._model is not None:
+            return round(self._model.percent(now - self._t0), 2)
+        return float(self._data.get("percent") or 0.0)
+
     def _eta_seconds(self, now: float) -> float | None:
+        if self._model is not None:
+            return self._model.eta(now - self._t0)
         eta = self._data.get("eta_seconds")
         before = self._base in ("reading", "neighborhoods")
         if before and self._expected is not None:
@@ -162,6 +181,13 @@ class StageDisplay(ProgressDisplay):
             shown = None
         with self._lock:
             now = time.perf_counter()
+            from service.core.progress import phase_of
+
+            phase = phase_of(event.stage, event.step)
+            if phase is not None:
+                self._phases.append((phase, now - self._t0))
+                if self._model is not None:
+                    self._model.enter(phase, now - self._t0)
             timed = dataclasses.replace(event, elapsed=now - self._t0)  # reading included
             self._data = self._tracker.update(timed)
             if shown is not None and shown != self._stage:
@@ -191,7 +217,7 @@ class StageDisplay(ProgressDisplay):
             "stages": len(STAGES),
             "elapsed_seconds": round(now - self._t0, 3),
             "stage_seconds": round(now - self._stage_t0, 3),
-            "percent": d.get("percent"),
+            "percent": self._percent(now),
             "eta_seconds": None if (eta := self._eta_seconds(now)) is None else round(eta, 3),
             "iteration": d.get("iteration", 0),
             "lambda": d.get("lambda") if kind == "iteration" else None,
@@ -205,7 +231,7 @@ class StageDisplay(ProgressDisplay):
         d = self._data
         where = f"[{STAGES.index(self._base) + 1}/{len(STAGES)}] " if self._base in STAGES else ""
         eta = _eta(self._eta_seconds(now))
-        clock = f"{now - self._t0:.1f} s, {d.get('percent', 0.0):.0f} %{eta}"
+        clock = f"{now - self._t0:.1f} s, {self._percent(now):.0f} %{eta}"
         if kind == "iteration" and d.get("lambda") is not None and d.get("phi") is not None:
             line = self.line(int(d.get("iteration", 0)), float(d["lambda"]), float(d["phi"]))
             return f"{line}  ({clock})"
