@@ -86,6 +86,7 @@ def replay(run: dict[str, Any], step: float = 0.25) -> dict[str, Any]:
         t += step
     return {"name": run["name"], "points": run["points"], "wall_seconds": total,
             "cpu_seconds": run.get("cpu_seconds"), "load": run.get("load"),
+            "calibration": run["name"] in CALIBRATION,
             "worst_eta_ratio": round(worst, 3), "percent_went_back": back,
             "longest_frozen_seconds": round(frozen, 2)}  # fmt: skip
 

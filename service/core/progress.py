@@ -98,7 +98,16 @@ PHASES: tuple[str, ...] = (
 #: Seconds of each phase as ``a + b * n`` (n points), measured on the calibration runs of
 #: ``benchmarks/progress`` (``python -m benchmarks.progress.fit``): only the ratios matter (a
 #: busy or fast machine scales every phase alike).
-PHASE_COST: dict[str, tuple[float, float]] = {}
+PHASE_COST: dict[str, tuple[float, float]] = {
+    "reading": (1.4285, 0.0),
+    "neighborhoods": (0.5747, 3.841e-05),
+    "neighborhoods:weights": (2.3006, 1.815e-05),
+    "neighborhoods:noise": (0.004, 0.0),
+    "analysis": (0.0, 0.0001445),
+    "search": (3.9795, 0.0),
+    "postprocess": (0.0, 2.772e-06),
+    "writing": (0.075, 6.333e-07),
+}
 
 
 def phase_of(stage: str, step: str | None = None) -> str | None:

@@ -80,7 +80,8 @@ def test_form_generated_from_schema_shapes(browsing: Browsing, web_server: WebSe
 BBOX_AND_LABELS = """async () => {
   const { bboxText } = await import('/static/js/ui.js');
   const { LABELS } = await import('/static/js/schemaform.js');
-  const labels = [...document.querySelectorAll('#params-section label.label')].map((l) => l.textContent);
+  const labels = [...document.querySelectorAll('#params-section label.label')]
+    .map((l) => l.textContent);
   return {
     utm: bboxText({ min: [500000.009, 5000000.003, 9.161], max: [500110.0, 5000109.997, 10.842] }),
     small: bboxText({ min: [-1, 0, 0.5], max: [1, 2, 1.5] }),

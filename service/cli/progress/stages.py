@@ -176,7 +176,7 @@ class StageDisplay(ProgressDisplay):
         if event.tau is not None:
             self.tau = event.tau
         base = _FOLDED.get(event.stage, event.stage)
-        shown = f"{base}: {event.step}" if event.step else base
+        shown: str | None = f"{base}: {event.step}" if event.step else base
         if base not in STAGES:
             shown = None
         with self._lock:
