@@ -95,6 +95,11 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
         "whitespace, commas or newlines; '#' starts a comment",
     )  # fmt: skip
     more.add_argument(
+        "--in-crs", metavar="CRS",
+        help="the CRS of a LAS/LAZ input that declares none (or a wrong one), an EPSG code, "
+        "like PDAL's a_srs: recorded in the output, and the source of --crs",
+    )  # fmt: skip
+    more.add_argument(
         "--where", metavar="EXPR",
         help="smooth only the points EXPR selects, PDAL's 'where' grammar: 'Classification == "
         "2', 'Intensity > 100 and ReturnNumber == 1', and/or/not, parentheses; the others are "

@@ -160,6 +160,29 @@ def _details(doc: GeometryDocument) -> list[str]:
     return out
 
 
+def _assign_crs(ns: argparse.Namespace, doc: GeometryDocument | None) -> None:
+    """``--in-crs``: the CRS of a LAS/LAZ input (PDAL's ``a_srs``); exit status 2 for a value
+    pyproj does not know or another format (checked first with ``doc`` ``None``)."""
+    text = getattr(ns, "in_crs", None)
+    if not text:
+        return
+    import pyproj
+
+    code = str(text).strip().upper().removeprefix("EPSG:")
+    try:
+        crs = pyproj.CRS.from_user_input(f"EPSG:{int(code)}" if code.isdigit() else text)
+    except pyproj.exceptions.CRSError:
+        raise CliError(f"--in-crs: {text!r} is not a CRS pyproj knows", EXIT_USAGE) from None
+    if doc is None:
+        return
+    header = getattr(doc.layout, "header", None)
+    if header is None or not hasattr(header, "add_crs"):
+        raise CliError(f"--in-crs applies to LAS/LAZ input, not {doc.source_format}", EXIT_USAGE)
+    from service.io.formats.las_meta import assign_crs
+
+    assign_crs(header, crs)
+
+
 def _selects(ns: argparse.Namespace) -> bool:
     return bool(getattr(ns, "where", None) or getattr(ns, "fix_classes", None))
 
@@ -193,6 +216,7 @@ def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]
     if ns.xyz_dims is not None and ns.xyz_dims < 1:
         raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
     _selection(ns, None)  # a bad expression before anything is read
+    _assign_crs(ns, None)
     out_fmt = output_format(ns.output, ns.format)
     refuse_own_input(ns.input, ns.output, getattr(ns, "overwrite", False))
     check_writable(ns.output, "output")
@@ -207,7 +231,7 @@ def _streamed(
     """The format of a tiled run read and written in chunks (issue 23), else ``None``: a file
     to a file, no ``--fixed``, no writer option
     (:func:`service.workflows.smooth_file.streamed_format_of`)."""
-    if ns.fixed or _selects(ns) or "-" in (ns.input, ns.output):
+    if ns.fixed or _selects(ns) or getattr(ns, "in_crs", None) or "-" in (ns.input, ns.output):
         return None
     from service.workflows.smooth_file import streamed_format_of
 
@@ -326,6 +350,7 @@ def _smooth_one(
         fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
         progress.stage("reading")
         source = doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+        _assign_crs(ns, doc)
         outside = _selection(ns, doc)
         if outside is not None:
             fixed = (fixed or []) + outside

@@ -29,6 +29,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from service.workflows.errors import ServiceError
+
 __all__ = ["SelectionError", "class_list", "fixed_outside", "parse_where", "selected"]
 
 _TOKEN = re.compile(
@@ -42,11 +44,9 @@ _OPS: dict[str, Callable[[Any, Any], Any]] = {
 _WORDS = {"and": "&&", "or": "||", "not": "!"}
 
 
-class SelectionError(ValueError):
-    """A ``where`` expression that does not parse or names no dimension of the file.
-
-    Typed like the service's errors: HTTP 422 naming ``field``, CLI exit status 2.
-    """
+class SelectionError(ServiceError):
+    """A ``where`` expression that does not parse or names no dimension of the file:
+    HTTP 422 naming ``field``, CLI exit status 2."""
 
     code = "invalid-selection"
     title = "Invalid selection expression"
@@ -54,13 +54,7 @@ class SelectionError(ValueError):
     exit_code = 2  # see the CLI's table, service/exit_codes.py
 
     def __init__(self, message: str, field: str = "where") -> None:
-        super().__init__(message)
-        self.message = message
-        self.field = field
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{code, message, field}``."""
-        return {"code": self.code, "message": self.message, "field": self.field}
+        super().__init__(message, field=field)
 
 
 @dataclass(frozen=True)

@@ -133,3 +133,21 @@ def test_notes_are_true_for_the_output_format() -> None:
     assert "kept 1 waypoints as they are" in output_notes(doc, "gpx")
     out = laspy.read(io.BytesIO(write_geometry(doc, "las")))
     assert "gps_time" not in out.point_format.dimension_names or not np.any(out.gps_time)
+
+
+def test_in_crs_gives_a_bare_las_its_crs_and_feeds_crs(tmp_path: Path) -> None:
+    """``--in-crs`` (PDAL's a_srs): recorded in the output, and the source of ``--crs``."""
+    src = tmp_path / "bare.las"
+    src.write_bytes(_utm_las(crs=None, fmt=1))
+    out = tmp_path / "out.las"
+    res = _cli("smooth", src, "-o", out, "--in-crs", "32632", "--crs", "25832", "--rms", "0.01")
+    assert res.returncode == 0, res.stderr
+    assert "reprojected from EPSG:32632 to EPSG:25832" in res.stderr
+    assert laspy.read(out).header.parse_crs().to_epsg() == 25832
+    res = _cli("smooth", src, "-o", out, "--in-crs", "32632", "--rms", "0.01", "-q")
+    assert res.returncode == 0 and laspy.read(out).header.parse_crs().to_epsg() == 32632
+    sphere = REPO / "service" / "samples" / "noisy-sphere.ply"
+    for source, code in ((src, "99999999"), (sphere, "32632")):
+        res = _cli("smooth", source, "-o", tmp_path / "x.ply", "--in-crs", code)
+        assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+        assert "--in-crs" in res.stderr

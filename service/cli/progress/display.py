@@ -62,16 +62,21 @@ class ProgressDisplay:
         self.last_iteration = 0
         self._width = 0
         self._shown: tuple[str, str] | None = None
+        self.tolerance: float | None = None  # the search's, when known
+        self._converged = False
 
     def repeats(self, lam: float, phi: float) -> bool:
-        """Whether ``(lam, phi)`` reads as the point shown last, to the digits shown (the
-        engine evaluating the same lambda again to refine a converged search): then no new
-        line, so a converged search prints no further iterations (issue 41); the summary
-        still counts every evaluation."""
+        """Whether the line of ``(lam, phi)`` would tell nothing new: it reads as the line
+        shown last (same lambda and phi to the digits shown), or the search had converged
+        (relative error within the tolerance) and still has (the engine refining lambda).
+        Such lines are not printed, so a converged search prints no further iterations
+        (issue 41); the summary still counts every evaluation."""
         shown = (fmt_g(lam), fmt_g(phi))
-        if self._shown == shown:
+        rel = None if not self.tau else abs(phi - self.tau) / self.tau
+        converged = rel is not None and self.tolerance is not None and rel <= self.tolerance
+        if self._shown == shown or (converged and self._converged):
             return True
-        self._shown = shown
+        self._shown, self._converged = shown, converged
         return False
 
     def line(self, iteration: int, lam: float, phi: float) -> str:

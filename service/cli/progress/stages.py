@@ -110,6 +110,7 @@ class StageDisplay(ProgressDisplay):
         super().__init__(stream, enabled=enabled, tty=False if json_lines else tty)
         self.stages = stages or json_lines
         self.json_lines = json_lines
+        self.tolerance = tolerance
         self.interval = tick if tick is not None else (TICK if self.tty or json_lines else LOG_TICK)
         if self.stages:  # the jobs' package only when the stages are shown
             from service.jobs.progress import ProgressTracker

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "assign_crs",
     "crs_facts",
     "file_crs",
     "reprojected_header",
@@ -83,6 +84,12 @@ def summary(header: Any, points: NDArray[np.float64], attrs: Mapping[str, Any]) 
     return out
 
 
+def assign_crs(header: Any, crs: Any) -> None:
+    """Give ``header`` the CRS ``crs`` (PDAL's ``a_srs``): its CRS VLRs replaced."""
+    header.vlrs = [v for v in header.vlrs if type(v).__name__ not in _CRS_VLRS]
+    header.add_crs(crs)
+
+
 def reprojected_header(header: Any, crs: Any, points: NDArray[np.float64]) -> Any:
     """A copy of ``header`` for ``points`` in ``crs``: the CRS VLRs replaced (WKT for point
     formats 6-10, else GeoTIFF keys: ``laspy.LasHeader.add_crs``), the x and y offsets a round
@@ -91,8 +98,7 @@ def reprojected_header(header: Any, crs: Any, points: NDArray[np.float64]) -> An
     import copy
 
     new = copy.deepcopy(header)
-    new.vlrs = [v for v in new.vlrs if type(v).__name__ not in _CRS_VLRS]
-    new.add_crs(crs)
+    assign_crs(new, crs)
     scales = np.asarray(new.scales, dtype=np.float64)
     offsets = np.array(new.offsets, dtype=np.float64)
     offsets[:2] = np.floor(points[:, :2].min(axis=0) / scales[:2] / 1000.0) * 1000.0 * scales[:2]
