@@ -67,6 +67,7 @@ def replay(run: dict[str, Any], step: float = 0.25) -> dict[str, Any]:
     entries = phase_entries(run)
     total = float(run["wall_seconds"])
     worst, last_pct, back, frozen, same_since, last_eta = 1.0, 0.0, False, 0.0, 0.0, None
+    marks: dict[str, float | None] = {}
     t = 0.0
     while t < total:
         for phase, at in entries:
@@ -78,6 +79,9 @@ def replay(run: dict[str, Any], step: float = 0.25) -> dict[str, Any]:
         if t >= 0.1 * total and eta is not None and total - t > 0.5:
             truth = total - t
             worst = max(worst, eta / truth, truth / max(eta, 1e-9))
+        for q in (10, 25, 50, 75):
+            if f"{q}%" not in marks and t >= q / 100 * total:
+                marks[f"{q}%"] = None if eta is None else round(eta / (total - t), 2)
         if eta is not None and last_eta is not None and abs(eta - last_eta) < 1e-9:
             frozen = max(frozen, t - same_since)
         else:
@@ -87,7 +91,8 @@ def replay(run: dict[str, Any], step: float = 0.25) -> dict[str, Any]:
     return {"name": run["name"], "points": run["points"], "wall_seconds": total,
             "cpu_seconds": run.get("cpu_seconds"), "load": run.get("load"),
             "calibration": run["name"] in CALIBRATION,
-            "worst_eta_ratio": round(worst, 3), "percent_went_back": back,
+            "worst_eta_ratio": round(worst, 3), "eta_over_truth_at": marks,
+            "percent_went_back": back,
             "longest_frozen_seconds": round(frozen, 2)}  # fmt: skip
 
 
