@@ -146,7 +146,12 @@ def _extension(source: str, out_fmt: str | None, in_fmt: str | None) -> str | No
 
 
 def output_names(
-    inputs: Sequence[str], directory: str, template: str, out_fmt: str | None, in_fmt: str | None
+    inputs: Sequence[str],
+    directory: str,
+    template: str,
+    out_fmt: str | None,
+    in_fmt: str | None,
+    overwrite: bool = False,
 ) -> list[str]:
     """The output path of each input (``template`` rendered in ``directory``).
 
@@ -154,8 +159,10 @@ def output_names(
     ------
     CliError
         Exit status 2: a bad template, two inputs with the same output, an output that is
-        its own input.
+        its own input (a link to it too) without ``overwrite``.
     """
+    from service.cli.output import refuse_own_input
+
     names: list[str] = []
     for source in inputs:
         path = Path(source)
@@ -177,9 +184,7 @@ def output_names(
     seen: dict[str, str] = {}
     for source, target in zip(inputs, names, strict=True):
         real = os.path.realpath(target)
-        if real == os.path.realpath(source):
-            raise CliError(f"{source} would be overwritten by its own output {target}; give "
-                           "another -o DIR/ or --name", EXIT_USAGE)  # fmt: skip
+        refuse_own_input(source, target, overwrite)
         if real in seen:
             raise CliError(f"{seen[real]} and {source} would both be written to {target}; "
                            "give --name with {parent}", EXIT_USAGE)  # fmt: skip
@@ -301,7 +306,8 @@ def _prepare(ns: argparse.Namespace, inputs: Sequence[str]) -> list[argparse.Nam
     check_crs(ns.crs)
     if ns.report:
         check_writable(ns.report, "report")
-    names = output_names(inputs, ns.output, ns.name or DEFAULT_NAME, out_fmt, ns.input_format)
+    names = output_names(inputs, ns.output, ns.name or DEFAULT_NAME, out_fmt, ns.input_format,
+                         getattr(ns, "overwrite", False))  # fmt: skip
     try:
         os.makedirs(ns.output, exist_ok=True)
     except OSError as exc:
@@ -353,10 +359,14 @@ def run_batch(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int
     each = _prepare(ns, inputs)
     jobs = _jobs(ns, inputs, err)
     outcomes: list[FileOutcome] = []
+    clock = BatchClock(inputs, started)
     for outcome in _outcomes(each, jobs):
         outcomes.append(outcome)
         if outcome.code != EXIT_OK or not ns.quiet:
-            err.write(f"geosmooth: {outcome.line}\n")
+            k, times = clock.done(outcome.input)
+            err.write(f"geosmooth: {k} {outcome.line} ({times})\n")
+            for warning in (outcome.report or {}).get("warnings") or []:
+                err.write(f"  warning: {warning}\n")
             err.flush()
     code = worst([o.code for o in outcomes])
     failed = [o for o in outcomes if o.code != EXIT_OK]
@@ -365,6 +375,38 @@ def run_batch(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int
     if ns.report:
         _write_report(ns, replace_ns(ns, input=list(inputs)), outcomes, code)
     return code
+
+
+class BatchClock:
+    """``[k/N]``, the time so far and the time left of a batch (issue 41): the time left is
+    the time so far over the input bytes done times the bytes still to do (a file's cost
+    grows with its size; files of one kind and density make it a fair proxy)."""
+
+    def __init__(self, inputs: Sequence[str], started: float) -> None:
+        self.sizes = {p: _size(p) for p in inputs}
+        self.total = sum(self.sizes.values())
+        self.started = started
+        self.count = 0
+        self.bytes_done = 0
+
+    def done(self, source: str) -> tuple[str, str]:
+        """``("[k/N]", "batch 12.3 s, ~40 s left")`` once the file ``source`` is finished."""
+        self.count += 1
+        self.bytes_done += self.sizes.get(source, 0)
+        elapsed = time.perf_counter() - self.started
+        n = len(self.sizes)
+        text = f"batch {elapsed:.1f} s"
+        if self.count < n and self.bytes_done > 0:
+            left = elapsed * (self.total - self.bytes_done) / self.bytes_done
+            text += f", ~{left:.0f} s left"
+        return f"[{self.count}/{n}]", text
+
+
+def _size(path: str) -> int:
+    try:
+        return max(os.path.getsize(path), 1)
+    except OSError:
+        return 1
 
 
 def _unchanged(report: dict[str, Any] | None) -> bool:

@@ -60,10 +60,10 @@ def add_result_options(parser: argparse.ArgumentParser, *, local: bool) -> None:
     if local:
         files.add_argument(
             "--progress", choices=("auto", "text", "json"), default="auto",
-            help="the stages on stderr (read, neighbourhoods, weights, noise, search, finish, "
-            "write) with progress and an estimate, updated every second on a terminal: text "
-            "lines, or one JSON object per line; auto: text lines for an input of 1 MiB or "
-            "more, else only the lambda search [default: auto]",
+            help="the stages on stderr (reading, neighborhoods, analysis, search, postprocess, "
+            "writing: a job's stage names) with progress and an estimate, updated every "
+            "second on a terminal: text lines, or one JSON object per line; auto: text lines "
+            "for an input of 1 MiB or more, else only the lambda search [default: auto]",
         )  # fmt: skip
 
 
@@ -95,6 +95,21 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
         "whitespace, commas or newlines; '#' starts a comment",
     )  # fmt: skip
     more.add_argument(
+        "--in-crs", metavar="CRS",
+        help="the CRS of a LAS/LAZ input that declares none (or a wrong one), an EPSG code, "
+        "like PDAL's a_srs: recorded in the output, and the source of --crs",
+    )  # fmt: skip
+    more.add_argument(
+        "--where", metavar="EXPR",
+        help="smooth only the points EXPR selects, PDAL's 'where' grammar: 'Classification == "
+        "2', 'Intensity > 100 and ReturnNumber == 1', and/or/not, parentheses; the others are "
+        "held fixed (bit-identical) and anchor the smoothing",
+    )  # fmt: skip
+    more.add_argument(
+        "--fix-classes", metavar="LIST",
+        help="hold the points of these classes fixed, e.g. 6,9 (buildings, water)",
+    )  # fmt: skip
+    more.add_argument(
         "--input-format", metavar=formats(),
         help="input format when the INPUT extension does not say",
     )  # fmt: skip
@@ -113,6 +128,12 @@ def add_smooth(sub: argparse._SubParsersAction[Parser]) -> None:
         "--time-limit", metavar="SECONDS",
         help="stop a file's run after SECONDS of CPU time, nothing written (exit 13) "
         "[default: 3600, the server's job time limit; 'none': no bound]",
+    )  # fmt: skip
+    more.add_argument(
+        "--overwrite", action="store_true",
+        help="allow an output that is the input itself (the same path, a symbolic or hard "
+        "link): without it such an output is refused with exit status 2 (single files and "
+        "batches alike), so a raw scan is never replaced by mistake",
     )  # fmt: skip
     more.add_argument(
         "--exit-unchanged", type=_exit_status, default=0, metavar="N",

@@ -32,12 +32,38 @@ __all__ = [
     "check_format",
     "check_writable",
     "given_writer_options",
+    "is_own_input",
     "output_format",
+    "refuse_own_input",
     "write_file",
     "write_json_report",
     "write_output",
     "writer_options",
 ]
+
+
+# --------------------------------------------------------------------------- own input
+
+
+def is_own_input(source: str, target: str) -> bool:
+    """Whether writing ``target`` would replace the file ``source``: the same path after links,
+    or the same file by another name (a hard link: same device and inode)."""
+    if "-" in (source, target):
+        return False
+    if os.path.realpath(source) == os.path.realpath(target):
+        return True
+    try:
+        return os.path.samefile(source, target)
+    except OSError:  # the output does not exist yet (or the input is gone: read fails later)
+        return False
+
+
+def refuse_own_input(source: str, target: str, overwrite: bool) -> None:
+    """Exit status 2 when ``target`` is ``source`` (:func:`is_own_input`) without
+    ``--overwrite``: a raw scan is never replaced by mistake (issue 41)."""
+    if not overwrite and is_own_input(source, target):
+        raise CliError(f"{source} would be overwritten by its own output {target}; give "
+                       "another -o (or --overwrite to replace the input)", EXIT_USAGE)  # fmt: skip
 
 
 # --------------------------------------------------------------------------- formats

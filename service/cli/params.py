@@ -106,6 +106,12 @@ def add_smoothing_options(parser: argparse.ArgumentParser) -> None:
             help=_field_help(target_name),
         )
     opts = parser.add_argument_group("smoothing options")
+    opts.add_argument(
+        "--params", metavar="FILE.json", dest="params_file", default=None,
+        help="the parameters as data: a JSON object of the options below (names with '_'), "
+        "or a --report file (its 'params' are used, and its 'where', 'fix_classes' and 'crs' "
+        "pipeline options); options given on the command line win",
+    )  # fmt: skip
     for name, info in SmoothingParams.model_fields.items():
         if name in TARGET_FIELDS:
             continue
@@ -138,10 +144,52 @@ def params_from_args(ns: argparse.Namespace) -> SmoothingParams:
         for name in SmoothingParams.model_fields
         if getattr(ns, name, None) is not None
     }
+    base = params_file(ns)
+    if any(t in given for t in TARGET_FIELDS):  # the command line's target replaces the file's
+        base = {k: v for k, v in base.items() if k not in TARGET_FIELDS}
+    given = {**base, **given}
     try:
         return SmoothingParams.model_validate(given)
     except ValidationError as exc:
         raise CliError(_validation_message(exc), EXIT_USAGE) from exc
+
+
+#: Pipeline options a ``--params`` file may carry besides the parameters (issue 41).
+PIPELINE_OPTIONS = ("where", "fix_classes", "crs")
+
+
+def params_file(ns: argparse.Namespace) -> dict[str, object]:
+    """The parameters of ``--params FILE`` (empty without it); its pipeline options
+    (:data:`PIPELINE_OPTIONS`) are set on ``ns`` where the command line gave none.
+
+    Raises
+    ------
+    CliError
+        Exit status 2: unreadable, not a JSON object, or naming an unknown parameter.
+    """
+    path = getattr(ns, "params_file", None)
+    if not path:
+        return {}
+    import json
+    from pathlib import Path
+
+    try:
+        obj = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise CliError(f"--params: cannot read {path}: {exc}", EXIT_USAGE) from exc
+    if not isinstance(obj, dict):
+        raise CliError(f"--params: {path} holds no JSON object", EXIT_USAGE)
+    params = obj.get("params", obj) if isinstance(obj.get("params"), dict) else obj
+    for option in PIPELINE_OPTIONS:
+        if getattr(ns, option, None) is None and obj.get(option) is not None:
+            setattr(ns, option, obj[option])
+    if params is not obj:
+        return {k: v for k, v in params.items() if v is not None}
+    known = set(SmoothingParams.model_fields) | set(PIPELINE_OPTIONS)
+    unknown = sorted(set(obj) - known)
+    if unknown:
+        raise CliError(f"--params: {path}: unknown parameter {unknown[0]!r}", EXIT_USAGE)
+    return {k: v for k, v in obj.items() if k in SmoothingParams.model_fields}
 
 
 def _validation_message(exc: ValidationError) -> str:

@@ -27,10 +27,11 @@ from service.cli.output import (
     check_writable,
     given_writer_options,
     output_format,
+    refuse_own_input,
     write_json_report,
     write_output,
 )
-from service.cli.params import params_from_args
+from service.cli.params import PIPELINE_OPTIONS, params_from_args
 from service.cli.parser_base import version
 from service.cli.progress import ProgressDisplay, show_summary
 from service.core.params import SmoothingParams
@@ -159,13 +160,65 @@ def _details(doc: GeometryDocument) -> list[str]:
     return out
 
 
+def _assign_crs(ns: argparse.Namespace, doc: GeometryDocument | None) -> None:
+    """``--in-crs``: the CRS of a LAS/LAZ input (PDAL's ``a_srs``); exit status 2 for a value
+    pyproj does not know or another format (checked first with ``doc`` ``None``)."""
+    text = getattr(ns, "in_crs", None)
+    if not text:
+        return
+    import pyproj
+
+    code = str(text).strip().upper().removeprefix("EPSG:")
+    try:
+        crs = pyproj.CRS.from_user_input(f"EPSG:{int(code)}" if code.isdigit() else text)
+    except pyproj.exceptions.CRSError:
+        raise CliError(f"--in-crs: {text!r} is not a CRS pyproj knows", EXIT_USAGE) from None
+    if doc is None:
+        return
+    header = getattr(doc.layout, "header", None)
+    if header is None or not hasattr(header, "add_crs"):
+        raise CliError(f"--in-crs applies to LAS/LAZ input, not {doc.source_format}", EXIT_USAGE)
+    from service.io.formats.las_meta import assign_crs
+
+    assign_crs(header, crs)
+
+
+def _selects(ns: argparse.Namespace) -> bool:
+    return bool(getattr(ns, "where", None) or getattr(ns, "fix_classes", None))
+
+
+def _selection(ns: argparse.Namespace, doc: GeometryDocument | None) -> list[int] | None:
+    """The file indices ``--where`` / ``--fix-classes`` hold fixed (``None``: no selection);
+    with ``doc`` ``None`` only the expressions are checked. Exit status 2 for a bad one."""
+    if not _selects(ns):
+        return None
+    from service.workflows.selection import SelectionError, class_list, fixed_outside, parse_where
+
+    try:
+        classes = class_list(ns.fix_classes) if getattr(ns, "fix_classes", None) else None
+        if doc is None:
+            if ns.where:
+                parse_where(ns.where)
+            return None
+        g = doc.geometry
+        pts = g.points if doc.weld is None else g.points[doc.weld.index]  # the file's numbering
+        out = fixed_outside(pts, doc.attributes, ns.where, classes)
+    except SelectionError as exc:
+        raise CliError(exc.message, EXIT_USAGE) from exc
+    ns.selection_counts = (len(pts) - len(out), len(pts))
+    return [int(i) for i in out]
+
+
 def _check_options(ns: argparse.Namespace) -> tuple[SmoothingParams, str | None]:
     """Everything that needs no input file: parameters, formats, outputs."""
     params = params_from_args(ns)
     check_format(ns.input_format, "--input-format")
     if ns.xyz_dims is not None and ns.xyz_dims < 1:
         raise CliError(f"--xyz-dims: must be at least 1, got {ns.xyz_dims}", EXIT_USAGE)
+    _selection(ns, None)  # a bad expression before anything is read
+    _assign_crs(ns, None)
     out_fmt = output_format(ns.output, ns.format)
+    refuse_own_input(ns.input, ns.output, getattr(ns, "overwrite", False))
     check_writable(ns.output, "output")
     if ns.report:
         check_writable(ns.report, "report")
@@ -178,7 +231,7 @@ def _streamed(
     """The format of a tiled run read and written in chunks (issue 23), else ``None``: a file
     to a file, no ``--fixed``, no writer option
     (:func:`service.workflows.smooth_file.streamed_format_of`)."""
-    if ns.fixed or "-" in (ns.input, ns.output):
+    if ns.fixed or _selects(ns) or getattr(ns, "in_crs", None) or "-" in (ns.input, ns.output):
         return None
     from service.workflows.smooth_file import streamed_format_of
 
@@ -297,8 +350,13 @@ def _smooth_one(
         fixed = read_fixed_indices(ns.fixed) if ns.fixed else None
         progress.stage("reading")
         source = doc = read_input(ns.input, ns.input_format, ns.weld, ns.xyz_dims)
+        _assign_crs(ns, doc)
+        outside = _selection(ns, doc)
+        if outside is not None:
+            fixed = (fixed or []) + outside
         geometry = _with_fixed(doc, fixed)
         progress.expect(_model_seconds(geometry, params))
+        progress.sized(geometry.n)
         target = lambda _result, data: write_output(ns.output, data, "output")  # noqa: E731
     with _cli_errors(params, progress), _tile_map(streamed) as run_map:
         if doc is not None:
@@ -337,6 +395,7 @@ def _report(
             output=ns.output,
             output_format=done.output_format,
             params=params.model_dump(mode="json"),
+            **{k: getattr(ns, k) for k in PIPELINE_OPTIONS if getattr(ns, k, None) is not None},
             geosmooth_version=version(),
             wall_seconds=time.perf_counter() - started,
         )
@@ -345,5 +404,8 @@ def _report(
         write_json_report(ns.report, report)
     doc = done.document
     details = ["streamed"] if doc is None else _details(doc)
+    if getattr(ns, "selection_counts", None):
+        chosen, total = ns.selection_counts
+        details.append(f"{chosen} of {total} points selected, {total - chosen} held fixed")
     notes = [] if doc is None else output_notes(doc, done.output_format, ns.crs)
     show_summary(progress, report, ns, params, started, details=details, notes=notes)

@@ -13,7 +13,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["STAGES", "STEPS", "ProgressCallback", "ProgressEvent"]
+__all__ = [
+    "PHASES",
+    "STAGES",
+    "STEPS",
+    "ProgressCallback",
+    "ProgressEvent",
+    "ProgressModel",
+    "phase_of",
+    "phase_shares",
+]
 
 #: Stages in the order a run goes through them (the engine's are ``neighborhoods`` .. ``done``).
 STAGES: tuple[str, ...] = (
@@ -69,3 +78,105 @@ class ProgressEvent:
 
 
 ProgressCallback = Callable[[ProgressEvent], None]
+
+
+# --------------------------------------------------------------------------- the cost model
+
+#: The parts of a run the progress model times, in run order: the stages, ``neighborhoods``
+#: split at its steps (issue 41). ``laplacian`` is built inside ``neighborhoods``.
+PHASES: tuple[str, ...] = (
+    "reading",
+    "neighborhoods",
+    "neighborhoods:weights",
+    "neighborhoods:noise",
+    "analysis",
+    "search",
+    "postprocess",
+    "writing",
+)
+
+#: Seconds of each phase as ``a + b * n`` (n points), measured on the calibration runs of
+#: ``benchmarks/progress`` (``python -m benchmarks.progress.fit``): only the ratios matter (a
+#: busy or fast machine scales every phase alike).
+PHASE_COST: dict[str, tuple[float, float]] = {
+    "reading": (1.4285, 0.0),
+    "neighborhoods": (0.5747, 3.841e-05),
+    "neighborhoods:weights": (2.3006, 1.815e-05),
+    "neighborhoods:noise": (0.004, 0.0),
+    "analysis": (0.0, 0.0001445),
+    "search": (3.9795, 0.0),
+    "postprocess": (0.0, 2.772e-06),
+    "writing": (0.075, 6.333e-07),
+}
+
+
+def phase_of(stage: str, step: str | None = None) -> str | None:
+    """The phase of an event (``None``: a stage the model does not time, ``queued``, ``done``)."""
+    if stage == "laplacian":
+        stage = "neighborhoods"
+    name = f"{stage}:{step}" if step else stage
+    return name if name in PHASES else None
+
+
+def phase_shares(n: int) -> dict[str, float]:
+    """Each phase's share of a run of ``n`` points (summing to 1)."""
+    cost = {p: max(a + b * n, 0.0) for p, (a, b) in PHASE_COST.items()}
+    total = sum(cost.values())
+    if total <= 0:
+        return {p: 1.0 / len(PHASES) for p in PHASES}
+    return {p: cost.get(p, 0.0) / total for p in PHASES}
+
+
+class ProgressModel:
+    """Percent done and time left of one run, from the phases' measured shares (issue 41).
+
+    At the start of a phase the run's total time is estimated as the time so far over the
+    shares of the phases done; inside a phase the percent moves with the time spent against
+    that phase's expected share (capped at its end), and a phase that overruns stretches the
+    total (as if it were about to end): the percent never goes back, the time left moves
+    every second and is never frozen. No estimate before the first phase ends.
+
+    Parameters
+    ----------
+    n : int
+        Points of the input (the shares depend on it).
+    """
+
+    def __init__(self, n: int) -> None:
+        self.shares = phase_shares(max(int(n), 1))
+        self.phase: str | None = None
+        self.start = 0.0
+        self.before = 0.0  # share of the phases done
+
+    def enter(self, phase: str, elapsed: float) -> None:
+        """Phase ``phase`` starts ``elapsed`` seconds into the run (later phases only)."""
+        if phase not in self.shares or phase == self.phase:
+            return
+        if self.phase is not None and PHASES.index(phase) < PHASES.index(self.phase):
+            return  # a tiled run's later tile: the phase is under way already
+        order = PHASES[: PHASES.index(phase)]
+        self.before = sum(self.shares[p] for p in order)
+        self.phase, self.start = phase, float(elapsed)
+
+    def total(self, elapsed: float) -> float | None:
+        """The estimated total seconds of the run (``None`` before the first phase ends)."""
+        if self.phase is None or self.before < 1e-3 or self.start <= 0:
+            return None
+        share = self.shares[self.phase]
+        total = self.start / self.before
+        if elapsed > self.start + share * total:  # the phase overruns: as if it ended now
+            total = elapsed / min(self.before + share, 1.0)
+        return max(total, elapsed)
+
+    def percent(self, elapsed: float) -> float:
+        """Percent of the run done at ``elapsed`` seconds (0-100, never going back)."""
+        total = self.total(elapsed)
+        if total is None:
+            return 0.0
+        end = self.before + (self.shares[self.phase] if self.phase else 0.0)
+        return 100.0 * min(max(elapsed / total, self.before), end)
+
+    def eta(self, elapsed: float) -> float | None:
+        """Seconds left at ``elapsed`` (``None`` before the first phase ends)."""
+        total = self.total(elapsed)
+        return None if total is None else max(total - elapsed, 0.0)

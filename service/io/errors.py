@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-__all__ = ["FormatError", "UnsupportedFormat"]
+__all__ = ["FormatError", "MissingDependency", "UnsupportedFormat"]
 
 
 class FormatError(ValueError):
@@ -71,3 +71,56 @@ class UnsupportedFormat(FormatError):
     field = "format"
     title = "Unsupported format"
     status = 415
+
+
+class MissingDependency(Exception):
+    """A package the server needs to read or write a format is not installed (issue 41).
+
+    A server-side fault, never the input's: HTTP 500 naming the package, CLI exit status 1
+    (internal), unlike :class:`FormatError` (400, the user's file).
+
+    Parameters
+    ----------
+    package : str
+        The distribution to install (``"pillow"``), as pip names it.
+    fmt : str, optional
+        The format being read or written.
+    """
+
+    code: ClassVar[str] = "missing-dependency"
+    field: str | None = None
+    title: ClassVar[str] = "A server package is missing"
+    status: ClassVar[int] = 500
+    exit_code: ClassVar[int] = 1  # internal: see the CLI's table, service/exit_codes.py
+
+    def __init__(self, package: str, *, fmt: str | None = None) -> None:
+        what = f"{fmt.upper()} files" if fmt else "this format"
+        message = (
+            f"the Python package {package!r} that {what} need is not installed on this "
+            f"machine (an installation fault, not the input's: pip install {package})"
+        )
+        super().__init__(message)
+        self.message = message
+        self.package = package
+        self.fmt = fmt
+
+    @classmethod
+    def of(cls, exc: ImportError, fmt: str | None = None) -> MissingDependency:
+        """The missing package of an ``ImportError`` (its module's distribution name)."""
+        import re
+
+        named = re.search(r"named '([\w.]+)'|import of ([\w.]+)", str(exc))
+        module = (exc.name or (named and (named[1] or named[2])) or "unknown").split(".")[0]
+        return cls(_DISTRIBUTIONS.get(module, module), fmt=fmt)
+
+    def to_dict(self) -> dict[str, object]:
+        """Machine-readable form (problem details, job records)."""
+        out: dict[str, object] = {"code": self.code, "message": self.message}
+        out["package"] = self.package
+        if self.fmt is not None:
+            out["format"] = self.fmt
+        return out
+
+
+#: Import names whose pip distribution is named otherwise.
+_DISTRIBUTIONS = {"PIL": "pillow", "lzf": "python-neo-lzf", "yaml": "pyyaml"}

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from service.io._shared.georef import CrsOption, Georef, project, target_crs
+from service.io._shared.georef import CrsOption, Georef, project, reproject, target_crs
 
 if TYPE_CHECKING:
     from service.io._shared.plain import PlainDocument
@@ -22,12 +22,14 @@ if TYPE_CHECKING:
     from service.io.registry import Format
 
 __all__ = [
+    "crs_notes",
     "dropped_kinds",
     "georeference",
     "input_kinds",
     "is_geographic",
     "output_notes",
     "same_family",
+    "source_crs",
     "uv_count",
 ]
 
@@ -91,9 +93,10 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
 
     spec = get_format(fmt)
     if same_family(doc, spec):
-        return list(doc.notes)
+        return list(doc.notes) + crs_notes(doc, spec, crs)
     lost = [name for name in doc.attributes if not spec.keeps(name)]
     notes = [n for n in doc.notes if not (lost and n.startswith("kept ") and "column" in n)]
+    notes = [n for n in notes if not n.endswith("waypoints as they are")] + _gpx_notes(doc, spec)
     if lost:
         notes.append(f"{spec.title} keeps no {', '.join(lost)}: not written")
     from service.io._shared.texture import keeps_uv
@@ -106,14 +109,68 @@ def output_notes(doc: GeometryDocument, fmt: str, crs: str | int | None = None) 
         what = " or ".join(_LOST[k] for k in dropped)
         notes.append(f"{spec.title} keeps no {what}: wrote the {doc.n_output} vertices as points")
     frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
-    if frame is not None and not spec.geographic_only and crs is not None:
-        notes.append(f"{spec.title} gets easting/northing in crs {crs}, not longitude/latitude")
+    if crs is not None:
+        notes += crs_notes(doc, spec, crs)
     elif frame is not None and not spec.geographic_only:  # metres about the data's centre
         notes.append(
             f"{spec.title} gets metres in the local east/north/up frame about the data's centre,"
             " not longitude/latitude (write GPX or GeoJSON to keep them)"
         )
     return notes
+
+
+def source_crs(doc: GeometryDocument) -> object | None:
+    """The ``pyproj.CRS`` a planar input declares (a LAS/LAZ CRS record), else ``None``."""
+    header = getattr(doc.layout, "header", None)
+    if header is None or not hasattr(header, "parse_crs"):
+        return None
+    from service.io.formats.las_meta import file_crs
+
+    return file_crs(header)
+
+
+def _gpx_notes(doc: GeometryDocument, spec: Format) -> list[str]:
+    """What a GPX input loses in another format: its waypoints and its points' times (issue
+    41: a LAS's gps_time is 0 for them, so say so)."""
+    gpx = getattr(doc.layout, "gpx", None)
+    if gpx is None or doc.source_format != "gpx":
+        return []
+    out = []
+    if gpx.waypoints:
+        out.append(f"{spec.title} keeps no GPX waypoints: {len(gpx.waypoints)} not written")
+    points = [p for trk in gpx.tracks for seg in trk.segments for p in seg.points]
+    points += [p for rte in gpx.routes for p in rte.points]
+    timed = sum(p.time is not None for p in points)
+    if timed:
+        out.append(f"{spec.title} gets no GPX times: the <time> of {timed} points not written")
+    return out
+
+
+def crs_notes(doc: GeometryDocument, spec: Format, crs: CrsOption) -> list[str]:
+    """The note naming the resolved EPSG of the ``crs`` option (``utm``: the zone chosen)."""
+    if crs is None or spec.geographic_only:
+        return []
+    frame = getattr(getattr(doc.layout, "frame", None), "frame", None)
+    try:
+        import pyproj
+
+        if frame is not None:
+            target = target_crs(crs, frame)
+            name = pyproj.CRS.from_user_input(target).name
+            return [f"{spec.title} gets easting/northing in {target} ({name}), not "
+                    "longitude/latitude"]  # fmt: skip
+        source = source_crs(doc)
+        if source is None:
+            return []
+        import numpy as np
+
+        pts = doc.geometry.points
+        _, georef = reproject(source, crs, np.vstack([pts.min(axis=0), pts.max(axis=0)]))
+    except (ValueError, pyproj.exceptions.CRSError):
+        return []
+    code = source.to_epsg()  # type: ignore[attr-defined]
+    was = f"EPSG:{code}" if code else str(source.name)  # type: ignore[attr-defined]
+    return [f"{spec.title} reprojected from {was} to {georef.crs} ({georef.name})"]
 
 
 def georeference(
@@ -129,11 +186,15 @@ def georeference(
     """
     geo = getattr(doc.layout, "frame", None)
     frame = getattr(geo, "frame", None)
+    source = None if frame is not None or option is None else source_crs(doc)
+    if source is not None and not spec.geographic_only:  # projected input: issue 41
+        pts, georef = reproject(source, option, plain.points)
+        return replace(plain, points=pts, normals=None, georef=georef, moved=True)
     if option is not None and (frame is None or spec.geographic_only or same_family(doc, spec)):
         where = "longitude/latitude" if spec.geographic_only else "planar coordinates"
         raise ValueError(
-            "crs applies to geographic input (GPX, GeoJSON) written to a projected format;"
-            f" this {spec.title} output gets {where}"
+            "crs applies to input whose CRS is known (a LAS/LAZ CRS record, or geographic input:"
+            f" GPX, GeoJSON) written to a projected format; this {spec.title} output gets {where}"
         )
     if frame is None or spec.geographic_only or same_family(doc, spec):
         return plain

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from service.io.errors import FormatError
+from service.workflows.provenance import stamp_bytes, stamp_file
 from service.workflows.unchanged import (
     CONVERTED,
     COPIED,
@@ -241,6 +242,7 @@ def smooth_streamed(
             shutil.copyfile(src, tmp)
         else:
             rewrite(src, tmp, fmt, result.points)
+            stamp_file(tmp, fmt)
     if same:
         return Smoothed(marked(result, COPIED), None, fmt, fmt, streamed=True, unchanged=COPIED)
     return Smoothed(result, None, fmt, fmt, streamed=True)
@@ -372,7 +374,7 @@ def _write(
         how = CONVERTED if data is None else COPIED
         done = dataclasses.replace(done, result=marked(done.result, how), unchanged=how)
     if data is None:
-        data = encode(doc, done.output_format, points, **writing)
+        data = stamp_bytes(encode(doc, done.output_format, points, **writing), done.output_format)
     if isinstance(target, Path):
         from service.io.atomic import write_file
 

@@ -14,8 +14,10 @@ from service.cli.progress.stages import STAGES, StageDisplay
 from service.core.progress import ProgressEvent
 from tests.cli.conftest import run_cli
 
-#: Stage names in the order a default run of a noisy surface goes through them.
-ORDER = list(STAGES)
+#: Stage lines in the order a default run of a noisy surface goes through them: the names of a
+#: job's events (issue 41), the steps of ``neighborhoods`` on lines of their own.
+ORDER = ["reading", "neighborhoods", "neighborhoods: weights", "neighborhoods: noise",
+         "analysis", "search", "postprocess", "writing"]  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -30,6 +32,10 @@ def surface(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+def _shown(record: dict[str, object]) -> str:
+    return f"{record['stage']}: {record['step']}" if record["step"] else str(record["stage"])
+
+
 def _first_seen(names: list[str]) -> list[str]:
     return [n for i, n in enumerate(names) if n not in names[:i]]
 
@@ -41,13 +47,14 @@ def test_text_mode_prints_each_stage_in_order_then_the_summary(
     assert res.returncode == 0, res.stderr
     lines = res.stderr.splitlines()
     stages = [ln for ln in lines if ln.startswith("geosmooth: [")]
-    names = [ln.split("] ", 1)[1].split()[0] for ln in stages]
+    names = [ln.split("] ", 1)[1].split("  (")[0] for ln in stages]
     assert names == ORDER, res.stderr  # each stage once, in run order
-    for k, ln in enumerate(stages, 1):
-        assert ln.startswith(f"geosmooth: [{k}/7] ") and " %" in ln and ln.endswith(")"), ln
+    for ln, name in zip(stages, names, strict=True):
+        k = STAGES.index(name.split(":")[0]) + 1
+        assert ln.startswith(f"geosmooth: [{k}/6] ") and " %" in ln and ln.endswith(")"), ln
     search = [ln for ln in lines if ln.startswith("geosmooth: iteration")]
     assert search and all("lambda=" in ln and " %" in ln for ln in search)
-    assert lines.index(stages[4]) < lines.index(search[0]) < lines.index(stages[5])
+    assert lines.index(stages[5]) < lines.index(search[0]) < lines.index(stages[6])
     assert any(ln.startswith(f"geosmooth: {surface} -> ") for ln in lines)  # the summary
 
 
@@ -58,10 +65,10 @@ def test_json_mode_is_one_object_per_line(surface: Path, tmp_path: Path) -> None
     assert records[-1]["event"] == "summary" and str(surface) in records[-1]["text"]
     body = records[:-1]
     assert {r["event"] for r in body} <= {"stage", "iteration", "tick"}
-    assert _first_seen([r["stage"] for r in body]) == ORDER
-    assert [r["stage"] for r in body if r["event"] == "stage"] == ORDER
+    assert _first_seen([_shown(r) for r in body]) == ORDER
+    assert [_shown(r) for r in body if r["event"] == "stage"] == ORDER
     for r in body:
-        assert r["index"] == ORDER.index(r["stage"]) + 1 and r["stages"] == 7
+        assert r["index"] == STAGES.index(r["stage"]) + 1 and r["stages"] == 6
         assert 0.0 <= r["percent"] <= 100.0 and r["elapsed_seconds"] >= 0.0
     percents = [r["percent"] for r in body]
     assert percents == sorted(percents)
@@ -112,8 +119,8 @@ def test_ticker_updates_a_silent_stage_on_a_terminal_and_stops_on_close() -> Non
     display.close()
     updates = out.getvalue().split("\r")[1:]
     assert len(updates) >= 4  # the stage line, then one tick every 0.05 s of silence
-    assert all(u.startswith("geosmooth: [2/7] neighbourhoods") for u in updates)
-    seconds = [float(u.split()[3]) for u in updates[1:]]  # "... neighbourhoods 0.1 s (..."
+    assert all(u.startswith("geosmooth: [2/6] neighborhoods") for u in updates)
+    seconds = [float(u.split()[3]) for u in updates[1:]]  # "... neighborhoods 0.1 s (..."
     assert seconds == sorted(seconds) and seconds[-1] > seconds[0]
     assert out.getvalue().endswith("\n")  # the line ended by close()
     done = out.getvalue()
@@ -138,7 +145,20 @@ def test_steps_and_stages_map_to_the_seven_names() -> None:
     display.stage("writing")
     display.close()
     records = [json.loads(ln) for ln in out.getvalue().splitlines()]
-    assert [r["stage"] for r in records if r["event"] == "stage"] == ORDER
+    assert [_shown(r) for r in records if r["event"] == "stage"] == ORDER
     second = [r for r in records if r["event"] == "iteration"][1]
     assert (second["lambda"], second["phi"], second["relative_error"]) == (0.4, 2.0, 0.0)
     assert second["percent"] == 90.0  # the jobs' estimate: the search's slice filled
+
+
+def test_a_converged_search_prints_no_line_that_reads_as_the_last_one() -> None:
+    """Issue 41: the engine refining a converged lambda (same lambda and phi to the digits
+    shown) adds no iteration line; the summary still counts every evaluation."""
+    out = io.StringIO()
+    display = StageDisplay(out, 1e-3, tick=60.0, stages=False)
+    for k, (lam, phi) in enumerate([(0.5, 2.2), (0.4072291, 2.0000001), (0.4072302, 2.0),
+                                    (0.4072302, 1.99999993)], 1):  # fmt: skip
+        display(ProgressEvent("search", tau=2.0, iteration=k, lam=lam, phi=phi))
+    display.close()
+    lines = out.getvalue().splitlines()
+    assert [ln.split()[2] for ln in lines] == ["1", "2"] and display.calls == 4

@@ -143,7 +143,8 @@ def test_geojson_to_las_in_utm() -> None:
 def test_notes_name_the_frame() -> None:
     doc, _ = _gpx()
     assert any("local east/north/up" in n for n in output_notes(doc, "las"))
-    assert any("crs utm" in n for n in output_notes(doc, "las", crs="utm"))
+    zone = [n for n in output_notes(doc, "las", crs="utm") if "easting/northing" in n]
+    assert len(zone) == 1 and "in EPSG:326" in zone[0] and "UTM zone" in zone[0]  # issue 41
 
 
 def test_crs_is_refused_where_it_means_nothing() -> None:

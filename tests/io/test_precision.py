@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import io
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -140,3 +141,32 @@ def test_e57_from_utm_text_is_double() -> None:
     got = READERS["e57"](data).points
     assert np.max(np.abs(got - doc.geometry.points)) == 0.0
     assert io.BytesIO(data).read(8) == b"ASTM-E57"
+
+
+def test_e57_keeps_its_coordinates_precision(tmp_path: Path) -> None:
+    """Issue 41 item 8: a float32 E57 is written back float32 (its size), a double one double."""
+    import pye57
+    from pye57 import libe57
+
+    def precision(data: bytes) -> object:
+        path = tmp_path / "p.e57"
+        path.write_bytes(data)
+        e57 = pye57.E57(str(path))  # alive while its nodes are read
+        proto = libe57.StructureNode(e57.get_header(0).points.prototype())
+        found = libe57.FloatNode(proto.get("cartesianX")).precision()
+        e57.close()
+        return found
+
+    single = tmp_path / "single.e57"
+    rng = np.random.default_rng(2)
+    writer = pye57.E57(str(single), mode="w")  # pye57 writes E57_SINGLE coordinates
+    writer.write_scan_raw({f"cartesian{a}": rng.random(500) for a in "XYZ"})
+    writer.close()
+    doc = read_geometry(single.read_bytes(), "e57")
+    out = write_geometry(doc, "e57", doc.geometry.points + 0.01)
+    assert precision(out) == libe57.E57_SINGLE and len(out) == single.stat().st_size
+    double = write_geometry(read_geometry(b"500000.123 5000000.456 10.5\n" * 3 + b"1 2 3\n", "xyz"),
+                            "e57")  # fmt: skip
+    assert precision(double) == libe57.E57_DOUBLE
+    again = read_geometry(double, "e57")
+    assert precision(write_geometry(again, "e57", again.geometry.points)) == libe57.E57_DOUBLE

@@ -75,3 +75,33 @@ def test_form_generated_from_schema_shapes(browsing: Browsing, web_server: WebSe
     assert out["groups"] == [1, 3]  # the alternatives (default null) first, then the rest
     assert "neighbours" in out["help"] and "≥ 3" in out["help"] and "default 12" in out["help"]
     browsing.assert_offline()
+
+
+BBOX_AND_LABELS = """async () => {
+  const { bboxText } = await import('/static/js/ui.js');
+  const { LABELS } = await import('/static/js/schemaform.js');
+  const labels = [...document.querySelectorAll('#params-section label.label')]
+    .map((l) => l.textContent);
+  return {
+    utm: bboxText({ min: [500000.009, 5000000.003, 9.161], max: [500110.0, 5000109.997, 10.842] }),
+    small: bboxText({ min: [-1, 0, 0.5], max: [1, 2, 1.5] }),
+    labels, tau: LABELS.tau,
+  };
+}"""
+
+
+def test_utm_bounds_show_the_offset_once_and_labels_are_words(
+    browsing: Browsing, web_server: WebServer
+) -> None:
+    """Issue 41 item 7: a 110 m UTM extent reads as ranges about a round offset, not
+    "[500,000, 5.001e+5]"; the form's labels are words with units, not "Lam", "Tau"."""
+    page = browsing.page
+    page.goto(f"{web_server.url}/")
+    page.wait_for_selector("body[data-ready=true]")
+    out = page.evaluate(BBOX_AND_LABELS)
+    assert out["utm"] == (
+        "offset (500,000, 5,000,000, 0); [0.009, 110] × [0.003, 110] × [9.161, 10.84]"
+    ), out["utm"]
+    assert out["small"] == "[-1, 1] × [0, 2] × [0.5, 1.5]"
+    assert "τ: deviation budget (units²)" in out["labels"] and "Tau" not in out["labels"]
+    assert "Lam" not in out["labels"] and out["tau"] == "τ: deviation budget (units²)"

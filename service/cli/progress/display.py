@@ -61,6 +61,23 @@ class ProgressDisplay:
         self.calls = 0
         self.last_iteration = 0
         self._width = 0
+        self._shown: tuple[str, str] | None = None
+        self.tolerance: float | None = None  # the search's, when known
+        self._converged = False
+
+    def repeats(self, lam: float, phi: float) -> bool:
+        """Whether the line of ``(lam, phi)`` would tell nothing new: it reads as the line
+        shown last (same lambda and phi to the digits shown), or the search had converged
+        (relative error within the tolerance) and still has (the engine refining lambda).
+        Such lines are not printed, so a converged search prints no further iterations
+        (issue 41); the summary still counts every evaluation."""
+        shown = (fmt_g(lam), fmt_g(phi))
+        rel = None if not self.tau else abs(phi - self.tau) / self.tau
+        converged = rel is not None and self.tolerance is not None and rel <= self.tolerance
+        if self._shown == shown or (converged and self._converged):
+            return True
+        self._shown, self._converged = shown, converged
+        return False
 
     def line(self, iteration: int, lam: float, phi: float) -> str:
         """The text shown for one iteration (without line ending).
@@ -96,7 +113,7 @@ class ProgressDisplay:
             self.tau = tau
         self.calls += 1
         self.last_iteration = max(self.last_iteration, iteration)
-        if not self.enabled:
+        if not self.enabled or self.repeats(lam, phi):
             return
         self.put(self.line(iteration, lam, phi))
 
@@ -133,6 +150,9 @@ class ProgressDisplay:
 
     def expect(self, seconds: float) -> None:
         """The engine's model of the run's time (used by the stage lines only)."""
+
+    def sized(self, n: int) -> None:
+        """The input's point count, once read (the stage lines' progress model)."""
 
     def close(self) -> None:
         """The run is over (or failed): end the terminal line."""

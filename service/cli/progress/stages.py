@@ -35,22 +35,17 @@ from typing import TYPE_CHECKING, Any, TextIO
 from service.cli.progress.display import ProgressDisplay
 
 if TYPE_CHECKING:
-    from service.core.progress import ProgressEvent
+    from service.core.progress import ProgressEvent, ProgressModel
 
 __all__ = ["LOG_TICK", "STAGES", "STAGES_FROM_BYTES", "TICK", "StageDisplay", "display_for"]
 
-#: The stages of ``smooth`` in run order (the names on stderr).
-STAGES = ("read", "neighbourhoods", "weights", "noise", "search", "finish", "write")
-#: Engine / use-case stage -> stage shown (``analysis``: tau is known, the search starts).
-_SHOWN = {
-    "reading": "read",
-    "neighborhoods": "neighbourhoods",
-    "laplacian": "neighbourhoods",
-    "analysis": "search",
-    "search": "search",
-    "postprocess": "finish",
-    "writing": "write",
-}
+#: The stages of ``smooth`` in run order: the names a job's events and ``GET /v1/jobs/{id}``
+#: give (:data:`service.core.progress.STAGES`, issue 41), less ``queued`` and ``done`` and the
+#: ``laplacian`` the engine builds inside ``neighborhoods``. The engine's ``step`` inside
+#: ``neighborhoods`` (``weights``, ``noise``) is shown as ``neighborhoods: weights``.
+STAGES = ("reading", "neighborhoods", "analysis", "search", "postprocess", "writing")
+#: Stages the display folds into the one before (no event of their own in a run).
+_FOLDED = {"laplacian": "neighborhoods"}
 #: Seconds between updates on a terminal and in JSON mode while a stage is silent.
 TICK = 1.0
 #: The same into a file or pipe (plain lines: a log is not flooded).
@@ -115,6 +110,7 @@ class StageDisplay(ProgressDisplay):
         super().__init__(stream, enabled=enabled, tty=False if json_lines else tty)
         self.stages = stages or json_lines
         self.json_lines = json_lines
+        self.tolerance = tolerance
         self.interval = tick if tick is not None else (TICK if self.tty or json_lines else LOG_TICK)
         if self.stages:  # the jobs' package only when the stages are shown
             from service.jobs.progress import ProgressTracker
@@ -123,21 +119,41 @@ class StageDisplay(ProgressDisplay):
         self._t0 = time.perf_counter()
         self._lock = threading.RLock()
         self._stage: str | None = None
+        self._base: str | None = None  # the stage of STAGES (without the step)
         self._stage_t0 = self._t0
         self._last_out = self._t0
         self._data: dict[str, Any] = {}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._expected: tuple[float, float] | None = None  # (model seconds, clock at start)
+        self._model: ProgressModel | None = None
+        self._phases: list[tuple[str, float]] = []  # (phase, elapsed) entered so far
+
+    def sized(self, n: int) -> None:
+        """The input's point count: from now on the percent and the time left are the
+        measured cost model's (:class:`service.core.progress.ProgressModel`, issue 41)."""
+        from service.core.progress import ProgressModel
+
+        with self._lock:
+            self._model = ProgressModel(n)
+            for phase, at in self._phases:
+                self._model.enter(phase, at)
 
     def expect(self, seconds: float) -> None:
         """The engine's model of the run's time (from now on), for the estimate before the
         search."""
         self._expected = (float(seconds), time.perf_counter())
 
+    def _percent(self, now: float) -> float:
+        if self._model is not None:
+            return round(self._model.percent(now - self._t0), 2)
+        return float(self._data.get("percent") or 0.0)
+
     def _eta_seconds(self, now: float) -> float | None:
+        if self._model is not None:
+            return self._model.eta(now - self._t0)
         eta = self._data.get("eta_seconds")
-        before = self._stage in ("read", "neighbourhoods", "weights", "noise")
+        before = self._base in ("reading", "neighborhoods")
         if before and self._expected is not None:
             seconds, start = self._expected
             return max(seconds - (now - start), 0.0)
@@ -160,19 +176,31 @@ class StageDisplay(ProgressDisplay):
             return
         if event.tau is not None:
             self.tau = event.tau
-        shown = event.step or _SHOWN.get(event.stage)
+        base = _FOLDED.get(event.stage, event.stage)
+        shown: str | None = f"{base}: {event.step}" if event.step else base
+        if base not in STAGES:
+            shown = None
         with self._lock:
             now = time.perf_counter()
+            from service.core.progress import phase_of
+
+            phase = phase_of(event.stage, event.step)
+            if phase is not None:
+                self._phases.append((phase, now - self._t0))
+                if self._model is not None:
+                    self._model.enter(phase, now - self._t0)
             timed = dataclasses.replace(event, elapsed=now - self._t0)  # reading included
             self._data = self._tracker.update(timed)
             if shown is not None and shown != self._stage:
                 self.finish()  # a terminal keeps the stage just ended on its own line
                 self._stage, self._stage_t0 = shown, now
+                self._base = base
                 self._out("stage", now)
             if event.lam is not None and event.phi is not None:
                 self.calls += 1
                 self.last_iteration = max(self.last_iteration, event.iteration)
-                self._out("iteration", now)
+                if self.json_lines or not self.repeats(event.lam, event.phi):  # data: every one
+                    self._out("iteration", now)
         self._start_ticker()
 
     # -- output -----------------------------------------------------------------------------
@@ -180,15 +208,17 @@ class StageDisplay(ProgressDisplay):
         """The JSON object of one line: ``event`` (``stage``, ``iteration``, ``tick``), the
         stage shown and its number, the clocks and the jobs' progress numbers."""
         d = self._data
-        stage = self._stage or ""
+        stage = self._base or ""
+        step = (self._stage or "").partition(": ")[2] or None
         return {
             "event": kind,
             "stage": stage,
+            "step": step,
             "index": STAGES.index(stage) + 1 if stage in STAGES else None,
             "stages": len(STAGES),
             "elapsed_seconds": round(now - self._t0, 3),
             "stage_seconds": round(now - self._stage_t0, 3),
-            "percent": d.get("percent"),
+            "percent": self._percent(now),
             "eta_seconds": None if (eta := self._eta_seconds(now)) is None else round(eta, 3),
             "iteration": d.get("iteration", 0),
             "lambda": d.get("lambda") if kind == "iteration" else None,
@@ -200,9 +230,9 @@ class StageDisplay(ProgressDisplay):
     def text(self, kind: str, now: float) -> str:
         """The text of one line (without line ending)."""
         d = self._data
-        where = f"[{STAGES.index(self._stage) + 1}/{len(STAGES)}] " if self._stage in STAGES else ""
+        where = f"[{STAGES.index(self._base) + 1}/{len(STAGES)}] " if self._base in STAGES else ""
         eta = _eta(self._eta_seconds(now))
-        clock = f"{now - self._t0:.1f} s, {d.get('percent', 0.0):.0f} %{eta}"
+        clock = f"{now - self._t0:.1f} s, {self._percent(now):.0f} %{eta}"
         if kind == "iteration" and d.get("lambda") is not None and d.get("phi") is not None:
             line = self.line(int(d.get("iteration", 0)), float(d["lambda"]), float(d["phi"]))
             return f"{line}  ({clock})"

@@ -31,7 +31,7 @@ import numpy as np
 if TYPE_CHECKING:
     from service.io._shared.geo import LocalFrame
 
-__all__ = ["CrsOption", "Georef", "project", "target_crs", "utm_epsg"]
+__all__ = ["CrsOption", "Georef", "epsg_of", "project", "reproject", "target_crs", "utm_epsg"]
 
 CrsOption = str | int | None
 
@@ -101,9 +101,14 @@ def utm_epsg(lon: float, lat: float) -> int:
 
 def target_crs(option: CrsOption, frame: LocalFrame) -> str:
     """``"EPSG:<code>"`` of the ``crs`` option (``ValueError`` for anything else)."""
+    return epsg_of(option, frame.lon0, frame.lat0)
+
+
+def epsg_of(option: CrsOption, lon0: float, lat0: float) -> str:
+    """``"EPSG:<code>"`` of the ``crs`` option, ``"utm"`` being the zone of ``(lon0, lat0)``."""
     text = str(option).strip()
     if text.lower() == "utm":
-        return f"EPSG:{utm_epsg(frame.lon0, frame.lat0)}"
+        return f"EPSG:{utm_epsg(lon0, lat0)}"
     code = text.upper().removeprefix("EPSG:")
     if not code.isdigit():
         raise ValueError(
@@ -128,3 +133,26 @@ def project(target: str, lon: Any, lat: Any, ele: Any) -> tuple[Any, str]:
     if not np.isfinite(pts).all():
         raise ValueError(f"crs {target} ({crs.name}) cannot hold these points (outside its area)")
     return pts, str(crs.name)
+
+
+def reproject(source: Any, option: CrsOption, points: Any) -> tuple[Any, Georef]:
+    """Points of a projected (or geographic) CRS ``source`` (a ``pyproj.CRS``, e.g. a LAS file's)
+    in the projected CRS of the ``crs`` option, like PDAL's ``filters.reprojection`` with the
+    file's ``a_srs`` and ``out_srs``: x, y transformed (pyproj, ``always_xy``), z as read.
+    ``"utm"`` is the WGS84 UTM zone of the points' centre. Returns the points and the
+    :class:`Georef` naming the resolved EPSG (``ValueError`` for a CRS that cannot hold them)."""
+    import pyproj
+
+    pts = np.asarray(points, dtype=np.float64)
+    centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
+    to_wgs = pyproj.Transformer.from_crs(source, "EPSG:4326", always_xy=True)
+    lon0, lat0 = (float(v) for v in to_wgs.transform(centre[0], centre[1]))
+    target = epsg_of(option, lon0, lat0)
+    crs = pyproj.CRS.from_user_input(target)
+    if not crs.is_projected:
+        raise ValueError(f"crs {target} ({crs.name}) is not a projected CRS")
+    x, y = pyproj.Transformer.from_crs(source, crs, always_xy=True).transform(pts[:, 0], pts[:, 1])
+    out = np.column_stack([x, y, pts[:, 2:]])
+    if not np.isfinite(out).all():
+        raise ValueError(f"crs {target} ({crs.name}) cannot hold these points (outside its area)")
+    return out, Georef(target, (lon0, lat0, 0.0), str(crs.name))

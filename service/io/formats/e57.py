@@ -14,10 +14,13 @@ Writing
 A document read from E57 is written as the same scans (names, poses, fields) with each valid
 point moved back into its scan's frame; spherical scans are written as cartesian ones. Other
 documents become one scan (``intensity``, ``red green blue`` attributes as E57 fields).
-Coordinates are written as double-precision floats (``E57_DOUBLE``): pye57 0.4 hard-codes
-``E57_SINGLE`` for its point prototype, which moved georeferenced points (5.6e6 m) by up to
-0.25 m, so the write runs with pye57's ``libe57`` module seen through a proxy whose
-``E57_SINGLE`` is ``E57_DOUBLE`` (nothing else changes; the buffers were double already).
+Coordinates keep the input's precision (issue 41): single-precision coordinate fields stay
+``E57_SINGLE`` (a float32 scan is not written at twice its size); anything else (double
+fields, scaled integers, another format's float64 coordinates) is written as double-precision
+floats (``E57_DOUBLE``): pye57 0.4 hard-codes ``E57_SINGLE`` for its point prototype, which
+moved georeferenced points (5.6e6 m) by up to 0.25 m, so that write runs with pye57's
+``libe57`` module seen through a proxy whose ``E57_SINGLE`` is ``E57_DOUBLE`` (nothing else
+changes; the buffers were double already).
 libE57 needs a real file, so bytes go through a temporary file.
 """
 
@@ -45,6 +48,7 @@ from service.io.source import Source
 __all__ = ["E57Layout", "read_e57", "write_e57"]
 
 _XYZ = ("cartesianX", "cartesianY", "cartesianZ")
+_SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
 _ATTRS = ("intensity", "colorRed", "colorGreen", "colorBlue", "rowIndex", "columnIndex")
 
 
@@ -96,11 +100,26 @@ def _scan(e57: Any, i: int) -> tuple[Any, dict[str, Any], NDArray[np.float64]]:
     return header, raw, xyz
 
 
+def _single(header: Any) -> bool:
+    """Whether a scan's coordinate fields are all single-precision floats."""
+    from pye57 import libe57
+
+    try:
+        proto = libe57.StructureNode(header.points.prototype())
+        names = [c for c in (*_XYZ, *_SPHERICAL) if proto.isDefined(c)]
+        return bool(names) and all(
+            libe57.FloatNode(proto.get(c)).precision() == libe57.E57_SINGLE for c in names
+        )
+    except Exception:  # a scaled-integer or unusual field: not single floats
+        return False
+
+
 def read_e57(source: Source, *, weld: bool = False) -> GeometryDocument:
     """Read every scan of an E57 file (see the module docstring)."""
     import pye57
 
     scans = []
+    single = True
     parts: list[NDArray[np.float64]] = []
     with source.as_path(".e57") as path:
         try:
@@ -108,6 +127,7 @@ def read_e57(source: Source, *, weld: bool = False) -> GeometryDocument:
             count = e57.scan_count
             for i in range(count):
                 header, raw, xyz = _scan(e57, i)
+                single = single and _single(header)
                 rot = np.asarray(header.rotation, dtype=np.float64)
                 trans = np.asarray(header.translation, dtype=np.float64)
                 valid: NDArray[np.bool_] = np.asarray(np.isfinite(xyz).all(axis=1))
@@ -133,7 +153,9 @@ def read_e57(source: Source, *, weld: bool = False) -> GeometryDocument:
     notes = [f"{len(scans)} E57 scans, {sum(len(p) for p in parts)} valid points"]
     doc = assemble(np.concatenate(parts), fmt="e57", notes=notes, weld=weld)
     return doc.with_extras(
-        attributes=attributes, precision=Precision("float32"), layout=E57Layout(scans)
+        attributes=attributes,
+        precision=Precision("float32" if single else "float64"),
+        layout=E57Layout(scans),
     )
 
 
@@ -199,7 +221,8 @@ def write_e57(plain: PlainDocument, out: BinaryIO) -> None:
     os.unlink(name)
     try:
         e57 = pye57.E57(name, mode="w")
-        with _double_coordinates():
+        double = plain.coordinate_dtype() != np.float32
+        with _double_coordinates() if double else contextlib.nullcontext():
             for scan_name, rot, trans, data in _scans_of(plain):
                 e57.write_scan_raw(data, name=scan_name, rotation=rot, translation=trans)
         e57.close()

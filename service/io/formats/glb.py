@@ -36,7 +36,7 @@ from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
 from service.io._shared.texture import corner_uvs, split_at_seams
 from service.io.document import GeometryDocument, Precision
-from service.io.errors import FormatError
+from service.io.errors import FormatError, MissingDependency
 from service.io.source import Source
 
 __all__ = ["GlbLayout", "read_glb", "write_glb"]
@@ -57,6 +57,8 @@ def _load(data: bytes) -> Any:
         raise FormatError("not a GLB file (no 'glTF' magic)", fmt="glb")
     try:
         return trimesh.load(io.BytesIO(data), file_type="glb", process=False, force="scene")
+    except ImportError as exc:  # the server's installation, not the file (issue 41)
+        raise MissingDependency.of(exc, "glb") from exc
     except Exception as exc:  # trimesh raises many kinds on bad input; report one line
         text = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise FormatError(f"GLB: {text}", fmt="glb") from None
@@ -120,6 +122,8 @@ def _bytes(colors: NDArray[Any]) -> NDArray[np.uint8]:
 def _export(scene: Any) -> bytes:
     try:
         data = scene.export(file_type="glb")
+    except ImportError as exc:  # the server's installation, not the file (issue 41)
+        raise MissingDependency.of(exc, "glb") from exc
     except Exception as exc:
         text = " ".join(str(exc).split())[:200]
         raise FormatError(f"GLB export failed: {text}", fmt="glb") from None

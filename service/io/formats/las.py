@@ -39,7 +39,7 @@ from service.io._shared.assemble import assemble
 from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
-from service.io.errors import FormatError
+from service.io.errors import FormatError, MissingDependency
 from service.io.limits import check_points
 from service.io.source import Source
 
@@ -73,6 +73,8 @@ def _laspy_errors(fmt: str) -> Any:
         raise
     except MemoryError:
         raise
+    except ImportError as exc:  # the server's installation, not the file (issue 41)
+        raise MissingDependency.of(exc, fmt) from exc
     except Exception as exc:  # laspy and lazrs raise many kinds on bad files; report one line
         text = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise FormatError(f"{fmt.upper()}: {text}", fmt=fmt) from None
@@ -229,8 +231,8 @@ def _scaled(values: NDArray[np.float64], scale: float, offset: float, axis: str)
 def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: bool) -> None:
     import laspy
 
-    header = layout.header
     pts = plain.points
+    header = layout.header if plain.georef is None else _reprojected(layout.header, plain)
     with (
         _laspy_errors("las"),
         layout.source.open() as fh,
@@ -240,6 +242,10 @@ def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: 
         at = 0
         for chunk in reader.chunk_iterator(CHUNK):
             k = len(chunk)
+            if header is not layout.header:  # new offsets: the record scaled by the new header
+                chunk = laspy.ScaleAwarePointRecord(
+                    chunk.array, header.point_format, header.scales, header.offsets
+                )
             if "classification" in plain.attributes:  # outliers flagged as class 7 (issue 31)
                 chunk["classification"] = plain.attributes["classification"][at : at + k]
             if plain.moved:
@@ -250,6 +256,16 @@ def _restream(plain: PlainDocument, layout: LasLayout, out: BinaryIO, compress: 
             at += k
         if header.evlrs:
             writer.write_evlrs(header.evlrs)
+
+
+def _reprojected(header: Any, plain: PlainDocument) -> Any:
+    """The input's header for the reprojected points of ``plain`` (:mod:`.las_meta`)."""
+    import pyproj
+
+    from service.io.formats.las_meta import reprojected_header
+
+    crs = pyproj.CRS.from_user_input(plain.georef.crs)
+    return reprojected_header(header, crs, as_xyz(plain.points, "las"))
 
 
 def _new_header(plain: PlainDocument) -> Any:

@@ -9,7 +9,7 @@ import { ProgressView } from "./progress.js";
 import { JobList } from "./jobs.js";
 import { clearReport, enableDownloads, showReport } from "./results.js";
 import { loadResultView, showInputView } from "./compare.js";
-import { $, clearErrors, fillTable, fmt, showProblem } from "./ui.js";
+import { $, bboxText, clearErrors, fillTable, fmt, showProblem } from "./ui.js";
 
 const state = { config: null, form: null, input: null, job: null };
 const FINAL = new Set(["succeeded", "failed", "cancelled"]);
@@ -130,7 +130,7 @@ function useButton(name, value) {
 
 function showInfo(info, name) {
   const box = info.bbox || { min: [], max: [] };
-  const bbox = box.min.map((lo, d) => `[${fmt(lo)}, ${fmt(box.max[d])}]`).join(" × ");
+  const bbox = bboxText(box);
   const rows = [
     ["kind", info.kind, "points", fmt(info.n_points)],
     ["dimension", `${info.dimension}-D`, info.kind === "mesh" ? "faces" : "polylines", fmt(info.kind === "mesh" ? info.n_faces : info.n_polylines)],

@@ -81,6 +81,45 @@ function control(name, prop, root) {
   return { node: input, read: () => input.value || null, write: (v) => { input.value = v ?? ""; } };
 }
 
+/**
+ * Human labels with units for the parameters (issue 41: not the schema's "Lam", "Tau"); a
+ * parameter not named here keeps the schema's title. "units" are the input's coordinate units
+ * (metres for GPX/GeoJSON and projected scans).
+ */
+export const LABELS = {
+  tau: "τ: deviation budget (units²)",
+  rms: "RMS displacement (units)",
+  lam: "λ: smoothing weight",
+  laplacian: "Laplacian",
+  weights: "neighbour weights",
+  neighborhood: "point neighbourhoods",
+  k: "k: neighbours",
+  sigma_h: "σ_h: Laplacian regularisation",
+  sigma_f: "σ_f: feature scale",
+  robust: "robust (outlier-resistant) weights",
+  noise_weights: "weights from the noise",
+  outliers: "outliers",
+  tolerance: "relative tolerance of τ",
+  max_iterations: "maximum λ iterations",
+  fix_boundary: "hold the boundary fixed",
+  preserve_volume: "preserve the volume",
+  solver: "linear solver",
+  search: "λ search",
+  method: "method",
+  order: "order",
+  spectrum: "spectrum report",
+  displacement: "displacement",
+  tangential: "tangential step",
+  presmooth: "pre-smoothing passes",
+  junctions: "curve junctions",
+  ends: "curve ends",
+  boundary: "boundary",
+  max_deviation: "maximum deviation (units)",
+  strict: "strict: fail on shape loss",
+  tile_points: "points per tile",
+  preset: "preset",
+};
+
 export class SchemaForm {
   /**
    * @param {HTMLElement} container where the fields go
@@ -110,7 +149,7 @@ export class SchemaForm {
     if (def !== undefined) c.write(def);
     const { alts } = variants(prop, this.root);
     const bounds = alts.map(describeBounds).filter(Boolean).join("; ");
-    const label = el("label", { class: "label", for: `param-${name}`, text: prop.title || name });
+    const label = el("label", { class: "label", for: `param-${name}`, text: LABELS[name] || prop.title || name });
     const help = el("div", { class: "help", text: [prop.description, bounds && `(${bounds})`,
       def !== undefined && def !== null ? `default ${def}` : ""].filter(Boolean).join(" ") });
     const range = el("span", { class: "range", "data-range-for": name });

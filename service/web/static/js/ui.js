@@ -13,6 +13,23 @@ export function fmt(v, digits = 4) {
   return a !== 0 && (a < 1e-3 || a >= 1e5) ? v.toExponential(digits - 1) : String(Number(v.toPrecision(digits)));
 }
 
+/**
+ * A bounding box readable at any magnitude (issue 41): when an axis lies far from 0 against
+ * its extent (UTM eastings, 5e5 m for a 110 m scan), a round offset is shown once and the
+ * ranges about it: "offset (500,000, 5,000,000, 0); [0.01, 110] × [0, 110] × [9.2, 10.8]".
+ */
+export function bboxText(box) {
+  const lo = box.min || [], hi = box.max || [];
+  const offsets = lo.map((l, d) => {
+    const ext = Math.abs(hi[d] - l);
+    if (!Number.isFinite(l) || Math.abs(l) < 1000 * Math.max(ext, 1e-9)) return 0;
+    const step = 10 ** Math.ceil(Math.log10(Math.max(ext, 1e-9)) + 1); // a round value below lo
+    return Math.floor(l / step) * step;
+  });
+  const ranges = lo.map((l, d) => `[${fmt(l - offsets[d])}, ${fmt(hi[d] - offsets[d])}]`).join(" × ");
+  return offsets.some((o) => o !== 0) ? `offset (${offsets.map((o) => fmt(o)).join(", ")}); ${ranges}` : ranges;
+}
+
 export function seconds(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return "–";
   return s < 1 ? `${(s * 1000).toFixed(0)} ms` : s < 120 ? `${s.toFixed(2)} s` : `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
