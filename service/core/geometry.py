@@ -212,8 +212,8 @@ def mean_spacing(geometry: Geometry) -> float:
     else:
         if geometry.n < 2:
             return 0.0
-        from scipy.spatial import cKDTree  # here: importing a Geometry stays scipy-free
+        from service.core.operator.knn import tree_knn  # here: a Geometry stays scipy-free
 
-        d, _ = cKDTree(P).query(P, k=2)
+        d, _ = tree_knn(P, 2, np.arange(geometry.n))  # coincident points collapsed (issue 42)
         return float(np.mean(d[:, 1]))
     return float(np.mean(np.linalg.norm(P[e[:, 0]] - P[e[:, 1]], axis=1)))
