@@ -92,7 +92,8 @@ def _local_copies(A: sp.csr_matrix) -> tuple[Any, ...] | None:
         return None
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-    perm = reverse_cuthill_mckee((A + A.T).tocsr(), symmetric_mode=True).astype(np.int64)
+    # A's own pattern (nearly symmetric; any order gives the same products): no A + A^T (0.5 s)
+    perm = reverse_cuthill_mckee(A, symmetric_mode=True).astype(np.int64)
     inv = np.empty_like(perm)
     inv[perm] = np.arange(m)
     return perm, inv, _renamed(A, perm, inv), _renamed(A.T.tocsr(), perm, inv)
