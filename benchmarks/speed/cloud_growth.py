@@ -12,6 +12,7 @@ Usage: ``python -m benchmarks.speed.cloud_growth [--sizes 100000,1000000] [--out
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import subprocess
@@ -73,6 +74,7 @@ def run_size(n: int) -> dict[str, Any]:
                    "input": _rms(np.linalg.norm(g.points - truth, axis=1))},
         "outliers": report.get("outlier_count"), "solver": res.solver,
         "matvecs": res.matvecs, "profile": _profile_stages(prof),
+        "points_sha256": hashlib.sha256(np.ascontiguousarray(res.points).tobytes()).hexdigest(),
         "open3d_estimate_normals_cpu": _open3d_normals(g.points),
     }  # fmt: skip
 

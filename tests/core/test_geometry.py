@@ -12,6 +12,7 @@ from service.core import (
     InvalidShape,
     NonFiniteCoordinates,
 )
+from service.core.geometry import mean_spacing
 
 
 def test_kinds_and_dtypes() -> None:
@@ -91,3 +92,17 @@ def test_weights_and_fixed() -> None:
     with pytest.raises(IndexOutOfRange) as info:
         Geometry(np.zeros((2, 3)), fixed=[0, 2])
     assert info.value.field == "geometry.fixed"
+
+
+def test_mean_spacing_of_a_cloud_with_thousands_of_copies() -> None:
+    """20,000 copies of two points beside 2,000 distinct ones (issue 42 item 5): the copies'
+    nearest other point is at 0, the rest's by brute force; no quadratic k-d tree search."""
+    rng = np.random.default_rng(4)
+    Q = rng.normal(size=(2000, 3))
+    P = np.vstack([Q, np.repeat(Q[:2], 10000, axis=0)])[rng.permutation(22000)]
+    D = np.linalg.norm(Q[:, None] - Q[None], axis=2)
+    np.fill_diagonal(D, np.inf)
+    nearest = D.min(axis=1)
+    nearest[:2] = 0.0  # the copied points
+    expected = np.sum(nearest[2:]) / 22000  # 20,002 points at 0
+    assert mean_spacing(Geometry(P)) == pytest.approx(expected, rel=1e-12)

@@ -25,10 +25,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from service.core.geometry import Geometry
-from service.core.operator.knn import GRID_FROM
+from service.core.operator.knn import GRID_FROM, tree_knn
 
 __all__ = [
     "COMPILED_FROM",
@@ -171,8 +170,7 @@ def point_neighbours(
         rows, nbr = curve_neighbours(geometry, k + 1, np.arange(n))
         if rows.size == n:
             return _self_first(nbr, np.arange(n))
-    _, nbr = cKDTree(P).query(P, k=min(k + 1, n))
-    nbr = np.asarray(nbr, dtype=np.int64).reshape(n, -1)
+    _, nbr = tree_knn(P, k + 1, np.arange(n))  # coincident points collapsed (issue 42)
     return _self_first(nbr, np.arange(n))
 
 

@@ -10,6 +10,11 @@ its ``3^s`` block, each point's ``k`` nearest by insertion into a sorted list. A
 is answered by the k-d tree, so the result is exact: the same neighbour sets as the k-d tree
 (ties at equal distance aside), each row sorted by distance, the point itself first (coincident
 points: in index order).
+
+Coincident points cost both searches the square of their number (issue 42: 160K copies of one
+point took 141 s). When copies would cost more than the search itself (the sum of the squared
+multiplicities above :data:`COPIES_COST` ``k n``), the distinct points are searched instead and
+each row is filled from their copies (:func:`_collapsed`): ``O(n log n)``, and still exact.
 """
 
 from __future__ import annotations
@@ -21,11 +26,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["GRID_FROM", "grid_knn", "knn", "nearest", "release"]
+__all__ = ["COPIES_COST", "GRID_FROM", "grid_knn", "knn", "nearest", "release", "tree_knn"]
 
 Array = NDArray[np.float64]
 #: Below this many points the k-d tree is as fast (and the grid's set-up is not worth it).
 GRID_FROM = 50_000
+#: Coincident points are collapsed when the sum of their squared multiplicities exceeds this
+#: many times ``k n`` (a search's own cost); below it the outputs stay those of the plain search.
+COPIES_COST = 4
 
 
 def knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
@@ -34,7 +42,7 @@ def knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
     n, s = P.shape
     k = min(k, n)
     if n < GRID_FROM or s != 3 or k < 2:
-        return _tree(P, k, np.arange(n))
+        return tree_knn(P, k, np.arange(n))
     return grid_knn(P, k)
 
 
@@ -42,8 +50,8 @@ def grid_knn(P: Array, k: int) -> tuple[Array, NDArray[np.int64]]:
     """:func:`knn` on the uniform grid whatever the size (3-D points, ``2 <= k <= n``)."""
     n = P.shape[0]
     grid = _grid(P, k)
-    if grid is None:
-        return _tree(P, k, np.arange(n))
+    if grid is None or (_clumped(grid[4], k) and _heavy(P, k)):
+        return tree_knn(P, k, np.arange(n))
     S, lo, h, order, starts, cells, _ = grid
     dist = np.empty((n, k))
     idx = np.empty((n, k), dtype=np.int64)
@@ -68,9 +76,75 @@ def nearest(
     n, s = P.shape
     k = min(k, n)
     grid = _grid(P, cell_k) if n >= GRID_FROM and s == 3 and k >= 2 else None
-    if grid is None:
-        return _tree(P, k, at)
+    if grid is None or (_clumped(grid[4], cell_k) and _heavy(P, k)):
+        return tree_knn(P, k, at)
     return _widening(P, grid, at, k, 1)
+
+
+def _clumped(starts: NDArray[np.int64], k: int) -> bool:
+    """Whether the grid's cells are crowded enough (squared counts above the copies' bound)
+    to look for coincident points (the cells' counts bound the groups' from above)."""
+    counts = np.diff(starts).astype(np.float64)
+    return float(counts @ counts) > COPIES_COST * k * float(starts[-1])
+
+
+def tree_knn(P: Array, k: int, at: NDArray[np.int64]) -> tuple[Array, NDArray[np.int64]]:
+    """The ``k`` nearest of the points ``at`` by the k-d tree (``cKDTree(P).query(P[at], k)``
+    reshaped to ``(at.size, k)``), or :func:`_collapsed`'s rows when coincident points would
+    make the search quadratic."""
+    k = min(k, P.shape[0])
+    if _heavy(P, k):
+        return _collapsed(_copies(P), min(k, P.shape[0]), at)
+    return _tree(P, k, at)
+
+
+def _heavy(P: Array, k: int) -> bool:
+    """Whether ``P``'s coincident points would cost a search of ``k`` more than the search."""
+    return bool(_copies(P)[-1] > COPIES_COST * k * P.shape[0])
+
+
+#: The last two points arrays' coincident groups (``(points, their sum, groups)``, as ``_MEMO``;
+#: two: the distinct points' own search looks at theirs).
+_COPIES: list[tuple[weakref.ref[Array], float, Any]] = []
+
+
+def _copies(P: Array) -> Any:
+    """The coincident groups of ``P``: distinct points, each point's group, the groups' runs
+    in ``members`` (indices by group, in index order), the distinct points' searches so far
+    (by ``k``) and the sum of the squared group sizes; remembered for the last array."""
+    total = float(np.sum(P))
+    for ref, tot, got in _COPIES:
+        if ref() is P and (tot == total or (np.isnan(tot) and np.isnan(total))):
+            return got
+    members = np.lexsort(P.T[::-1])  # stable: a group's points in index order
+    S = P[members]
+    new = np.r_[True, np.any(S[1:] != S[:-1], axis=1)]
+    gstart = np.r_[np.flatnonzero(new), P.shape[0]].astype(np.int64)
+    inv = np.empty(P.shape[0], dtype=np.int64)
+    inv[members] = np.cumsum(new) - 1
+    sizes = np.diff(gstart).astype(np.float64)
+    got = (np.ascontiguousarray(S[new]), inv, gstart, members.astype(np.int64), {}, sizes @ sizes)
+    _COPIES[:] = [*_COPIES[-1:], (weakref.ref(P), total, got)]
+    return got
+
+
+def _collapsed(copies: Any, k: int, at: NDArray[np.int64]) -> tuple[Array, NDArray[np.int64]]:
+    """Rows for the points ``at`` from the distinct points' ``min(k, m)`` nearest (searched
+    once per ``k``): the point itself, then the copies of its distinct neighbours, nearest first
+    (each group in index order)."""
+    from service.core.operator.knn_kernels import expand_copies
+
+    U, inv, gstart, members, searched, _ = copies
+    ku = min(k, U.shape[0])
+    if ku not in searched:
+        searched[ku] = knn(U, ku) if ku > 1 else (np.zeros((U.shape[0], 1)), np.arange(
+            U.shape[0], dtype=np.int64)[:, None])  # fmt: skip
+    du, iu = searched[ku]
+    dist = np.empty((at.size, k))
+    idx = np.empty((at.size, k), dtype=np.int64)
+    expand_copies(du, np.ascontiguousarray(iu, dtype=np.int64), inv, gstart, members,
+                  np.ascontiguousarray(at, dtype=np.int64), dist, idx)  # fmt: skip
+    return dist, idx
 
 
 def _widening(
@@ -104,8 +178,9 @@ _MEMO: list[tuple[weakref.ref[Array], float, int, Any]] = []
 
 
 def release() -> None:
-    """Forget the remembered grid and tree (their memory: ~50 bytes a point)."""
+    """Forget the remembered grid, tree and coincident groups (~50 bytes a point)."""
     _MEMO.clear()
+    _COPIES.clear()
 
 
 def _remembered(P: Array, k: int, make: Any) -> Any:

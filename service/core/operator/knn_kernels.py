@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["grid_query", "query_at"]
+__all__ = ["expand_copies", "grid_query", "query_at"]
 
 Array = NDArray[np.float64]
 
@@ -177,3 +177,36 @@ def query_at(
         for t in range(filled):
             dist[q, t] = math.sqrt(max(bd[t], 0.0))
             idx[q, t] = bi[t]
+
+
+@njit(cache=True)
+def expand_copies(
+    dist_u: Array,
+    nbr_u: NDArray[np.int64],
+    inv: NDArray[np.int64],
+    gstart: NDArray[np.int64],
+    members: NDArray[np.int64],
+    at: NDArray[np.int64],
+    dist: Array,
+    idx: NDArray[np.int64],
+) -> None:  # pragma: no cover
+    """Rows of :func:`service.core.operator.knn.knn` from the distinct points' rows: point
+    ``at[r]`` first, then the copies of its distinct neighbours, nearest first, each distinct
+    point's copies in index order, until ``idx.shape[1]`` are found."""
+    k = idx.shape[1]
+    for r in range(at.size):
+        i = at[r]
+        u = inv[i]
+        idx[r, 0], dist[r, 0] = i, 0.0
+        f = 1
+        for j in range(nbr_u.shape[1]):
+            if f == k:
+                break
+            v = nbr_u[u, j]
+            for t in range(gstart[v], gstart[v + 1]):
+                p = members[t]
+                if p != i:
+                    idx[r, f], dist[r, f] = p, dist_u[u, j]
+                    f += 1
+                    if f == k:
+                        break

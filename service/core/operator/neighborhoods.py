@@ -27,7 +27,6 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from service.core._arrays import unique_keys
 
@@ -215,15 +214,12 @@ def mesh_neighborhoods(
 
 
 def _query(points: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Each point's ``k`` nearest, itself included: the grid search of
-    :func:`service.core.operator.knn.knn` (issue 30: 1M-point cloud 8.6 s -> ~1 s; the same sets
-    as the k-d tree's, ties at equal distance aside) from its size on, else the k-d tree."""
+    """Each point's ``k`` nearest, itself included: :func:`service.core.operator.knn.knn` (the
+    grid search from its size on, issue 30: 1M-point cloud 8.6 s -> ~1 s; else the k-d tree;
+    coincident points collapsed, issue 42)."""
     from service.core.operator import knn as grid
 
-    if points.shape[0] >= grid.GRID_FROM and points.shape[1] == 3:
-        return grid.knn(points, k)
-    dist, idx = cKDTree(points).query(points, k=k)
-    return np.asarray(dist).reshape(-1, k), np.asarray(idx).reshape(-1, k)
+    return grid.knn(points, k)
 
 
 def knn(points: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:

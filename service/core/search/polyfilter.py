@@ -40,11 +40,13 @@ from service.core.system.deviation import Deviation
 
 __all__ = [
     "DEGREE",
+    "MAX_WORK",
     "RESOLUTION",
     "SincFilter",
     "chebyshev_moments",
     "combine",
     "filter_system",
+    "max_degree",
     "sinc_degree",
     "sinc_deviation",
     "windowed_sinc",
@@ -55,6 +57,12 @@ Array = NDArray[np.float64]
 #: doubled (up to :data:`MAX_DEGREE`) while no pass band is narrow enough for tau.
 DEGREE = 24
 MAX_DEGREE = 768
+#: The degree's cap in unknowns: ``degree * unknowns <= MAX_WORK`` (whatever the budget: the
+#: products stay bounded; issue 39), never below ``4 DEGREE``. A 1M-vertex mesh (normal
+#: displacement) stops at 96 (95 products, the output from the kept vectors) where a budget its
+#: normal mode cannot absorb (rms 1.73 sigma on the 1M torus) doubled to 768 (1535 products,
+#: 81 s CPU); inputs up to ~130K unknowns keep :data:`MAX_DEGREE`.
+MAX_WORK = 100_000_000
 #: The degree resolves the pass band: at least ``RESOLUTION * sqrt(mu_max / mu_pb)`` (Chebyshev
 #: polynomials of degree N resolve about 1/N^2 of [-1, 1] next to its end, and the pass band of a
 #: filter in M = L^T L sits at mu_pb = k_pb^2 for a band k_pb of L). With the fixed starting
@@ -207,12 +215,22 @@ def sinc_deviation(apply_op: Callable[[Array], Array], c: Array, flt: SincFilter
     return out
 
 
-def sinc_degree(mu_pb: float, mu_max: float, start: int = DEGREE) -> int:
-    """``start`` doubled (up to :data:`MAX_DEGREE`) until it resolves the pass band ``mu_pb``:
+def max_degree(unknowns: int) -> int:
+    """The largest degree (``DEGREE`` doubled) for a system of ``unknowns`` entries of ``c``:
+    :data:`MAX_DEGREE`, or less where ``degree * unknowns`` would exceed :data:`MAX_WORK`
+    (never below ``4 DEGREE``)."""
+    cap = MAX_DEGREE
+    while cap > 4 * DEGREE and cap * unknowns > MAX_WORK:
+        cap //= 2
+    return cap
+
+
+def sinc_degree(mu_pb: float, mu_max: float, start: int = DEGREE, cap: int = MAX_DEGREE) -> int:
+    """``start`` doubled (up to ``cap``) until it resolves the pass band ``mu_pb``:
     ``degree >= RESOLUTION * sqrt(mu_max / mu_pb)``."""
     need = RESOLUTION * math.sqrt(mu_max / max(mu_pb, 1e-300 * mu_max))
     degree = start
-    while degree < need and 2 * degree <= MAX_DEGREE:
+    while degree < need and 2 * degree <= cap:
         degree *= 2
     return degree
 
@@ -232,7 +250,8 @@ def windowed_sinc(
     The degree is doubled while even the narrowest pass band deviates less than ``tau``
     (heavy smoothing needs a filter that resolves ``mu << mu_max``) or while the band found is
     narrower than the degree resolves (:func:`sinc_degree`), continuing the same
-    recurrence (``2N - 1`` products in all for degree ``2N``). With ``keep``, the
+    recurrence (``2N - 1`` products in all for degree ``2N``), up to :func:`max_degree` of
+    ``c``'s size (the band nearest tau at that degree is returned). With ``keep``, the
     Chebyshev vectors of the returned filter's degree are left in it (see
     :func:`chebyshev_moments`) while they fit in :data:`KEEP_BYTES`; else it is left empty.
 
@@ -246,6 +265,7 @@ def windowed_sinc(
     """
     if keep is not None:
         keep.clear()
+    cap = max(max_degree(c.size), degree)
     rec = _Recurrence(apply_op, c, mu_max, keep if 4 * degree * c.size <= KEEP_BYTES else None)
     while True:
         if 4 * degree * c.size > KEEP_BYTES:
@@ -253,8 +273,8 @@ def windowed_sinc(
         moments = rec.extend(max(degree - 1, 1))
         flt, phi, history = _band(moments, tau, mu_max, degree, tolerance)
         mu_pb = (flt.x_pb + 1.0) * mu_max / 2.0
-        met = phi >= tau * (1 - tolerance) and sinc_degree(mu_pb, mu_max, degree) == degree
-        if met or 2 * degree > MAX_DEGREE:
+        met = phi >= tau * (1 - tolerance) and sinc_degree(mu_pb, mu_max, degree, cap) == degree
+        if met or 2 * degree > cap:
             return flt, phi, history
         degree *= 2
 
@@ -332,7 +352,8 @@ def filter_system(
     keep: list[NDArray[np.float32]] = []
     if tau is None:
         mu_pb = min(lam if lam is not None else mu_max, mu_max)
-        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, sinc_degree(mu_pb, mu_max))
+        degree = sinc_degree(mu_pb, mu_max, cap=max_degree(c.size))
+        flt = SincFilter(2 * mu_pb / mu_max - 1, mu_max, degree)
     else:
         flt, _, _ = windowed_sinc(apply_op, c, tau, mu_max, tolerance=tolerance, keep=keep)
     # one pass of products: the output from the moments' own vectors when they were kept

@@ -34,7 +34,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from service.core.errors import ParameterError
 from service.core.geometry import Geometry
@@ -131,17 +130,18 @@ def _frames(
     X = presmooth(points, adjacency, steps)
     n = X.shape[0]
     k = min(k, n)
-    query = X if at is None else X[at]
+    m = n if at is None else len(at)
     if codim == 1 and at is None and X.shape[1] == 3 and n >= COMPILED_FRAMES_FROM:
         from service.core.system.fast_frames import surface_normals  # issue 30: closed form
 
         return surface_normals(X, k)
+    from service.core.operator.knn import tree_knn  # coincident points collapsed (issue 42)
     from service.core.operator.sized_kernels import neighbourhood_covariances
 
-    _, idx = cKDTree(X).query(query, k=k)
-    idx = np.ascontiguousarray(np.asarray(idx).reshape(query.shape[0], k), dtype=np.int64)
-    out = np.empty((query.shape[0], X.shape[1], codim))
-    for start in range(0, query.shape[0], 250000):
+    _, idx = tree_knn(X, k, np.arange(n) if at is None else np.asarray(at, dtype=np.int64))
+    idx = np.ascontiguousarray(idx, dtype=np.int64)
+    out = np.empty((m, X.shape[1], codim))
+    for start in range(0, m, 250000):
         cov = neighbourhood_covariances(X, idx[start : start + 250000])
         out[start : start + 250000] = np.linalg.eigh(cov)[1][:, :, :codim]  # ascending variance
     return out

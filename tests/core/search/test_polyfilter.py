@@ -12,8 +12,10 @@ from service.core.search.polyfilter import (
     SincFilter,
     chebyshev_moments,
     combine,
+    max_degree,
     sinc_degree,
     sinc_deviation,
+    windowed_sinc,
 )
 from tests.core.core_fixtures import noisy_icosphere
 
@@ -115,6 +117,40 @@ def test_the_degree_resolves_the_pass_band() -> None:
     assert sinc_degree(0.25, 1.0) == 24
     assert sinc_degree(1e-4, 1.0) == 384  # needs 200: 24, 48, 96, 192 are too coarse
     assert sinc_degree(1e-12, 1.0) == 768
+
+
+def test_the_degree_cap_follows_the_size_not_the_budget() -> None:
+    """degree * unknowns <= MAX_WORK (1e8), never below 96: 1M unknowns 96, 164K 384, 10K 768."""
+    assert max_degree(1_000_000) == 96
+    assert max_degree(163_842) == 384
+    assert max_degree(10_000) == 768
+    assert max_degree(10**9) == 96
+
+
+def test_a_budget_beyond_the_shape_stops_at_the_cap(monkeypatch: pytest.MonkeyPatch) -> None:
+    """tau twice phi(0) (no pass band meets it): the degree stops at the size's cap (192, then
+    96: 191, then 95 products; 768 uncapped), and phi is the dense filter's for the band
+    returned."""
+    from service.core.search import polyfilter
+
+    Mt, mu, V, c = _dense_case(5)
+    mu_max = 1.05 * mu.max()
+    w = ((V.T @ c) ** 2).sum(axis=1)
+    tau = 2.0 * float(np.sum(w / mu**2))  # phi(0): every mode removed
+    calls: list[int] = []
+
+    def op(X: np.ndarray) -> np.ndarray:
+        calls.append(1)
+        return Mt @ X
+
+    x = np.clip(2 * mu / mu_max - 1, -1, 1)
+    for cap in (192, 96):
+        monkeypatch.setattr(polyfilter, "MAX_WORK", cap * c.size)
+        calls.clear()
+        flt, phi, _ = windowed_sinc(op, c, tau, mu_max)
+        assert flt.degree == cap and len(calls) == cap - 1
+        assert phi == pytest.approx(float(np.sum(w * cheb.chebval(x, flt.q()) ** 2)), rel=1e-9)
+        assert phi < tau
 
 
 def test_a_narrow_pass_band_on_a_curve_is_the_dense_filter() -> None:
