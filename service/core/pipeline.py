@@ -56,6 +56,7 @@ from service.core.search.target import (
     check_range,
     find_lambda,
     gcv_search,
+    out_of_range,
     resolve_tau,
 )
 from service.core.system.deviation import Deviation
@@ -165,7 +166,10 @@ def tikhonov(
                 dev = Deviation(problem.system, solver=solver, order=params.order,
                                 symbolic=analysis_of)  # fmt: skip
         if search is None and one and aim.tau is not None and params.tau_rule != "gcv":
-            search = solve_tau(dev, frame.tau_in(aim.tau), params.tolerance, progress(dev))
+            try:
+                search = solve_tau(dev, frame.tau_in(aim.tau), params.tolerance, progress(dev))
+            except TauOutOfRange as exc:  # internal frame: the range's end in the input's
+                raise out_of_range(params, aim.tau, frame.phi_out(exc.tau_max)) from None
         if params.tau_rule == "gcv":
             search, aim = gcv_search(dev, problem.geometry, params, problem.fixed, frame)
         elif search is None:

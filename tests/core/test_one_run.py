@@ -275,3 +275,14 @@ def test_risk_on_a_designed_spectrum_matches_the_closed_form(k: int) -> None:
     assert rule.choice.lam == pytest.approx(best, rel=1e-2)
     y = c[:, 0] * mu ** (k - 1) / (mu + got.lam) ** k  # the exact minimiser at lambda
     assert np.linalg.norm(got.E[:, 0] - y) <= 1e-3 * np.linalg.norm(y)
+
+
+@pytest.mark.parametrize("k", [1, 2])
+def test_a_tau_above_phi0_stops_at_the_floor(k: int) -> None:
+    """tau not below phi(0): the run stops once its phi(floor) has converged, says so, and
+    reports that phi(0) (the dense one, to 1e-3), with no solution and no budget spent."""
+    s = _free(nu=16, nv=12)
+    phi0 = s.phi(s.floor, k)
+    got = one_run(s.apply, s.c, s.d, 1.5 * phi0, s.floor, order=k, budget=10)
+    assert got.at_floor and got.E is None
+    assert got.tau == pytest.approx(phi0, rel=1e-3)

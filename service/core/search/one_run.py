@@ -89,6 +89,9 @@ class OneRun:
         Both stopping rules met within ``max_steps``.
     decided_at : int
         Steps at which the rule decided lambda (0 without a rule).
+    at_floor : bool
+        tau is not below ``phi(0)``: the root stayed at the floor on a converged model
+        (``tau`` is then that model's ``phi(0)``; no solution).
     polished : int
         Products of a conjugate-gradient polish of the vectors (0: none was needed).
     """
@@ -105,6 +108,7 @@ class OneRun:
     converged: bool
     decided_at: int = 0
     polished: int = 0
+    at_floor: bool = False
 
 
 def direct_cost(size: int) -> int:
@@ -189,6 +193,7 @@ def one_run(
     decided_at = 0
     lam_g = lam_r = top(tau) if tau > 0 else lo
     trail: list[tuple[int, float]] = []
+    floor_phi: list[float] = []
     stop = ""
     check = _checkpoint(0, [], rtol)
     while run.steps < max_steps and not run.done and not stop:
@@ -205,6 +210,9 @@ def one_run(
             fixed, decided_at = rule.choice.lam, run.steps
         model = run.model(order)
         lam_g = fixed if fixed is not None else model.root(tau, lo, top(tau))
+        if fixed is None and _at_floor(model, lam_g, lo, floor_phi):
+            stop = "floor"  # tau not below phi(0): no lambda above the floor meets it
+            break
         size = math.sqrt(max(float(model.phi(lam_g)), 1e-300))
         err = model.error_bound(lam_g) / size
         trail.append((run.steps, err))
@@ -215,7 +223,8 @@ def one_run(
             lam_r = lam_g if fixed is not None else model.root(tau, lo, top(tau), radau=True)
             if abs(lam_r / lam_g - 1) <= LAMBDA_RTOL:
                 stop = "converged"
-        elif budget is not None and _over_budget(trail, rtol, run, decided_at, budget):
+        elif budget is not None and lam_g > lo and _over_budget(trail, rtol, run, decided_at,
+                                                                budget):  # fmt: skip
             stop = "budget"
     if rule is not None and fixed is None:  # max_steps before the rule decided: the last curves
         rule.update(_rules(run), order, run.steps, True)
@@ -224,11 +233,13 @@ def one_run(
         lam_g = lam_r = fixed
     model = run.model(order)
     target = float(model.phi(lam_g)) if fixed is not None else tau
+    if stop == "floor":  # the model's phi(0): what the caller reports as the range's end
+        target = floor_phi[-1]
     probes = rule.probes.products if rule is not None else 0
     products = run.products + probes
-    if stop == "budget":
+    if stop in ("budget", "floor") or (fixed is None and not lam_g > lo):
         return OneRun(lam_g, target, None, {}, math.nan, math.inf, (lam_g, lam_r), run.steps,
-                      products, False, decided_at)  # fmt: skip
+                      products, False, decided_at, 0, stop == "floor")  # fmt: skip
     if stop == "converged":  # the fewest steps whose solution meets the bound (the rule may
         # have run the recurrence past the solution's convergence: a shorter second pass)
         above = [j for j, e in trail if e > rtol]  # the last checkpoint short of the bound
@@ -236,6 +247,19 @@ def one_run(
     res = _solution(run, model, c, d, lam_g, lam_r, target, decided_at, rtol,
                     stop == "converged")  # fmt: skip
     return replace(res, products=res.products + probes)
+
+
+def _at_floor(model: TikhonovModel, lam: float, lo: float, seen: list[float]) -> bool:
+    """Whether the root sits at the floor on a converged model: ``phi(lo)`` of this checkpoint
+    within 1e-3 of the last one's (``seen`` keeps it). Then tau is not below ``phi(0)`` and the
+    run stops instead of spending its budget on a solve at the floor."""
+    if lam > lo:
+        seen.clear()
+        return False
+    phi = float(model.phi(lo))
+    last = seen[-1] if seen else None
+    seen.append(phi)
+    return last is not None and abs(phi - last) <= 1e-3 * abs(phi)
 
 
 def _rules(run: LanczosRun) -> Callable[[bool], tuple[Array, Array]]:

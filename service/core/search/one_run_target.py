@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from service.core.errors import TauOutOfRange
 from service.core.linalg.lanczos_run import LanczosRun
 from service.core.linalg.solver import Direct
 from service.core.params import SmoothingParams
@@ -207,7 +208,10 @@ def solve_tau(
     res = one_run(apply_mt, c, d, tau, dev.floor, order=dev.order,
                   ceiling=dev.system.lambda_ceiling, budget=direct_cost(dev.system.size),
                   report=report)  # fmt: skip
-    if res.E is None or not res.converged or not dev.floor < res.lam:
+    if res.at_floor:  # tau is not below phi(0) (the model's, converged)
+        raise TauOutOfRange("tau is not below phi(0)", field="params.tau", tau=tau,
+                            tau_max=float(res.tau))
+    if res.E is None or not res.converged:
         return None
     dev.adopt(res.lam, res.E)
     phi = dev(res.lam)

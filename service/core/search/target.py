@@ -39,6 +39,7 @@ __all__ = [
     "check_range",
     "find_lambda",
     "gcv_search",
+    "out_of_range",
     "phi_at_zero_of",
     "resolve_tau",
 ]
@@ -127,7 +128,8 @@ def resolve_tau(
     return Target(rms_to_tau(params.rms, free_weight(geometry, fixed)))
 
 
-def _out_of_range(params: SmoothingParams, tau: float, phi0: float) -> TauOutOfRange:
+def out_of_range(params: SmoothingParams, tau: float, phi0: float) -> TauOutOfRange:
+    """The error of a given tau (or rms) not below ``phi(0)`` (input frame)."""
     return TauOutOfRange(
         f"smoothing factor tau={tau:.6g} is out of range: it must lie in (0, {phi0:.6g}),"
         " where the upper bound phi(0) is the deviation of the fully smoothed shape",
@@ -163,7 +165,7 @@ def find_lambda(
     if params.search == "rational" or (phi0 is None and tau >= bound):
         phi0 = phi_at_zero_of(dev, op, fixed, params)
     if phi0 is not None and not 0.0 < tau < phi0:
-        raise _out_of_range(params, target.tau, frame.phi_out(phi0))
+        raise out_of_range(params, target.tau, frame.phi_out(phi0))
     if params.search == "rational":
         assert phi0 is not None
         lam0 = initial_lambda(_fro(system.explicit()), float(np.linalg.norm(system.d2)))
@@ -224,7 +226,7 @@ def check_range(
     assert target.tau is not None
     phi0 = phi_at_zero_of(dev, op, fixed, params)
     if frame.tau_in(target.tau) >= phi0:
-        raise _out_of_range(params, target.tau, frame.phi_out(phi0))
+        raise out_of_range(params, target.tau, frame.phi_out(phi0))
 
 
 def phi_at_zero_of(
