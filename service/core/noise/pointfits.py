@@ -35,6 +35,7 @@ __all__ = [
     "curve_neighbours",
     "design",
     "leave_one_out",
+    "mesh_neighbours",
     "patch_variances",
     "point_neighbours",
 ]
@@ -155,6 +156,59 @@ def curve_neighbours(
         rows.append(cols[np.lexsort((dist, -score.data[lo:hi]))[:K]])
         kept.append(at[i])
     return np.array(kept, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, K)
+
+
+#: Hops over the mesh's edges a surface neighbourhood may span (:func:`mesh_neighbours`).
+MAX_HOPS = 8
+
+
+def mesh_neighbours(
+    points: Array, faces: NDArray[np.int64], K: int, at: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The ``K`` nearest points (itself first) of each point ``at`` among those within the fewest
+    hops over the mesh's edges that reach ``K`` (issue 40): a neighbourhood that follows the
+    surface, never across a thin wall, fold or plate whose other side is nearer in space than
+    along the mesh (a 4 x 4 x 0.3 plate: the 24 nearest in space of a face's vertex take the
+    other face's; its noise read 35x the truth). Inside each hop ball the choice is by
+    distance, so long thin triangles (20:1) and fans of high valence still give neighbourhoods
+    spread over the surface. Points whose component has fewer than ``K`` points within
+    :data:`MAX_HOPS` hops are left out.
+
+    Returns the points kept (in ``at``'s order) and their neighbours, nearest first."""
+    n = points.shape[0]
+    T = np.asarray(faces, dtype=np.int64)
+    a = np.concatenate([T[:, j] for j in range(T.shape[1])])
+    b = np.concatenate([T[:, (j + 1) % T.shape[1]] for j in range(T.shape[1])])
+    A = sp.csr_matrix((np.ones(2 * a.size), (np.r_[a, b], np.r_[b, a])), shape=(n, n))
+    A = (A + sp.identity(n, format="csr")).astype(bool).astype(np.float64).tocsr()
+    live = np.arange(at.size)  # the rows still growing, and their reached sets R
+    R = sp.csr_matrix((np.ones(at.size), (live, at)), shape=(at.size, n))
+    rows = np.full((at.size, K), -1, dtype=np.int64)
+    for _ in range(MAX_HOPS):
+        R = (R @ A).astype(bool).astype(np.float64).tocsr()
+        ready = np.diff(R.indptr) >= K
+        if ready.any():
+            rows[live[ready]] = _nearest_in(points, at[live[ready]], R[ready], K)
+            live, R = live[~ready], R[~ready]
+        if live.size == 0:
+            break
+    kept = np.ones(at.size, dtype=bool)
+    kept[live] = False
+    return at[kept], rows[kept]
+
+
+def _nearest_in(
+    points: Array, centre: NDArray[np.int64], R: sp.csr_matrix, K: int
+) -> NDArray[np.int64]:
+    """Per row of ``R`` (at least ``K`` candidates for point ``centre[i]``), the ``K``
+    candidates nearest to the centre, nearest first (the centre itself first)."""
+    R = R.tocsr()
+    row = np.repeat(np.arange(R.shape[0]), np.diff(R.indptr))
+    col = R.indices.astype(np.int64)
+    dist = np.sum((points[col] - points[centre[row]]) ** 2, axis=1)
+    dist[col == centre[row]] = -1.0  # the point itself first, before coincident copies
+    order = np.lexsort((dist, row))
+    return col[order][R.indptr[:-1, None] + np.arange(K)]
 
 
 def point_neighbours(
