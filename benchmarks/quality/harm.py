@@ -7,7 +7,7 @@ to 2 edges. Per case: geosmooth's default (no smoothing parameter) against fixed
 (:class:`benchmarks.quality.targets.Issue31Scorer`) plus the issue's own numbers: boundary
 vertices' error against the input's, closed volume against the truth's, whether a volume warning
 names the wrong direction, how far apart exact duplicates end, sigma^ / sigma, and the residual
-test's back-off (``report["backoff"]``). ``--before`` puts a former run's numbers beside.
+test's back-off (the points its warning names). ``--before`` puts a former run's numbers beside.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import argparse
 import datetime as dt
 import json
 import os
+import re
 import sys
 import time
 import zlib
@@ -146,7 +147,9 @@ def run_case(key: str) -> dict[str, Any]:
     out["cpu_seconds"] = time.process_time() - t0
     rep = res.report()
     out["report"] = {k: rep.get(k) for k in ("sigma_estimate", "noise_found", "tau", "lambda",
-                                             "warnings", "backoff", "data_weights")}
+                                             "warnings", "data_weights")}
+    said = [w for w in rep.get("warnings") or [] if w.startswith("residual test:")]
+    out["backoff_points"] = int(re.search(r"at (\d+) points", said[0])[1]) if said else 0
     out["sigma_ratio"] = (rep.get("sigma_estimate") or 0.0) / case.sigma
     out["auto"] = {**scorer.score(res.points), **_extras(case, res.points, rep)}
     tb = {}
@@ -173,7 +176,7 @@ def render(doc: dict[str, Any]) -> str:
              f"CPU {doc['cpu_seconds']:.0f} s, load at end {doc['load_end'][0]:.1f}. "
              "Ratios to the input's error; `a → b`: before → after.", "",
              "| case | phenomenon | half | σ̂/σ | RMS error | distance | vs better Taubin | "
-             "boundary | volume % (input) | dup gap h | back-off | warnings |",
+             "boundary | volume % (input) | dup gap h | backed-off points | warnings |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in doc["cases"]:
         b = before.get(c["key"], {})
@@ -193,15 +196,16 @@ def render(doc: dict[str, Any]) -> str:
 
         a = c["auto"]
         warn = "; ".join(w[:50] for w in c["report"].get("warnings") or [])
-        bo = c["report"].get("backoff")
+        bo = c.get("backoff_points", 0)
         lines.append(
-            f"| {c['key']} | {c['phenomenon']} | {c['half'][0]} | {pair(lambda r: r['sigma_ratio'])} "
+            f"| {c['key']} | {c['phenomenon']} | {c['half'][0]} "
+            f"| {pair(lambda r: r['sigma_ratio'])} "
             f"| {pair(lambda r: r['auto']['vertex'])} | {pair(lambda r: r['auto']['surface'])} "
             f"| {pair(lambda r: r['vs_taubin'])} | {pair(lambda r: r['auto'].get('boundary'))} "
             f"| {pair(lambda r: r['auto'].get('volume_pct'), '+.1f')} "
             f"({_f(a.get('volume_input_pct'), '+.1f')}) "
             f"| {pair(lambda r: r['auto'].get('dup_gap_h'), '.3g')} "
-            f"| {'–' if not bo else _f(bo.get('fraction'), '.2%')} | {warn} |")
+            f"| {bo or '–'} | {warn} |")
     return "\n".join(lines) + "\n"
 
 

@@ -18,6 +18,7 @@ Every generator is deterministic.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -81,7 +82,7 @@ def revolve(profile: FloatArray, ntheta: int) -> tuple[FloatArray, IntArray]:
             rings.append(count + np.arange(ntheta))
             count += ntheta
     tris: list[IntArray] = []
-    for a, b in zip(rings[:-1], rings[1:], strict=True):
+    for a, b in itertools.pairwise(rings):
         a1, b1 = np.roll(a, -1), np.roll(b, -1)
         for t in (np.stack([a, a1, b1], 1), np.stack([a, b1, b], 1)):
             tris.append(t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])])
@@ -178,12 +179,12 @@ def stairs(steps: int = 5, tread: float = 0.4, rise: float = 0.25, e: float = 0.
            width: float = 1.0) -> Shape:
     """90° stairs: ``steps`` treads and risers (vertical noise is the family's)."""
     corners = [(0.0, 0.0)]
-    for s in range(steps):
+    for _ in range(steps):
         x, z = corners[-1]
         corners += [(x + tread, z), (x + tread, z + rise)]
     corners.append((corners[-1][0] + tread, corners[-1][1]))
     counts = [max(1, round(np.hypot(b[0] - a[0], b[1] - a[1]) / e))
-              for a, b in zip(corners[:-1], corners[1:], strict=True)]
+              for a, b in itertools.pairwise(corners)]
     return extrude(f"stairs {steps}x{rise:g}", _subdivide(corners, counts), width,
                    round(width / e), f"{steps} 90-degree steps, rise {rise:g}, tread {tread:g}")
 

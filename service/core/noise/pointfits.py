@@ -194,7 +194,23 @@ def mesh_neighbours(
             break
     kept = np.ones(at.size, dtype=bool)
     kept[live] = False
+    deg = np.diff(A.indptr) - 1
+    for i in np.flatnonzero(kept & (deg[at] >= 2 * K)):  # a fan's hub: spread around it
+        rows[i] = _around(points, at[i], A.indices[A.indptr[at[i]]:A.indptr[at[i] + 1]], K)
     return at[kept], rows[kept]
+
+
+def _around(points: Array, centre: int, ring: NDArray[np.int64], K: int) -> NDArray[np.int64]:
+    """``centre`` and ``K - 1`` of its ring spread evenly by angle about it: the ``K`` nearest
+    of a cap's fan (valence 200) are an arc on one side, whose fit extrapolates to the hub and
+    reads it as an outlier (issue 40)."""
+    ring = ring[ring != centre]
+    Q = points[ring] - points[ring].mean(axis=0)
+    _, _, Vt = np.linalg.svd(Q, full_matrices=False)
+    uv = (points[ring] - points[centre]) @ Vt[:2].T
+    order = ring[np.argsort(np.arctan2(uv[:, 1], uv[:, 0]), kind="stable")]
+    pick = order[(np.arange(K - 1) * order.size) // (K - 1)]
+    return np.r_[centre, pick].astype(np.int64)
 
 
 def _nearest_in(
