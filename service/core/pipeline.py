@@ -257,7 +257,7 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
     if problem.weights is not None:  # outliers: kept (flag, drop) or pulled in, bounded
         X = place_outliers(problem.geometry.points, X, problem.op.L, problem.weights.pulled,
                            plan.outliers.value)
-    X, backoff = _residual_test(problem, plan, X)
+    X, backoff = _residual_test(problem, plan, sol, X)
     enabled = plan.tangential.value == "auto"
     X, along = relax_tangential(
         problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
@@ -281,7 +281,7 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
 
 
 def _residual_test(
-    problem: Problem, plan: Plan, X: NDArray[np.float64]
+    problem: Problem, plan: Plan, sol: Solution, X: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], BackOff | None]:
     """Issue 40: where the removed displacement was shape, not noise, back off
     (:mod:`.finish.residual`): the automatic tau on surfaces in normal displacement (a tau,
@@ -290,8 +290,10 @@ def _residual_test(
     if ((g.edges is not None and g.faces is None) or plan.displacement.value != "normal"
             or not plan.automatic_tau):
         return X, None
-    out = problem.weights.outliers if problem.weights is not None else np.zeros(0, np.int64)
-    return back_off(g.points, X, problem.op.L, out, g.fixed_mask())
+    dw = problem.weights
+    out = dw.outliers if dw is not None else np.zeros(0, np.int64)
+    return back_off(g.points, X, problem.op.L, out, g.fixed_mask(), sol.target.sigma,
+                    codimension(g))
 
 
 def report(

@@ -29,8 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.stats import chi2
 
-__all__ = ["CLUSTER", "HOPS", "RHO_BACKOFF", "BackOff", "back_off", "correlation"]
+__all__ = ["ALPHA", "CLUSTER", "HOPS", "RHO_BACKOFF", "BackOff", "back_off", "beyond_noise",
+           "correlation"]
 
 Array = NDArray[np.float64]
 #: Hops over the operator's graph that make a point's neighbourhood (2: ~19 points on a mesh).
@@ -41,6 +43,8 @@ HOPS = 2
 RHO_BACKOFF = 0.65
 #: Graph neighbours that must be above it too: removed shape is a region, not a point.
 CLUSTER = 2
+#: Family-wise level of the noise's Gaussian extreme (:func:`beyond_noise`).
+ALPHA = 0.01
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,8 @@ class BackOff:
         RMS over those points of the displacement the solve had removed.
     n : int
         Points tested.
+    put : ndarray, shape (len(points), s)
+        The displacement put back at those points.
     """
 
     points: NDArray[np.int64]
@@ -66,6 +72,14 @@ class BackOff:
     restored_rms: float
     removed_rms: float
     n: int
+    put: Array
+
+    def undone(self, X: Array) -> Array:
+        """``X`` without the back-off: the moves the smoothing made (the outlier count compares
+        a pulled point's move with those, :func:`.outliers.beyond_noise`)."""
+        out = X.copy()
+        out[self.points] -= self.put
+        return out
 
     def describe(self) -> str:
         """The note for the report."""
@@ -110,10 +124,28 @@ def correlation(R: Array, L: sp.spmatrix, use: NDArray[np.bool_], hops: int = HO
     return np.where(np.isfinite(rho) & (bd > 0), rho, 0.0)
 
 
+def beyond_noise(R: Array, L: sp.spmatrix, use: NDArray[np.bool_], sigma: Array | float,
+                 codim: int) -> Array:
+    """``|R_i| / (z sigma_i)``: the removed displacement against the noise's Gaussian extreme
+    ``z`` over ``n`` points (Bonferroni, :data:`ALPHA`; ``codim`` normal directions); 0 where
+    fewer than :data:`CLUSTER` graph neighbours are beyond it too (an extreme of the noise is a
+    point, a cut crease or pressed step a line of them)."""
+    n = R.shape[0]
+    z = float(np.sqrt(chi2.isf(ALPHA / max(n, 1), max(codim, 1))))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.linalg.norm(R, axis=1) / (z * np.asarray(sigma))
+    t = np.where(use & np.isfinite(t), t, 0.0)
+    above = (t > 1.0).astype(np.float64)
+    near = _balls(L, n, 1) @ above - above
+    return np.where(near >= CLUSTER, t, 0.0)
+
+
 def back_off(P: Array, X: Array, L: sp.spmatrix, exclude: NDArray[np.int64],
-             fixed: NDArray[np.bool_]) -> tuple[Array, BackOff | None]:
+             fixed: NDArray[np.bool_], sigma: Array | float | None = None, codim: int = 1,
+             ) -> tuple[Array, BackOff | None]:  # fmt: skip
     """``X`` with the removed displacement put back, in part, where the residual test says it
-    was shape (module docstring); ``None`` when nowhere."""
+    was shape (module docstring; ``sigma``: the noise per point or for all, when estimated);
+    ``None`` when nowhere."""
     use = ~fixed
     use[exclude] = False
     R = P - X
@@ -122,6 +154,9 @@ def back_off(P: Array, X: Array, L: sp.spmatrix, exclude: NDArray[np.int64],
     near = _balls(L, X.shape[0], 1) @ above - above  # graph neighbours also above
     gate = np.clip(2.0 * (rho - RHO_BACKOFF) / (1.0 - RHO_BACKOFF), 0.0, 1.0) * use
     gate[near < CLUSTER] = 0.0
+    if sigma is not None and np.all(np.asarray(sigma) > 0):
+        t = beyond_noise(R, L, use, sigma, codim)
+        gate = np.maximum(gate, np.clip(2.0 * (t - 1.0), 0.0, 1.0))
     hit = np.flatnonzero(gate > 0)
     if hit.size == 0:
         return X, None
@@ -129,5 +164,5 @@ def back_off(P: Array, X: Array, L: sp.spmatrix, exclude: NDArray[np.int64],
     out = X.copy()
     out[hit] += put
     rec = BackOff(hit, float(rho.max()), float(np.sqrt(np.mean(np.sum(put**2, axis=1)))),
-                  float(np.sqrt(np.mean(np.sum(R[hit] ** 2, axis=1)))), int(use.sum()))
+                  float(np.sqrt(np.mean(np.sum(R[hit] ** 2, axis=1)))), int(use.sum()), put)
     return out, rec
