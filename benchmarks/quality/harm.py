@@ -30,7 +30,7 @@ from benchmarks.measure import machine_info
 from benchmarks.quality import harmshapes as hs
 from benchmarks.quality import surfaces
 from benchmarks.quality.cases import Case
-from benchmarks.quality.issue31 import TAUBIN_ITERATIONS, taubin
+from benchmarks.quality.issue31 import TAUBIN_ITERATIONS, _commit, taubin
 from benchmarks.quality.run import write_tables
 from benchmarks.quality.shapes import Shape
 from benchmarks.quality.targets import Issue31Scorer
@@ -235,16 +235,6 @@ def main(argv: list[str] | None = None) -> int:
     stem = f"harm40-{args.tag}-{args.half}-{dt.datetime.now(dt.UTC):%Y-%m-%d}"
     print(write_tables(args.out, stem, doc, render))
     return 0
-
-
-def _commit() -> str | None:
-    import subprocess
-
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True, cwd=Path(__file__).parent).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 if __name__ == "__main__":
