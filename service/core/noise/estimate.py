@@ -43,7 +43,13 @@ from scipy.ndimage import gaussian_filter1d
 from service.core.geometry import Geometry
 from service.core.noise import curves
 from service.core.noise.curves import TrackNoise
-from service.core.noise.pointfits import curve_neighbours, mesh_neighbours, patch_variances
+from service.core.noise.pointfits import (
+    across,
+    adjacency,
+    curve_neighbours,
+    mesh_neighbours,
+    patch_variances,
+)
 
 __all__ = [
     "NOISE_RATIO",
@@ -245,8 +251,10 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
 
 
 def _along_mesh(geometry: Geometry, k: int, d: int) -> NoiseEstimate | None:
-    """The estimate from neighbourhoods along the mesh (:func:`.pointfits.mesh_neighbours`:
-    the two sides of a thin plate, wall or fold never share one), coincident vertices welded;
+    """The estimate from the nearest in space, except where they jumped across the mesh
+    (:func:`.pointfits.across`: a thin plate, wall or fold, thin triangles) and the
+    neighbourhood along the mesh is taken (:func:`.pointfits.mesh_neighbours`), so the two
+    sides of a thin part never share one; coincident vertices welded;
     ``None`` (neighbours in space, as for clouds) when fewer than a tenth of the sampled
     vertices have ``2k`` within a few hops (a triangle soup)."""
     P = geometry.points
@@ -256,9 +264,15 @@ def _along_mesh(geometry: Geometry, k: int, d: int) -> NoiseEstimate | None:
     if welded:
         P, F = uniq, inv.reshape(-1)[F]
     at = _sample(P.shape[0])
-    kept, nbr = mesh_neighbours(P, F, min(2 * k, P.shape[0]), at)
+    K = min(2 * k, P.shape[0])
+    kept, ring = mesh_neighbours(P, F, K, at)
     if kept.size < max(10, at.size // 10):
         return None
+    from service.core.operator.knn import nearest
+
+    _, nbr = nearest(P, kept, K, k + 1)
+    jump = across(adjacency(P.shape[0], F), kept, nbr)
+    nbr[jump] = ring[jump]
     full = not welded and kept.size == geometry.n
     return _kept(_estimate(P, nbr, k, d), nbr if full else None)
 
