@@ -17,12 +17,15 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from service.core.checks.diagnostics import diagnostics
 from service.core.errors import TauOutOfRange
 from service.core.finish.clip import clip_points
+from service.core.finish.duplicates import join_duplicates
 from service.core.finish.finished import Finished
 from service.core.finish.outliers import far_moved, place_outliers
+from service.core.finish.residual import BackOff, back_off
 from service.core.finish.tangential import relax_tangential
 from service.core.finish.volume import preserve_measure
 from service.core.frame import Frame
@@ -93,6 +96,8 @@ def smooth_one(
     run.emit("analysis", tau=aim.tau)
     solution = solve(problem, plan, aim, run, memory_limit)
     finished = finish(problem, plan, solution)
+    if finished.backoff is not None:
+        run.notes.append(finished.backoff.describe())
     return report(problem, plan, run, solution, finished)
 
 
@@ -313,10 +318,12 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
     if problem.weights is not None:  # outliers: kept (flag, drop) or pulled in, bounded
         X = place_outliers(problem.geometry.points, X, problem.op.L, problem.weights.pulled,
                            plan.outliers.value)
+    X, backoff = _residual_test(problem, plan, sol, X)
     enabled = plan.tangential.value == "auto"
     X, along = relax_tangential(
         problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
     )
+    X = join_duplicates(problem.geometry.points, X, problem.geometry.fixed_mask())
     volume_scale, group = None, params.finish
     if group.preserve_volume:
         X, volume_scale = preserve_measure(problem.geometry, X)
@@ -331,7 +338,23 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
                              problem.weights.tau_scale)
         X = place_outliers(P, X, problem.op.L, kept[~problem.geometry.fixed_mask()[kept]],
                            plan.outliers.value)
-    return Finished(X, volume_scale, along, kept)
+    return Finished(X, volume_scale, along, kept, backoff)
+
+
+def _residual_test(
+    problem: Problem, plan: Plan, sol: Solution, X: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], BackOff | None]:
+    """Issue 40: where the removed displacement was shape, not noise, back off
+    (:mod:`.finish.residual`): the automatic tau on surfaces in normal displacement (a tau,
+    rms or lambda given is the caller's amount of smoothing, kept)."""
+    g = problem.geometry
+    if ((g.edges is not None and g.faces is None) or plan.displacement.value != "normal"
+            or not plan.automatic_tau):
+        return X, None
+    dw = problem.weights
+    out = dw.outliers if dw is not None else np.zeros(0, np.int64)
+    return back_off(g.points, X, problem.op.L, out, g.fixed_mask(), sol.target.sigma,
+                    codimension(g))
 
 
 def report(

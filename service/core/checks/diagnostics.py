@@ -75,7 +75,8 @@ def diagnostics(
     stats = dev.stats if dev is not None else None
     rms = float(np.sqrt(np.mean(dev_pt**2)))
     weights = _kept(weights, fin, run.notes)
-    weights = _measured(weights, geometry, X, target.sigma, params.outliers, run.notes)
+    solved = X if fin.backoff is None else fin.backoff.undone(X)  # the smoothing's own moves
+    weights = _measured(weights, geometry, solved, target.sigma, params.outliers, run.notes)
     checks, shape_warnings, sigma = _shape(
         geometry, params, target, X, _bulk_rms(dev_pt, weights), run.notes
     )

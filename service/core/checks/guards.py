@@ -49,6 +49,7 @@ __all__ = [
     "guard_warnings",
     "renoised_measure",
     "shape_checks",
+    "volume_note",
 ]
 
 FLIP_FRACTION = 0.01
@@ -226,10 +227,7 @@ def guard_warnings(
             f"the shape was destroyed rather than smoothed; {fix}"
         )
     if checks.volume_change is not None and abs(checks.volume_change) > MEASURE_CHANGE:
-        out.append(
-            f"the enclosed volume changed by {100 * checks.volume_change:+.1f} %: the shape "
-            f"shrank rather than smoothed; {fix} (or set preserve_volume)"
-        )
+        out.append(volume_note(checks.volume_change, fix))
     loss = -checks.area_change if checks.area_change is not None else 0.0
     back = 1.0 - loss
     if loss > MEASURE_CHANGE and renoised is not None:
@@ -320,3 +318,12 @@ def renoised_measure(
     rng = np.random.default_rng(0)
     draws = [_measure(X + rng.normal(0.0, s, X.shape), geometry) for _ in range(RENOISE_DRAWS)]
     return float(np.mean(draws)) / before
+
+
+def volume_note(change: float, fix: str) -> str:
+    """The warning for an enclosed volume (area in 2-D) changed by ``change`` (relative): it
+    names the direction the volume went (issue 40: a cylinder whose volume grew by 32 % was
+    said to have shrunk)."""
+    way = "shrank" if change < 0 else "grew"
+    return (f"the enclosed volume changed by {100 * change:+.1f} %: the shape {way} rather "
+            f"than smoothed; {fix} (or set preserve_volume)")

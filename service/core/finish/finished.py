@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from service.core.finish.residual import BackOff
 from service.core.finish.tangential import TangentialStep
 
 __all__ = ["Finished"]
@@ -27,9 +28,12 @@ class Finished:
     outliers : ndarray of int or None
         The outliers kept in place (flag, drop): the data weights' and the points the solve
         moved far (:func:`~service.core.finish.outliers.far_moved`); ``None``: the weights'.
+    backoff : BackOff or None
+        Where the residual test (:mod:`~service.core.finish.residual`) put shape back.
     """
 
     X: NDArray[np.float64]
     volume_scale: float | None = None
     tangential: TangentialStep | None = None
     outliers: NDArray[np.int64] | None = None
+    backoff: BackOff | None = None

@@ -43,7 +43,13 @@ from scipy.ndimage import gaussian_filter1d
 from service.core.geometry import Geometry
 from service.core.noise import curves
 from service.core.noise.curves import TrackNoise
-from service.core.noise.pointfits import curve_neighbours, patch_variances
+from service.core.noise.pointfits import (
+    across,
+    adjacency,
+    curve_neighbours,
+    mesh_neighbours,
+    patch_variances,
+)
 
 __all__ = [
     "NOISE_RATIO",
@@ -237,6 +243,10 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
             full = rows.size == n  # every point, in order: kept for the data weights
             return _tracked(geometry, _kept(_estimate(P, along, k, d), along if full else None))
         # mostly polylines shorter than 2k points: neighbours in space, as for clouds
+    if geometry.faces is not None and d == 2:
+        got = _along_mesh(geometry, k, d)
+        if got is not None:
+            return got
     from service.core.operator.knn import nearest
 
     at = _sample(P)
@@ -249,6 +259,33 @@ def noise_of(geometry: Geometry, k: int | None = None) -> NoiseEstimate | None:
     k2 = min(2 * k, P.shape[0])
     _, nbr = nearest(P, at, k2, k + 1)
     full = P is geometry.points and at.size == n
+    return _kept(_estimate(P, nbr, k, d), nbr if full else None)
+
+
+def _along_mesh(geometry: Geometry, k: int, d: int) -> NoiseEstimate | None:
+    """The estimate from the nearest in space, except where they jumped across the mesh
+    (:func:`.pointfits.across`: a thin plate, wall or fold, thin triangles) and the
+    neighbourhood along the mesh is taken (:func:`.pointfits.mesh_neighbours`), so the two
+    sides of a thin part never share one; coincident vertices welded;
+    ``None`` (neighbours in space, as for clouds) when fewer than a tenth of the sampled
+    vertices have ``2k`` within a few hops (a triangle soup)."""
+    P = geometry.points
+    F = np.asarray(geometry.faces)
+    uniq, inv = np.unique(P, axis=0, return_inverse=True)
+    welded = uniq.shape[0] < P.shape[0]
+    if welded:
+        P, F = uniq, inv.reshape(-1)[F]
+    at = _sample(P.shape[0])
+    K = min(2 * k, P.shape[0])
+    kept, ring = mesh_neighbours(P, F, K, at)
+    if kept.size < max(10, at.size // 10):
+        return None
+    from service.core.operator.knn import nearest
+
+    _, nbr = nearest(P, kept, K, k + 1)
+    jump = across(adjacency(P.shape[0], F), kept, nbr)
+    nbr[jump] = ring[jump]
+    full = not welded and kept.size == geometry.n
     return _kept(_estimate(P, nbr, k, d), nbr if full else None)
 
 

@@ -30,10 +30,14 @@ from service.core.geometry import Geometry
 from service.core.operator.knn import GRID_FROM, tree_knn
 
 __all__ = [
+    "ACROSS_HOPS",
     "COMPILED_FROM",
+    "across",
+    "adjacency",
     "curve_neighbours",
     "design",
     "leave_one_out",
+    "mesh_neighbours",
     "patch_variances",
     "point_neighbours",
 ]
@@ -154,6 +158,101 @@ def curve_neighbours(
         rows.append(cols[np.lexsort((dist, -score.data[lo:hi]))[:K]])
         kept.append(at[i])
     return np.array(kept, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, K)
+
+
+#: Hops over the mesh's edges a surface neighbourhood may span (:func:`mesh_neighbours`).
+MAX_HOPS = 8
+
+
+def mesh_neighbours(
+    points: Array, faces: NDArray[np.int64], K: int, at: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The ``K`` nearest points (itself first) of each point ``at`` among those within the fewest
+    hops over the mesh's edges that reach ``K`` (issue 40): a neighbourhood that follows the
+    surface, never across a thin wall, fold or plate whose other side is nearer in space than
+    along the mesh (a 4 x 4 x 0.3 plate: the 24 nearest in space of a face's vertex take the
+    other face's; its noise read 35x the truth). Inside each hop ball the choice is by
+    distance, so long thin triangles (20:1) and fans of high valence still give neighbourhoods
+    spread over the surface. Points whose component has fewer than ``K`` points within
+    :data:`MAX_HOPS` hops are left out.
+
+    Returns the points kept (in ``at``'s order) and their neighbours, nearest first."""
+    n = points.shape[0]
+    A = adjacency(n, faces)
+    live = np.arange(at.size)  # the rows still growing, and their reached sets R
+    R = sp.csr_matrix((np.ones(at.size), (live, at)), shape=(at.size, n))
+    rows = np.full((at.size, K), -1, dtype=np.int64)
+    for _ in range(MAX_HOPS):
+        R = (R @ A).astype(bool).astype(np.float64).tocsr()
+        ready = np.diff(R.indptr) >= K
+        if ready.any():
+            rows[live[ready]] = _nearest_in(points, at[live[ready]], R[ready], K)
+            live, R = live[~ready], R[~ready]
+        if live.size == 0:
+            break
+    kept = np.ones(at.size, dtype=bool)
+    kept[live] = False
+    deg = np.diff(A.indptr) - 1
+    for i in np.flatnonzero(kept & (deg[at] >= 2 * K)):  # a fan's hub: spread around it
+        rows[i] = _around(points, at[i], A.indices[A.indptr[at[i]]:A.indptr[at[i] + 1]], K)
+    return at[kept], rows[kept]
+
+
+#: Hops beyond which a neighbour in space is across a thin part, not beside the point
+#: (:func:`across`): the 24 nearest of a regular mesh are within 3 hops (sigma^ on issue 31's
+#: 1 - 1.5 edge spheres and helicoid as with k-NN alone); the other face of a plate 3 edges
+#: thick is 8 hops or more away 2.5 edges inside its rim.
+ACROSS_HOPS = 5
+
+
+def adjacency(n: int, faces: NDArray[np.int64]) -> sp.csr_matrix:
+    """The mesh's vertex adjacency with the diagonal (0/1, CSR)."""
+    T = np.asarray(faces, dtype=np.int64)
+    a = np.concatenate([T[:, j] for j in range(T.shape[1])])
+    b = np.concatenate([T[:, (j + 1) % T.shape[1]] for j in range(T.shape[1])])
+    A = sp.csr_matrix((np.ones(2 * a.size), (np.r_[a, b], np.r_[b, a])), shape=(n, n))
+    return (A + sp.identity(n, format="csr")).astype(bool).astype(np.float64).tocsr()
+
+
+def across(
+    A: sp.csr_matrix, at: NDArray[np.int64], nbr: NDArray[np.int64], hops: int = ACROSS_HOPS
+) -> NDArray[np.bool_]:
+    """Rows whose neighbours ``nbr`` (of points ``at``) include one more than ``hops`` hops
+    away along the mesh (or in another component): a neighbourhood in space that jumped across
+    a thin wall, plate or fold, or along a thin triangle (issue 40)."""
+    R = sp.csr_matrix((np.ones(at.size), (np.arange(at.size), at)), shape=(at.size, A.shape[0]))
+    for _ in range(hops):
+        R = (R @ A).astype(bool).astype(np.float64).tocsr()
+    rows = np.repeat(np.arange(at.size), nbr.shape[1])
+    hit = np.asarray(R[rows, nbr.ravel()]).reshape(nbr.shape)
+    return ~np.all(hit > 0, axis=1)
+
+
+def _around(points: Array, centre: int, ring: NDArray[np.int64], K: int) -> NDArray[np.int64]:
+    """``centre`` and ``K - 1`` of its ring spread evenly by angle about it: the ``K`` nearest
+    of a cap's fan (valence 200) are an arc on one side, whose fit extrapolates to the hub and
+    reads it as an outlier (issue 40)."""
+    ring = ring[ring != centre]
+    Q = points[ring] - points[ring].mean(axis=0)
+    _, _, Vt = np.linalg.svd(Q, full_matrices=False)
+    uv = (points[ring] - points[centre]) @ Vt[:2].T
+    order = ring[np.argsort(np.arctan2(uv[:, 1], uv[:, 0]), kind="stable")]
+    pick = order[(np.arange(K - 1) * order.size) // (K - 1)]
+    return np.r_[centre, pick].astype(np.int64)
+
+
+def _nearest_in(
+    points: Array, centre: NDArray[np.int64], R: sp.csr_matrix, K: int
+) -> NDArray[np.int64]:
+    """Per row of ``R`` (at least ``K`` candidates for point ``centre[i]``), the ``K``
+    candidates nearest to the centre, nearest first (the centre itself first)."""
+    R = R.tocsr()
+    row = np.repeat(np.arange(R.shape[0]), np.diff(R.indptr))
+    col = R.indices.astype(np.int64)
+    dist = np.sum((points[col] - points[centre[row]]) ** 2, axis=1)
+    dist[col == centre[row]] = -1.0  # the point itself first, before coincident copies
+    order = np.lexsort((dist, row))
+    return col[order][R.indptr[:-1, None] + np.arange(K)]
 
 
 def point_neighbours(

@@ -314,14 +314,17 @@ def isolated(
 
 
 def _graph_neighbours(E: NDArray[np.int64], n: int, most: int = 32) -> NDArray[np.int64]:
-    """Each vertex's neighbours over the elements ``E`` (up to ``most``), ``-1`` padded."""
+    """Each vertex's neighbours over the elements ``E`` (up to ``most``, spread evenly over a
+    larger ring: the first ``most`` of a cap's fan of valence 200 are an arc whose median is a
+    rim point, issue 40), ``-1`` padded."""
     pairs = np.concatenate([E[:, [a, b]] for a in range(E.shape[1])
                             for b in range(E.shape[1]) if a != b])
     A = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     A.sum_duplicates()
     deg = np.diff(A.indptr)
     m = int(min(max(int(deg.max(initial=0)), 1), most))
-    pos = A.indptr[:-1, None] + np.arange(m)
+    step = np.maximum(deg / m, 1.0)[:, None]
+    pos = A.indptr[:-1, None] + (np.arange(m) * step).astype(np.int64)
     ok = np.arange(m) < deg[:, None]
     return np.where(ok, A.indices[np.minimum(pos, max(A.nnz - 1, 0))] if A.nnz else -1, -1)
 

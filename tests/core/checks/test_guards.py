@@ -180,3 +180,14 @@ def test_over_smoothed_sphere_is_flattened() -> None:
     r = smooth(Geometry(noisy, faces=F), SmoothingParams(tau=100.0))
     assert _area(r.points, F) < 0.5 * _area(P, F)
     assert any("flattened" in w and "lower tau" in w for w in r.warnings), r.warnings
+
+
+def test_volume_warning_names_the_direction() -> None:
+    P, F = noisy_icosphere(3, 0.0)
+    g = Geometry(P, faces=F)
+    for scale, word in ((0.8, "shrank"), (1.2, "grew")):
+        c = shape_checks(g, scale * P)
+        assert np.isclose(c.volume_change, scale**3 - 1)
+        said = [w for w in guard_warnings(c, "auto") if "enclosed volume" in w]
+        assert len(said) == 1 and f"the shape {word} " in said[0]
+        assert f"{100 * (scale**3 - 1):+.1f} %" in said[0]
