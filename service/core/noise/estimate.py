@@ -275,7 +275,7 @@ def _along_mesh(geometry: Geometry, k: int, d: int) -> NoiseEstimate | None:
     welded = uniq.shape[0] < P.shape[0]
     if welded:
         P, F = uniq, inv.reshape(-1)[F]
-    at = _sample(P.shape[0])
+    at = _sample(P)
     K = min(2 * k, P.shape[0])
     kept, ring = mesh_neighbours(P, F, K, at)
     if kept.size < max(10, at.size // 10):
