@@ -166,8 +166,8 @@ def e57_bytes(n: int = 1000, path: Path | None = None) -> bytes:
         name = str(path or Path(tmp) / "scan.e57")
         e57 = pye57.E57(name, mode="w")
         pts = _grid(n)
-        e57.write_scan_raw({"cartesianX": pts[:, 0], "cartesianY": pts[:, 1],
-                            "cartesianZ": pts[:, 2], "intensity": np.linspace(0, 1, n)})  # fmt: skip
+        fields = {"cartesianX": pts[:, 0], "cartesianY": pts[:, 1], "cartesianZ": pts[:, 2]}
+        e57.write_scan_raw({**fields, "intensity": np.linspace(0, 1, n)})
         e57.close()
         return Path(name).read_bytes()
 

@@ -108,7 +108,8 @@ def test_the_four_files_are_one_line_and_a_documented_status_in_the_cli(
     args = [str(path)] + (["-q", "-o", str(tmp_path / f"o-{name}")] if command == "smooth" else [])
     env = {"PATH": "/usr/bin:/bin", "RUST_BACKTRACE": "1"}  # a Rust panic would print its trace
     done = subprocess.run([sys.executable, "-m", "service.cli", command, *args], cwd=ROOT,
-                          env=env, capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
+                          env=env, capture_output=True, text=True, timeout=300,
+                          check=False)  # fmt: skip
     assert done.returncode == status, done.stderr[-2000:]
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("geosmooth: error:"), done.stderr[-2000:]
