@@ -68,7 +68,8 @@ class LocalQueue(QueueBase[JobStore], Maintenance):
         self.store = JobStore(self.data_dir / DB_NAME, config.result_ttl)
         self.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
         self.pool = WorkerPool(config, self.store, self.owner, on_settled=self._finished)
-        self.probe = StorageProbe(self.data_dir, config.min_free_bytes, self.store.check)
+        self.probe = StorageProbe(self.data_dir, config.min_free_bytes, self.store.check,
+                                  [self.files.root], self.store.path)  # fmt: skip
         self.notifier = Notifier(config.settings, self._webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._histogram = DurationHistogram()
