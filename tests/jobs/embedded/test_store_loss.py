@@ -80,7 +80,7 @@ def test_a_damaged_database_is_refused_and_nothing_is_touched(
     conn.close()
     shutil.copy(src, tmp_path / "b" / "jobs.sqlite3")
     _damage(tmp_path / "b" / "jobs.sqlite3", how)
-    with pytest.raises(StoreDamaged, match="jobs.sqlite3 is damaged"):
+    with pytest.raises(StoreDamaged, match=r"jobs\.sqlite3 is damaged"):
         make_queue(data_dir=tmp_path / "b")
     for job_id, data in results.items():  # untouched
         assert (tmp_path / "b" / "jobs" / job_id / "result.npy").read_bytes() == data
