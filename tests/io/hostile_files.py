@@ -58,7 +58,10 @@ def las_cases() -> dict[str, bytes]:
     nan_scale = bytearray(good)
     struct.pack_into("<d", nan_scale, 131, float("nan"))
     laz = las_bytes(compress=True)
+    contradiction = bytearray(good)
+    contradiction[104] = 6  # point format 6 in a LAS 1.2 file (issue 42: refused at the write)
     return {
+        "las_version_contradiction.las": bytes(contradiction),
         "las_huge_count.las": _set_count(good, 2**32 - 1),
         "las14_huge_count.las": _set_count(las_bytes(version="1.4"), 2**40),
         "las_count_one_more.las": _set_count(good, 401),

@@ -82,6 +82,20 @@ def _laspy_errors(fmt: str) -> Any:
         raise FormatError(f"{fmt.upper()}: the decoder failed ({exc})", fmt=fmt) from None
 
 
+def _check_version(header: Any, fmt: str) -> None:
+    """A point format the file's LAS version cannot hold is malformed at the read (it was
+    smoothed, then refused by the writer: exit 6 instead of 3)."""
+    from laspy.point import dims
+
+    version, point_format = str(header.version), int(header.point_format.id)
+    if not dims.is_point_fmt_compatible_with_version(point_format, version):
+        raise FormatError(
+            f"{fmt.upper()}: malformed header: point format {point_format} does not exist in"
+            f" LAS {version}",
+            fmt=fmt,
+        )
+
+
 _LASZIP_VLR = (b"laszip encoded", 22204)
 _VARIABLE_CHUNKS = 0xFFFFFFFF
 
@@ -215,6 +229,7 @@ def open_points(source: Source, fmt: str, *, attributes: bool = True) -> Iterato
         laspy.open(fh, closefd=False, laz_backend=backend) as reader,
     ):
         header = reader.header
+        _check_version(header, fmt)
         n = int(header.point_count)
         if n == 0:
             raise FormatError("the file holds no points", fmt=fmt)
