@@ -120,5 +120,5 @@ def test_a_point_format_the_version_cannot_hold_is_refused_at_the_read() -> None
     """Point format 6 in a LAS 1.2 file was smoothed, then refused by the writer (exit 6)."""
     from tests.io.hostile_files import las_cases
 
-    with pytest.raises(FormatError, match="point format 6 does not exist in LAS 1.2"):
+    with pytest.raises(FormatError, match=r"point format 6 does not exist in LAS 1\.2"):
         read_geometry(las_cases()["las_version_contradiction.las"], filename="a.las")
