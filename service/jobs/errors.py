@@ -94,11 +94,11 @@ class StorageUnavailable(StorageError):
 
 class StoreDamaged(StorageUnavailable):
     """The job database fails SQLite's integrity check, or is no database (a truncated or zeroed
-    file): the server does not start on it (``geosmooth serve`` exit status 14)."""
+    file): the server does not start on it (``geosmooth serve`` exits with its own status 14,
+    ``service.api.server.StoreUnusable``)."""
 
     code = "store-damaged"
     title = "Job database damaged"
-    exit_code = 14  # EXIT_STORE of service/exit_codes.py
 
 
 _FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
