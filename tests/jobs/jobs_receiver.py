@@ -26,13 +26,36 @@ class Delivery:
     body: bytes
 
 
+class _Served:
+    """A server on 127.0.0.1 run by a daemon thread, shut down on ``__exit__``."""
+
+    server: socketserver.BaseServer | None
+
+    def _serve(self, server: socketserver.BaseServer) -> None:
+        self.server = server
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+
+    def __exit__(self, *exc: object) -> None:
+        assert self.server is not None
+        self.server.shutdown()
+        self.server.server_close()
+
+    def url(self, path: str = "/hook") -> str:
+        assert self.server is not None
+        return f"http://127.0.0.1:{self.server.server_address[1]}{path}"  # type: ignore[index]
+
+
+class _Threads(socketserver.ThreadingTCPServer):
+    daemon_threads = True
+
+
 @dataclass
-class Receiver:
+class Receiver(_Served):
     """``with Receiver([500, 200]) as r: ...``: answers 500, then 200 (the last status repeats)."""
 
     statuses: list[int] = field(default_factory=lambda: [200])
     deliveries: list[Delivery] = field(default_factory=list)
-    server: http.server.ThreadingHTTPServer | None = None
+    server: socketserver.BaseServer | None = None
 
     def __enter__(self) -> Receiver:
         owner = self
@@ -49,18 +72,8 @@ class Receiver:
             def log_message(self, *args: Any) -> None:
                 return None
 
-        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        self._serve(http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler))
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        assert self.server is not None
-        self.server.shutdown()
-        self.server.server_close()
-
-    def url(self, path: str = "/hook") -> str:
-        assert self.server is not None
-        return f"http://127.0.0.1:{self.server.server_address[1]}{path}"
 
 
 def documented_verifier() -> Any:
@@ -74,7 +87,7 @@ def documented_verifier() -> Any:
 
 
 @dataclass
-class HostileReceiver:
+class HostileReceiver(_Served):
     """A receiver on 127.0.0.1 that reads the POST and then misbehaves, one ``mode`` of:
 
     ``endless``: 200 and a body without end (at most ``limit`` bytes, then it closes);
@@ -91,7 +104,7 @@ class HostileReceiver:
     sent: int = 0
     cut: threading.Event = field(default_factory=threading.Event)
     done: threading.Event = field(default_factory=threading.Event)
-    server: socketserver.ThreadingTCPServer | None = None
+    server: socketserver.BaseServer | None = None
 
     def _answer(self, sock: socket.socket) -> None:
         head = b"HTTP/1.1 200 OK\r\nContent-Type: text/plain\r\n"
@@ -141,19 +154,8 @@ class HostileReceiver:
                 finally:
                     owner.done.set()
 
-        socketserver.ThreadingTCPServer.daemon_threads = True
-        self.server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Handler)
-        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        self._serve(_Threads(("127.0.0.1", 0), Handler))
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        assert self.server is not None
-        self.server.shutdown()
-        self.server.server_close()
-
-    def url(self) -> str:
-        assert self.server is not None
-        return f"http://127.0.0.1:{self.server.server_address[1]}/hook"
 
 
 def _closed(sock: socket.socket) -> bool:
