@@ -103,8 +103,7 @@ class StoreDamaged(StorageUnavailable):
 
 _FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
 _UNAVAILABLE_ERRNOS = frozenset({errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO, errno.ENODEV,
-                                 errno.ESTALE, errno.ENOTCONN, errno.ETIMEDOUT,
-                                 errno.ENOENT})  # fmt: skip  (ENOENT: a store directory removed)
+                                 errno.ESTALE, errno.ENOTCONN, errno.ETIMEDOUT})  # fmt: skip
 
 
 def storage_error(exc: BaseException) -> StorageError | None:
