@@ -122,3 +122,17 @@ def test_a_point_format_the_version_cannot_hold_is_refused_at_the_read() -> None
 
     with pytest.raises(FormatError, match=r"point format 6 does not exist in LAS 1\.2"):
         read_geometry(las_cases()["las_version_contradiction.las"], filename="a.las")
+
+
+def test_parser_failures_are_the_files_errors() -> None:
+    """What a reader hits inside a third-party parser (dispatch.parser_failures): a real
+    allocation failure is input-too-large (the CLI's exit 3, not exit 1), an overflow or an
+    assertion is a format error."""
+    from service.io.dispatch import parser_failures
+
+    with pytest.raises(InputTooLarge, match="ran out of memory"), parser_failures("json"):
+        np.empty(2**62, dtype=np.uint8)  # numpy raises its MemoryError subclass
+    with pytest.raises(FormatError, match="OverflowError"), parser_failures("json"):
+        float(10**400)
+    with pytest.raises(FormatError, match="AssertionError"), parser_failures("dxf"):
+        assert isinstance(b"x", str)
