@@ -136,3 +136,16 @@ def test_parser_failures_are_the_files_errors() -> None:
         float(10**400)
     with pytest.raises(FormatError, match="AssertionError"), parser_failures("dxf"):
         assert isinstance(b"x", str)
+
+
+def test_gpx_entity_expansion_is_refused_before_it_grows() -> None:
+    """A 'billion laughs' GPX (10**9 copies of an entity, 3 GB expanded): expat's amplification
+    limit (100x, from 8 MiB of expansion on) refuses it as a format error."""
+    ents = "".join(f'<!ENTITY e{i} "{f"&e{i - 1};" * 10}">' for i in range(1, 10))
+    data = (f'<?xml version="1.0"?><!DOCTYPE gpx [<!ENTITY e0 "lol">{ents}]>'
+            '<gpx version="1.1" creator="t" xmlns="http://www.topografix.com/GPX/1/1">'
+            "<metadata><desc>&e9;</desc></metadata><trk><trkseg><trkpt lat='1' lon='1'/>"
+            "<trkpt lat='1.001' lon='1'/><trkpt lat='1.002' lon='1.001'/>"
+            "</trkseg></trk></gpx>")  # fmt: skip
+    with pytest.raises(FormatError, match="amplification"):
+        read_geometry(data.encode(), filename="laughs.gpx")
