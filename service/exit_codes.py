@@ -55,10 +55,13 @@ SUBMIT_EXIT_CODES: dict[int, str] = {
 }
 
 EXIT_ADDRESS = 11
+EXIT_STORE = 14
 
 #: Further statuses of ``geosmooth serve`` (``service.api.server``).
 SERVE_EXIT_CODES: dict[int, str] = {
     EXIT_USAGE: "serve: invalid setting (the message names the GEOSMOOTH_ variable), keys "
     "file, or a non-loopback address without API keys (see --insecure-no-auth)",
     EXIT_ADDRESS: "serve: the address cannot be bound (port in use, permission, unknown host)",
+    EXIT_STORE: "serve: the job database is damaged (SQLite's quick_check fails, or the file "
+    "is no database); nothing was started or deleted",
 }

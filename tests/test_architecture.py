@@ -102,7 +102,7 @@ CORE_ROOMS: tuple[tuple[str, ...], ...] = tuple(
 #: circle test still applies). The runner sits below the backends: a backend's worker calls
 #: the job function and hands it the tile map (the runner imports no backend).
 JOBS_ROOMS: tuple[tuple[str, ...], ...] = (
-    ("errors", "files", "metrics", "preload", "progress", "results"),  # import nothing of jobs
+    ("errors", "files", "forkserver", "metrics", "preload", "progress", "results"),  # no jobs
     ("queue",),  # the protocol and its records: JobQueue, JobRecord, JobSize, NewJob
     ("limits", "problems", "webhooks", "notify"),  # shared services
     ("admit",),  # what only the queue can check at submit

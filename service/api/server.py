@@ -8,7 +8,8 @@ non-loopback address without API keys unless told ``insecure_no_auth``
 
 Exit codes of ``serve`` (``exit_code`` of the errors): 0 stopped by SIGINT/SIGTERM;
 2 (``EXIT_USAGE``) invalid setting, keys file or insecure bind; 11 (``EXIT_ADDRESS``) the
-address cannot be bound (in use, not permitted, unknown host).
+address cannot be bound (in use, not permitted, unknown host); 14 (``EXIT_STORE``) the job
+database is damaged (SQLite's ``quick_check`` fails, or the file is no database).
 """
 
 from __future__ import annotations
@@ -27,12 +28,13 @@ import uvicorn
 from service.api.http.auth import KeyRing
 from service.api.http.logs import configure_logging, get_logger
 from service.api.http.protocol import guarded_protocol
-from service.exit_codes import EXIT_ADDRESS
+from service.exit_codes import EXIT_ADDRESS, EXIT_STORE
 from service.settings import ConfigError, Settings, load_settings
 
 __all__ = [
     "AddressUnavailable",
     "InsecureBind",
+    "StoreUnusable",
     "announcement",
     "base_url",
     "check_bind",
@@ -108,6 +110,24 @@ class AddressUnavailable(ConfigError):
     code = "address-unavailable"
     title = "Address unavailable"
     exit_code: ClassVar[int] = EXIT_ADDRESS
+
+
+class StoreUnusable(ConfigError):
+    """The job database is damaged (:class:`~service.jobs.errors.StoreDamaged`)."""
+
+    code = "store-damaged"
+    title = "Job database damaged"
+    exit_code: ClassVar[int] = EXIT_STORE
+
+
+def _check_store(settings: Settings) -> None:
+    from service.jobs import check_store
+    from service.jobs.errors import StoreDamaged
+
+    try:
+        check_store(settings)
+    except StoreDamaged as exc:
+        raise StoreUnusable(exc.message, field="GEOSMOOTH_DATA_DIR") from None
 
 
 def is_loopback(host: str) -> bool:
@@ -228,6 +248,7 @@ def serve(
     configure_logging(level, fmt)
     keys = KeyRing.from_settings(settings)
     check_bind(settings.host, keys.enabled, insecure_no_auth or settings.insecure_no_auth)
+    _check_store(settings)
     _raise_open_files_limit(settings.max_connections + 1024)
     sock = _bind(settings.host, settings.port, _BACKLOG)
     from service.api.app import create_app  # after the checks: a bad config starts nothing

@@ -11,11 +11,14 @@ against it, used by the CLI and the API before smoothing and by every write.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from service.io._shared.plain import NormalsMode, PrecisionMode, WriteOptions, plain_document
@@ -29,7 +32,7 @@ from service.io.holds import (
     output_notes,
     same_family,
 )
-from service.io.limits import ReadLimits, reading
+from service.io.limits import InputTooLarge, ReadLimits, reading
 from service.io.registry import (
     FORMATS,
     Format,
@@ -167,7 +170,7 @@ def read_geometry(
     check_not_empty(src, spec.name)
     given = _reader_options(spec, options)
     do_weld = spec.weld_default if weld is None else bool(weld)
-    with reading(limits) as bounds:
+    with reading(limits) as bounds, parser_failures(spec.name):
         doc: GeometryDocument = spec.read(src, weld=do_weld, **given)
         bounds.check(int(doc.geometry.n), 0, spec.name)  # formats without a declared count
     if weld is None and not do_weld:
@@ -175,6 +178,27 @@ def read_geometry(
 
         doc = weld_if_tied(doc)
     return doc
+
+
+@contextlib.contextmanager
+def parser_failures(fmt: str) -> Iterator[None]:
+    """Failures of a third-party parser on a hostile file as the file's error (issue 42).
+
+    ``MemoryError`` while reading is :class:`InputTooLarge`; an overflow, a linear-algebra
+    failure or an assertion inside a parser (a 400-digit integer, ezdxf's audit) is a
+    :class:`FormatError` line, never an internal error.
+    """
+    try:
+        yield
+    except MemoryError:
+        raise InputTooLarge(
+            f"reading the file ran out of memory; {ReadLimits.HINT}", fmt=fmt
+        ) from None
+    except (OverflowError, np.linalg.LinAlgError, AssertionError) as exc:
+        text = " ".join(str(exc).split())[:200]
+        raise FormatError(
+            f"{fmt}: the file could not be parsed ({type(exc).__name__}: {text})", fmt=fmt
+        ) from None
 
 
 def _reader_options(spec: Format, options: dict[str, Any]) -> dict[str, Any]:

@@ -27,8 +27,21 @@ __all__ = [
     "JobStatus",
     "LocalQueue",
     "QueueHealth",
+    "check_store",
     "make_queue",
 ]
+
+
+def check_store(settings: Settings) -> None:
+    """Before serving: raise :class:`~service.jobs.errors.StoreDamaged` when the embedded job
+    database fails SQLite's ``quick_check`` (the RQ backend keeps no database here)."""
+    if settings.queue == "rq":
+        return
+    from pathlib import Path
+
+    from service.jobs.embedded.sqlite import DB_NAME, check_file
+
+    check_file(Path(settings.data_dir) / DB_NAME)
 
 
 def make_queue(settings: Settings) -> JobQueue:

@@ -22,6 +22,7 @@ __all__ = [
     "StorageError",
     "StorageFull",
     "StorageUnavailable",
+    "StoreDamaged",
     "WebhookUrlRejected",
     "storage_error",
 ]
@@ -89,6 +90,15 @@ class StorageUnavailable(StorageError):
     code = "storage-unavailable"
     title = "Storage unavailable"
     status = 503
+
+
+class StoreDamaged(StorageUnavailable):
+    """The job database fails SQLite's integrity check, or is no database (a truncated or zeroed
+    file): the server does not start on it (``geosmooth serve`` exits with its own status 14,
+    ``service.api.server.StoreUnusable``)."""
+
+    code = "store-damaged"
+    title = "Job database damaged"
 
 
 _FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})

@@ -189,6 +189,24 @@ class JobFiles:
         """Delete a job's directory (no error if it is gone)."""
         shutil.rmtree(self.dir(job_id), ignore_errors=True)
 
+    @property
+    def quarantine_dir(self) -> Path:
+        """Where job directories without a record go (``data_dir/quarantine``)."""
+        return self.root.parent / "quarantine"
+
+    def quarantine(self, job_id: str) -> Path | None:
+        """Move a job directory into :attr:`quarantine_dir` (never deleted: its record may be
+        lost with a database, its result is still someone's); its new path (``None``: gone)."""
+        self.quarantine_dir.mkdir(parents=True, exist_ok=True)
+        dest = self.quarantine_dir / job_id
+        if dest.exists():
+            dest = self.quarantine_dir / f"{job_id}.{int(time.time() * 1000)}"
+        try:
+            os.rename(self.dir(job_id), dest)
+        except FileNotFoundError:
+            return None
+        return dest
+
     def orphans(self, known: set[str], min_age: float) -> list[str]:
         """Job directories without a record, older than ``min_age`` seconds.
 

@@ -17,12 +17,18 @@ that was checked (the ``Host`` header and TLS server name keep the URL's host), 
 that changes between the check and the connection (DNS rebinding) cannot redirect it. Redirects
 are not followed.
 
+Bounded: a try ends after ``webhook_timeout`` seconds in all (a watchdog shuts its socket, so a
+receiver that trickles its answer a byte at a time cannot hold a delivery thread), and reads at
+most :data:`MAX_ANSWER` bytes of the answer's body (the status line and headers are bounded by
+h11's 16 KiB); an answer that is longer, endless or unfinished at the deadline is a failed try.
+
 Delivery: at least once, retried with exponential backoff (1, 2, 4, ... s, at most 60 s between
 tries) on connection errors and non-2xx answers, ``webhook_max_attempts`` tries in all.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
 import ipaddress
@@ -33,6 +39,8 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit, urlunsplit
+
+import httpcore
 
 from service.jobs.errors import WebhookUrlRejected
 
@@ -52,6 +60,8 @@ __all__ = [
 SIGNATURE_HEADER = "Geosmooth-Signature"
 _MAX_URL = 2048
 _MAX_BACKOFF = 60.0
+#: Bytes of a receiver's answer body read at most (a longer answer is a failed try).
+MAX_ANSWER = 4096
 
 
 @dataclass(frozen=True)
@@ -176,23 +186,79 @@ def verify_signature(
     return fresh and hmac.compare_digest(expected, fields.get("v1", ""))
 
 
-def _post(target: Target, body: bytes, headers: dict[str, str], timeout: float) -> int:
-    """POST to the checked address (Host and TLS server name from the URL); the status."""
-    import httpx
+class _Deadline(httpcore.SyncBackend):
+    """Sockets that are shut down when the try's total deadline passes (whatever they wait on:
+    the connection, the TLS handshake, a status line or a body sent a byte at a time)."""
 
+    def __init__(self) -> None:
+        self._sockets: list[socket.socket] = []
+        self._lock = threading.Lock()
+        self._expired = False
+
+    def connect_tcp(self, host: str, port: int, timeout: float | None = None,
+                    local_address: str | None = None,
+                    socket_options: Any = None) -> httpcore.NetworkStream:  # fmt: skip
+        stream = super().connect_tcp(host, port, timeout, local_address, socket_options)
+        with self._lock:
+            self._sockets.append(stream.get_extra_info("socket"))
+            if self._expired:
+                self._shut()
+        return stream
+
+    def expire(self) -> None:
+        with self._lock:
+            self._expired = True
+            self._shut()
+
+    def _shut(self) -> None:
+        for sock in self._sockets:
+            with contextlib.suppress(OSError):
+                sock.shutdown(socket.SHUT_RDWR)
+
+
+def _post(target: Target, body: bytes, headers: dict[str, str], timeout: float) -> int:
+    """POST to the checked address (Host and TLS server name from the URL); the status.
+
+    The whole try (connection, TLS, request, status line, headers, answer body) ends within
+    ``timeout`` seconds, and at most :data:`MAX_ANSWER` bytes of the answer's body are read: a
+    longer, endless or unfinished answer raises :class:`WebhookAnswerRefused` (a failed try).
+    """
     parts = urlsplit(target.url)
     literal = f"[{target.address}]" if ":" in target.address else target.address
     direct = urlunsplit((parts.scheme, f"{literal}:{target.port}", parts.path or "/",
                          parts.query, ""))  # fmt: skip
-    extensions = {"sni_hostname": target.host} if parts.scheme == "https" else {}
-    with httpx.Client(timeout=timeout, follow_redirects=False, trust_env=False) as client:
-        response = client.post(
-            direct,
-            content=body,
-            headers={**headers, "Host": parts.netloc.rpartition("@")[2]},
-            extensions=extensions,
-        )
-    return response.status_code
+    extensions: dict[str, Any] = {"timeout": dict.fromkeys(("connect", "read", "write",
+                                                            "pool"), timeout)}  # fmt: skip
+    if parts.scheme == "https":
+        extensions["sni_hostname"] = target.host
+    backend = _Deadline()
+    timer = threading.Timer(timeout, backend.expire)
+    timer.daemon = True
+    timer.start()
+    try:
+        with (
+            httpcore.ConnectionPool(network_backend=backend, max_connections=1) as pool,
+            pool.stream(
+                "POST",
+                direct,
+                content=body,
+                extensions=extensions,
+                headers=[*headers.items(), ("Host", parts.netloc.rpartition("@")[2]),
+                         ("Connection", "close")],
+            ) as response,  # fmt: skip
+        ):
+            read = 0
+            for chunk in response.iter_stream():
+                read += len(chunk)
+                if read > MAX_ANSWER:
+                    raise WebhookAnswerRefused(f"answer body over {MAX_ANSWER} bytes")
+            return response.status
+    finally:
+        timer.cancel()
+
+
+class WebhookAnswerRefused(Exception):
+    """The receiver's answer was longer than :data:`MAX_ANSWER` bytes (a failed try)."""
 
 
 def deliver(

@@ -10,6 +10,7 @@ files to these.
 from __future__ import annotations
 
 import io
+import re
 import struct
 from pathlib import Path
 
@@ -57,7 +58,10 @@ def las_cases() -> dict[str, bytes]:
     nan_scale = bytearray(good)
     struct.pack_into("<d", nan_scale, 131, float("nan"))
     laz = las_bytes(compress=True)
+    contradiction = bytearray(good)
+    contradiction[104] = 6  # point format 6 in a LAS 1.2 file (issue 42: refused at the write)
     return {
+        "las_version_contradiction.las": bytes(contradiction),
         "las_huge_count.las": _set_count(good, 2**32 - 1),
         "las14_huge_count.las": _set_count(las_bytes(version="1.4"), 2**40),
         "las_count_one_more.las": _set_count(good, 401),
@@ -143,3 +147,96 @@ def write_all(dest: Path, corpus: bool = True) -> list[Path]:
         path.write_bytes(data)
         paths.append(path)
     return sorted(paths)
+
+
+def _crc32c(data: bytes) -> int:
+    """CRC-32C (Castagnoli), the checksum of every 1020-byte E57 page."""
+    crc = 0xFFFFFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ (0x82F63B78 if crc & 1 else 0)
+    return crc ^ 0xFFFFFFFF
+
+
+def e57_bytes(n: int = 1000, path: Path | None = None) -> bytes:
+    """A valid one-scan E57 file of ``n`` points written by pye57 (float32 x y z, intensity)."""
+    import tempfile
+
+    import pye57
+
+    with tempfile.TemporaryDirectory() as tmp:
+        name = str(path or Path(tmp) / "scan.e57")
+        e57 = pye57.E57(name, mode="w")
+        pts = _grid(n)
+        fields = {"cartesianX": pts[:, 0], "cartesianY": pts[:, 1], "cartesianZ": pts[:, 2]}
+        e57.write_scan_raw({**fields, "intensity": np.linspace(0, 1, n)})
+        e57.close()
+        return Path(name).read_bytes()
+
+
+def e57_with_record_count(data: bytes, count: int) -> bytes:
+    """``data`` (an E57 file) whose XML says ``recordCount="count"``, page checksums redone, so
+    libE57 reads the lie as the file's truth (the XML keeps its length: indentation absorbs
+    the digits)."""
+    pages = [data[i : i + 1024] for i in range(0, len(data), 1024)]
+    logical = b"".join(p[:1020] for p in pages)
+    old = re.search(rb'recordCount="(\d+)"', logical)
+    assert old is not None
+    new = f'recordCount="{count}"'.encode()
+    grow = len(new) - len(old[0])
+    pad = logical.index(b"\n" + b" " * (grow + 1), old.end())  # an indentation after it
+    logical = (logical[: old.start()] + new + logical[old.end() : pad + 1]
+               + logical[pad + 1 + grow :])  # fmt: skip
+    out = bytearray()
+    for i in range(0, len(logical), 1020):
+        page = logical[i : i + 1020]
+        out += page + struct.pack(">I", _crc32c(page))
+    return bytes(out)
+
+
+def _dxf_lines() -> list[bytes]:
+    import ezdxf
+
+    doc = ezdxf.new("R2000")
+    doc.modelspace().add_lwpolyline([(0, 0), (1, 0), (2, 1), (3, 1)])
+    out = io.StringIO()
+    doc.write(out)
+    return out.getvalue().encode().split(b"\n")
+
+
+def laz_with_chunk_count(data: bytes, count: int) -> bytes:
+    """A LAZ file whose chunk table says it holds ``count`` chunks (lazrs allocated 16 bytes a
+    chunk from it and aborted the process at 3e9)."""
+    offset = struct.unpack_from("<I", data, 96)[0]
+    table = struct.unpack_from("<q", data, offset)[0]
+    buf = bytearray(data)
+    struct.pack_into("<I", buf, table + 4, count)
+    return bytes(buf)
+
+
+def parser_cases() -> dict[str, bytes]:
+    """The four files of issue 42 finding 4, each once an internal error (HTTP 500, exit 1 or
+    134): a 400-digit GeoJSON integer (OverflowError), a GPX elevation of 1e308 (the noise
+    estimate failed before the extent check), a DXF with non-UTF-8 bytes in a layout name
+    (ezdxf's audit: AttributeError) and a LAZ whose chunk table declares 3.25e9 chunks (lazrs
+    aborted: "memory allocation of 52076478480 bytes failed")."""
+    big = b"9" * 400
+    geojson = b'{"type":"LineString","coordinates":[[0,0],[1,' + big + b"],[2,0],[3,1]]}"
+    points = b"".join(
+        b'<trkpt lat="%.4f" lon="%.4f"><ele>%s</ele></trkpt>'
+        % (45 + i * 1e-4, 7 + i * 1e-4, b"1e308" if i == 3 else b"10")
+        for i in range(10)
+    )
+    gpx = (b'<?xml version="1.0"?><gpx version="1.1" creator="t" '
+           b'xmlns="http://www.topografix.com/GPX/1/1"><trk><trkseg>' + points
+           + b"</trkseg></trk></gpx>")  # fmt: skip
+    lines = _dxf_lines()
+    at = next(i for i, ln in enumerate(lines) if ln == b"Layout1")  # the first paper layout name
+    dxf = b"\n".join([*lines[:at], b"\xff\xfe", *lines[at + 1 :]])
+    return {
+        "big_integer.geojson": geojson,
+        "ele_1e308.gpx": gpx,
+        "non_utf8.dxf": dxf,
+        "chunk_table.laz": laz_with_chunk_count(las_bytes(5000, compress=True), 3_254_779_905),
+    }

@@ -22,7 +22,7 @@ from service.jobs.webhooks import (
 from service.settings import Settings
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, wait_finished, wait_for
-from tests.jobs.jobs_receiver import Receiver, documented_verifier
+from tests.jobs.jobs_receiver import HostileReceiver, Receiver, documented_verifier
 
 MakeQueue = Callable[..., LocalQueue]
 SECRET = "whsec-test-4f1c"
@@ -149,3 +149,25 @@ def test_delivery_rechecks_the_target_and_sends_nothing_to_a_refused_one() -> No
     with Receiver() as hook:
         ok, tries = deliver(hook.url(), {"id": "x"}, _settings(webhook_allow_private=False))
     assert (ok, tries) == (False, 1) and hook.deliveries == []
+
+
+@pytest.mark.parametrize("mode", ["endless", "huge", "trickle", "silent"])
+def test_a_hostile_answer_is_a_failed_try_with_bounded_memory(mode: str) -> None:
+    """A receiver answering with an endless or 1 GiB body, a byte at a time, or not at all: the
+    try fails (not "delivered"), the client hangs up on it (the receiver sees the connection
+    cut before it ran out of answer), and the deliverer holds at most a few hundred KB."""
+    import tracemalloc
+
+    settings = _settings(webhook_timeout=1.0, webhook_max_attempts=1)
+    with HostileReceiver(mode) as hook:
+        tracemalloc.start()
+        try:
+            delivered, tries = deliver(hook.url(), {"id": "j"}, settings)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert hook.done.wait(60)
+    assert (delivered, tries) == (False, 1)
+    assert hook.cut.is_set()  # the client hung up: the answer was not waited out
+    assert hook.sent < hook.limit
+    assert peak < 1 << 20  # bytes, all Python allocations of the delivery

@@ -134,6 +134,12 @@ class GuardedH11Protocol(H11Protocol):
             self._disarm_header_timer()
             self.idle.pop(self, None)
 
+    def handle_events(self) -> None:
+        super().handle_events()
+        cycle = getattr(self, "cycle", None)
+        if cycle is not None and _framed_twice(getattr(self, "headers", [])):
+            cycle.keep_alive = False  # RFC 9112 section 6.1: close after responding
+
     def on_response_complete(self) -> None:
         super().on_response_complete()
         self._disarm_header_timer()  # idle from here on: uvicorn's keep-alive timeout applies
@@ -188,6 +194,13 @@ class GuardedH11Protocol(H11Protocol):
 
 
 _RETRY_AFTER = 2
+
+
+def _framed_twice(headers: list[tuple[bytes, bytes]]) -> bool:
+    """Both ``Content-Length`` and ``Transfer-Encoding``: h11 frames the body by the latter,
+    and the connection must close after the response (a request smuggling vector)."""
+    names = {name for name, _ in headers}
+    return b"content-length" in names and b"transfer-encoding" in names
 
 
 def _write_problem(

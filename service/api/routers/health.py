@@ -43,8 +43,8 @@ class Readiness(BaseModel):
 
 
 def _writable(path: Path) -> bool:
-    try:
-        path.mkdir(parents=True, exist_ok=True)
+    try:  # the spool itself may be made again, not its parents (a removed data directory)
+        path.mkdir(exist_ok=True)
         fd, name = tempfile.mkstemp(prefix=".readyz-", dir=path)
         os.close(fd)
         os.unlink(name)

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.io._shared.elements import (
     drop_repeating,
@@ -93,7 +94,9 @@ def assemble(
     FormatError
         If there are no points.
     GeometryError
-        From :class:`Geometry` validation (e.g. non-finite coordinates).
+        From :class:`Geometry` validation (e.g. non-finite coordinates), or points spanning
+        more than the engine represents (:meth:`~service.core.frame.Frame.of`: a GPX
+        elevation of 1e308 reached the noise estimate and failed there as an internal error).
     """
     notes = list(notes or [])
     pts = np.asarray(points, dtype=np.float64)
@@ -106,6 +109,7 @@ def assemble(
     lines = _polylines(polylines, notes)
     all_edges = edge_array(standalone, lines)
     geometry = Geometry(pts, faces=faces, edges=all_edges, weights=weights, fixed=fixed)
+    Frame.of(geometry.points, "normalized")  # the engine's extent check, at the read (issue 42)
     doc = GeometryDocument(
         geometry=geometry,
         polylines=lines,

@@ -97,8 +97,11 @@ class LocalFrame:
     def forward(
         self, lat: NDArray[np.float64], lon: NDArray[np.float64], h: NDArray[np.float64]
     ) -> NDArray[np.float64]:
-        """East, north, up (metres) of geodetic points."""
-        return (geodetic_to_ecef(lat, lon, h) - np.asarray(self.origin)) @ self._rotation().T
+        """East, north, up (metres) of geodetic points (a non-finite or overflowing height
+        gives non-finite coordinates, refused with the point named by the Geometry check,
+        without a NumPy warning on stderr)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            return (geodetic_to_ecef(lat, lon, h) - np.asarray(self.origin)) @ self._rotation().T
 
     def inverse(
         self, enu: NDArray[np.float64]

@@ -26,6 +26,7 @@ line (a point cloud) as ``POINT`` entities.
 from __future__ import annotations
 
 import io
+import logging
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -62,14 +63,30 @@ class DxfLayout:
     simple: list[bool]
 
 
+#: ezdxf logs each value it recovers as a warning (up to 112 lines of a bad file on the CLI's
+#: stderr, even with -q); what it could not recover is the one FormatError line.
+logging.getLogger("ezdxf").setLevel(logging.ERROR)
+
+
 def _load(data: bytes) -> Any:
+    """The drawing ``ezdxf.recover`` makes of ``data``.
+
+    Any exception of the recovery is the file's: besides ``DXFError`` and decoding errors, its
+    audit of a damaged file raises ``AttributeError`` (a layout whose name did not decode) and
+    ``AssertionError``; each is one FormatError line, never an internal error.
+    """
     from ezdxf import recover
     from ezdxf.lldxf.const import DXFError
 
     try:
         doc, _ = recover.read(io.BytesIO(data))
-    except (DXFError, ValueError, UnicodeDecodeError, IndexError, KeyError, TypeError) as exc:
-        raise FormatError(f"DXF: {' '.join(str(exc).split())[:200]}", fmt="dxf") from None
+    except MemoryError:
+        raise
+    except Exception as exc:
+        text = " ".join(str(exc).split())[:200]
+        if not isinstance(exc, DXFError | ValueError):
+            text = f"the drawing is damaged beyond recovery ({type(exc).__name__}: {text})"
+        raise FormatError(f"DXF: {text}", fmt="dxf") from None
     return doc
 
 

@@ -7,7 +7,9 @@ coordinates, ``intensity``, ``colorRed/Green/Blue``, ``rowIndex``, ``columnIndex
 state), placed in world coordinates with the scan's pose and concatenated. Points flagged
 invalid (or with NaN coordinates) are left out of the geometry and written back as they were.
 Intensity, colours and row/column indices are attributes when every scan has them. Images and
-fields pye57 cannot read are not kept (noted).
+fields pye57 cannot read are not kept (noted). A scan's ``recordCount`` is checked before pye57
+allocates its buffers: against the file size (at the fewest bits a record of its prototype can
+take) and the reader limits (:func:`service.io.limits.check_points`).
 
 Writing
 -------
@@ -43,6 +45,7 @@ from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError
+from service.io.limits import check_points
 from service.io.source import Source
 
 __all__ = ["E57Layout", "read_e57", "write_e57"]
@@ -77,11 +80,77 @@ def _name(header: Any, i: int) -> str:
         return f"scan {i}"
 
 
-def _scan(e57: Any, i: int) -> tuple[Any, dict[str, Any], NDArray[np.float64]]:
+def _record_bits(prototype: Any) -> int:
+    """The fewest bits one record of a compressed vector with this prototype takes on disk
+    (E57 bit-packs: a float 32 or 64 bits, an integer ``ceil(log2(max - min + 1))``)."""
+    from pye57 import libe57
+
+    bits = 0
+    for j in range(prototype.childCount()):
+        node = prototype.get(j)
+        kind = node.type()
+        if kind == libe57.E57_FLOAT:
+            bits += 32 if libe57.FloatNode(node).precision() == libe57.E57_SINGLE else 64
+        elif kind in (libe57.E57_INTEGER, libe57.E57_SCALED_INTEGER):
+            typed = (libe57.IntegerNode if kind == libe57.E57_INTEGER
+                     else libe57.ScaledIntegerNode)(node)  # fmt: skip
+            bits += max(0, int(typed.maximum()) - int(typed.minimum())).bit_length()
+        elif kind == libe57.E57_STRING:
+            bits += 8  # a string's length prefix
+    return bits
+
+
+def _check_scan(header: Any, i: int, size: int) -> None:
+    """Refuse a scan whose ``recordCount`` its file cannot hold, or the limits do not allow,
+    before pye57 allocates a buffer of that many records per field."""
+    from pye57 import libe57
+
+    n = int(header.point_count)
+    prototype = libe57.StructureNode(header.points.prototype())
+    bits = _record_bits(prototype)
+    if n * bits > 8 * size:
+        raise FormatError(
+            f"E57 scan {i} declares {n} points (recordCount), more than the file's {size}"
+            f" bytes can hold at {bits} bits a point",
+            fmt="e57",
+        )
+    # pye57's buffers (8 bytes a field at most), then xyz, its float64 copy, the valid mask,
+    # the world coordinates and their concatenation
+    check_points(n, 8 * prototype.childCount() + 6 * 24 + 1, "e57")
+
+
+def _read_raw(e57: Any, header: Any, i: int) -> dict[str, Any]:
+    """pye57's ``read_scan_raw`` (the fields it supports), with the records the reader
+    delivered counted: pye57 returns its ``np.empty`` buffers whole, so a ``recordCount``
+    larger than the data gave points of uninitialised memory."""
+    from pye57 import libe57
+    from pye57.e57 import SUPPORTED_POINT_FIELDS
+
+    n = int(header.point_count)
+    raw: dict[str, Any] = {}
+    buffers = libe57.VectorSourceDestBuffer()
+    for field in header.point_fields:
+        if field in SUPPORTED_POINT_FIELDS:
+            raw[field], buffer = e57.make_buffer(field, n)
+            buffers.append(buffer)
+    reader = header.points.reader(buffers)
+    try:
+        got = int(reader.read()) if n else 0
+    finally:
+        reader.close()
+    if got != n:
+        raise FormatError(
+            f"E57 scan {i} holds {got} points, its recordCount says {n}", fmt="e57"
+        )
+    return raw
+
+
+def _scan(e57: Any, i: int, size: int) -> tuple[Any, dict[str, Any], NDArray[np.float64]]:
     from pye57.utils import convert_spherical_to_cartesian
 
     header = e57.get_header(i)
-    raw = e57.read_scan_raw(i, ignore_unsupported_fields=True)
+    _check_scan(header, i, size)
+    raw = _read_raw(e57, header, i)
     if all(c in raw for c in _XYZ):
         xyz = np.column_stack([raw[c] for c in _XYZ]).astype(np.float64)
     elif "sphericalRange" in raw:
@@ -125,8 +194,9 @@ def read_e57(source: Source, *, weld: bool = False) -> GeometryDocument:
         try:
             e57 = pye57.E57(str(path))
             count = e57.scan_count
+            size = os.path.getsize(path)
             for i in range(count):
-                header, raw, xyz = _scan(e57, i)
+                header, raw, xyz = _scan(e57, i, size)
                 single = single and _single(header)
                 rot = np.asarray(header.rotation, dtype=np.float64)
                 trans = np.asarray(header.translation, dtype=np.float64)

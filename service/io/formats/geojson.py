@@ -20,6 +20,7 @@ FeatureCollection with one LineString per polyline (x = longitude, y = latitude)
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Any, BinaryIO
@@ -81,6 +82,9 @@ def _walk(coords: Any, depth: int, kind: str) -> Iterator[list[list[Any]]]:
         yield from _walk(part, depth - 1, kind)
 
 
+_FLOAT_MAX = sys.float_info.max
+
+
 def _check(line: list[Any]) -> int:
     """Dimension of a line's positions (2 or 3); FormatError for anything else."""
     dims = set()
@@ -90,6 +94,8 @@ def _check(line: list[Any]) -> int:
         for v in pos:
             if isinstance(v, bool) or not isinstance(v, int | float):
                 raise _fail(f"a coordinate must be a number, got {json.dumps(v)[:20]}")
+            if isinstance(v, int) and not -_FLOAT_MAX <= v <= _FLOAT_MAX:  # float(v) overflows
+                raise _fail(f"a coordinate is out of range, got {str(v)[:20]}...")
         dims.add(len(pos))
     return min(dims) if dims else 2
 

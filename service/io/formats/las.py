@@ -40,6 +40,7 @@ from service.io._shared.coords import as_xyz
 from service.io._shared.plain import PlainDocument
 from service.io.document import GeometryDocument, Precision
 from service.io.errors import FormatError, MissingDependency
+from service.io.formats.laz_chunks import check_chunk_table
 from service.io.limits import check_points
 from service.io.source import Source
 
@@ -78,6 +79,24 @@ def _laspy_errors(fmt: str) -> Any:
     except Exception as exc:  # laspy and lazrs raise many kinds on bad files; report one line
         text = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise FormatError(f"{fmt.upper()}: {text}", fmt=fmt) from None
+    except BaseException as exc:  # a Rust panic in lazrs (pyo3's PanicException) is not an
+        if type(exc).__name__ != "PanicException":  # Exception; any other BaseException is
+            raise  # KeyboardInterrupt, SystemExit ...
+        raise FormatError(f"{fmt.upper()}: the decoder failed ({exc})", fmt=fmt) from None
+
+
+def _check_version(header: Any, fmt: str) -> None:
+    """A point format the file's LAS version cannot hold is malformed at the read (it was
+    smoothed, then refused by the writer: exit 6 instead of 3)."""
+    from laspy.point import dims
+
+    version, point_format = str(header.version), int(header.point_format.id)
+    if not dims.is_point_fmt_compatible_with_version(point_format, version):
+        raise FormatError(
+            f"{fmt.upper()}: malformed header: point format {point_format} does not exist in"
+            f" LAS {version}",
+            fmt=fmt,
+        )
 
 
 def _decimals(scale: float) -> int | None:
@@ -141,8 +160,17 @@ def open_points(source: Source, fmt: str, *, attributes: bool = True) -> Iterato
     if source.size < 227:
         raise FormatError(f"{fmt.upper()}: the file is too short for a LAS header", fmt=fmt)
     _precheck(source.head(375), source.size, fmt)
-    with _laspy_errors(fmt), source.open() as fh, laspy.open(fh, closefd=False) as reader:
+    check_chunk_table(source, fmt)
+    # lazrs' sequential decoder: the parallel one trusts every chunk table entry (a damaged
+    # one made it panic, "capacity overflow"); the sequential one reads the chunks in turn
+    backend = laspy.LazBackend.Lazrs
+    with (
+        _laspy_errors(fmt),
+        source.open() as fh,
+        laspy.open(fh, closefd=False, laz_backend=backend) as reader,
+    ):
         header = reader.header
+        _check_version(header, fmt)
         n = int(header.point_count)
         if n == 0:
             raise FormatError("the file holds no points", fmt=fmt)

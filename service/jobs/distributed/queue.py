@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import multiprocessing
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from service.core.linalg.threads import threads_per_worker
 from service.jobs import admit
 from service.jobs.base import QueueBase
 from service.jobs.config import RQConfig
@@ -25,6 +27,7 @@ from service.jobs.distributed.backend import Backend
 from service.jobs.distributed.blobs import DirectoryBlobs
 from service.jobs.distributed.epoch import Epoch
 from service.jobs.distributed.store import RedisJobStore
+from service.jobs.forkserver import prepare_forkserver
 from service.jobs.notify import Notifier
 from service.jobs.queue import JobQueue, JobRecord, JobStatus, NewJob, QueueHealth
 
@@ -81,6 +84,11 @@ class RQQueue(QueueBase[RedisJobStore]):
             return
         self._started = True
         self._stop.clear()
+        if "forkserver" in multiprocessing.get_all_start_methods():
+            # the API's request processes (uploads checked at submit) fork from it: the same
+            # preload and BLAS thread cap as the embedded backend's (issue 42)
+            settings = self.config.settings
+            prepare_forkserver(settings.threads_per_job or threads_per_worker(settings.workers))
         self.notifier.start()
         with contextlib.suppress(Exception):
             self.epoch.check()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from service.jobs.files import probe_directory
@@ -30,11 +30,21 @@ class StorageProbe:
     min_free : int
         Bytes below which the store counts as full.
     db_check : callable
-        ``() -> "ok" | "corrupt" | "unavailable"``.
+        ``() -> "ok" | "corrupt" | "unavailable" | "missing"``.
+    dirs : sequence of Path
+        Further directories the store writes to (the job directories' root): each must exist
+        and take a file, like ``data_dir`` (a data directory removed under a live server was
+        "ready" while every submit failed).
+    db_file : Path, optional
+        The database file: ``"missing"`` when it was removed, checked on every call (an open
+        connection still reads the unlinked file; what it writes is lost).
     """
 
-    def __init__(self, data_dir: Path, min_free: int, db_check: Callable[[], str]) -> None:
+    def __init__(self, data_dir: Path, min_free: int, db_check: Callable[[], str],
+                 dirs: Sequence[Path] = (), db_file: Path | None = None) -> None:  # fmt: skip
         self.data_dir = Path(data_dir)
+        self.db_file = db_file
+        self.dirs = [Path(d) for d in dirs]
         self.min_free = min_free
         self._db_check = db_check
         self._db_state = "ok"
@@ -51,7 +61,9 @@ class StorageProbe:
 
     def health(self) -> QueueHealth:
         """Storage and database checks."""
-        checks = {"storage": probe_directory(self.data_dir, self.min_free),
-                  "database": self.database()}  # fmt: skip
+        states = [probe_directory(d, self.min_free) for d in (self.data_dir, *self.dirs)]
+        checks = {"storage": next((s for s in states if s != "ok"), "ok"),
+                  "database": "missing" if self.db_file and not self.db_file.exists()
+                  else self.database()}  # fmt: skip
         bad = [f"{name} {state}" for name, state in checks.items() if state != "ok"]
         return QueueHealth(not bad, checks, ", ".join(bad) or None)

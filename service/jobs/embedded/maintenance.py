@@ -179,13 +179,24 @@ class Maintenance:
         self.store.keep_reserve(self.config.reserve_bytes, self.config.min_free_bytes)
 
     def _remove_orphans(self, min_age: float = ORPHAN_AGE) -> None:
-        """Job directories without a record: at any age when no other live process uses the
-        store (:func:`sole_user`), else older than :data:`ORPHAN_AGE`."""
-        removed = self.files.orphans(self.store.ids(), min_age)
-        for job_id in removed:
-            self.files.remove(job_id)
-        if removed:
-            log.warning("removed %d orphan job director(y/ies) left by a crash", len(removed))
+        """Job directories without a record, at any age when no other live process uses the
+        store (:func:`sole_user`), else older than :data:`ORPHAN_AGE`, are quarantined
+        (:meth:`~service.jobs.files.JobFiles.quarantine`), never deleted: a crash between the
+        input and the record leaves one, but so does a lost or replaced database (a deleted
+        WAL, a restored old backup), whose directories hold accepted jobs and results."""
+        known = self.store.ids()
+        moved = [j for j in self.files.orphans(known, min_age) if self.files.quarantine(j)]
+        if not moved:
+            return
+        where = self.files.quarantine_dir
+        if known:
+            log.warning("moved %d job director(y/ies) without a record to %s (a crash between"
+                        " upload and record, or records lost with the database)", len(moved),
+                        where)  # fmt: skip
+        else:
+            log.error("the job database holds no job but %d job director(y/ies) exist: it is new,"
+                      " replaced or lost; moved them to %s, nothing deleted", len(moved),
+                      where)  # fmt: skip
 
     def _remove_strays(self) -> None:
         if time.monotonic() - self._last_strays < ORPHAN_AGE and self._last_strays > 0:

@@ -14,9 +14,7 @@ elsewhere. Both can be chosen explicitly.
 
 from __future__ import annotations
 
-import ast
 import contextlib
-import importlib
 import logging
 import multiprocessing
 import multiprocessing.context
@@ -28,12 +26,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from service.jobs import problems
 from service.jobs.embedded import child
 from service.jobs.embedded.store import Claim, JobStore
+from service.jobs.forkserver import prepare_forkserver
 
 if TYPE_CHECKING:
     from service.jobs.config import LocalConfig
@@ -43,7 +41,6 @@ __all__ = ["WorkerPool", "default_start_method"]
 log = logging.getLogger("geosmooth.jobs")
 
 _TICK = 0.05
-_PRELOAD = ("service.jobs.embedded.child", "service.jobs.runner", "service.jobs.preload")
 #: Signals by which a job process kills itself (its own bug or bad input): the job fails. Any
 #: other signal came from outside (the OOM killer's SIGKILL, a stop of the whole service): the
 #: run was interrupted and is retried like a server death.
@@ -54,30 +51,6 @@ _CRASH_SIGNALS = frozenset(
 _MAX_BACKOFF = 300.0
 #: Seconds a slot keeps trying to record a run's outcome before leaving it to the sweep.
 SETTLE_SECONDS = 50.0
-
-
-def main_module_imports() -> list[str]:
-    """Modules the ``__main__`` module imports at its top level (and this process has loaded).
-
-    multiprocessing re-runs the main module in every spawn/forkserver child (as
-    ``__mp_main__``). Preloading its imports in the forkserver makes that re-run cheap: with
-    ``python -m uvicorn``/``geosmooth serve``-style mains importing FastAPI it saves ~150 ms
-    per job.
-    """
-    path = getattr(sys.modules.get("__main__"), "__file__", None)
-    if not path:
-        return []
-    try:
-        tree = ast.parse(Path(path).read_bytes())
-    except (OSError, SyntaxError, ValueError):
-        return []
-    names: list[str] = []
-    for node in tree.body:
-        if isinstance(node, ast.Import):
-            names += [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names.append(node.module)
-    return [n for n in dict.fromkeys(names) if n in sys.modules and n != "__future__"]
 
 
 def default_start_method() -> str:
@@ -147,17 +120,8 @@ class WorkerPool:
         # read by service.jobs.preload in the forkserver: the limit every job process inherits
         os.environ["GEOSMOOTH_THREADS_PER_JOB"] = str(self.config.threads)
         if self.start_method == "forkserver":
-            preload = []
-            names = (*_PRELOAD, self.config.runner.partition(":")[0], *main_module_imports())
-            for name in dict.fromkeys(names):
-                try:  # only what imports cleanly here: a broken import must not kill the server
-                    importlib.import_module(name)
-                except Exception as exc:
-                    log.warning("not preloading %s in the forkserver: %s", name, exc)
-                else:
-                    preload.append(name)
-            self._ctx.set_forkserver_preload(preload)  # type: ignore[attr-defined]
-            multiprocessing.forkserver.ensure_running()
+            modules = ("service.jobs.embedded.child", self.config.runner.partition(":")[0])
+            prepare_forkserver(self.config.threads, modules)
         self._stopping.clear()
         self._threads = [
             threading.Thread(target=self._slot, name=f"geosmooth-slot-{i}", daemon=True)

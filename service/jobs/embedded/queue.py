@@ -34,6 +34,7 @@ from service.jobs.config import LocalConfig
 from service.jobs.embedded.health import StorageProbe
 from service.jobs.embedded.maintenance import HOST, LIVE_OWNERS, Maintenance
 from service.jobs.embedded.pool import WorkerPool
+from service.jobs.embedded.sqlite import DB_NAME
 from service.jobs.embedded.store import JobStore
 from service.jobs.errors import IdempotencyConflict
 from service.jobs.files import JobFiles
@@ -64,10 +65,11 @@ class LocalQueue(QueueBase[JobStore], Maintenance):
         self.data_dir = config.data_dir
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.files = JobFiles(self.data_dir)
-        self.store = JobStore(self.data_dir / "jobs.sqlite3", config.result_ttl)
+        self.store = JobStore(self.data_dir / DB_NAME, config.result_ttl)
         self.owner = f"{HOST}@{os.getpid()}:{uuid.uuid4().hex[:12]}"
         self.pool = WorkerPool(config, self.store, self.owner, on_settled=self._finished)
-        self.probe = StorageProbe(self.data_dir, config.min_free_bytes, self.store.check)
+        self.probe = StorageProbe(self.data_dir, config.min_free_bytes, self.store.check,
+                                  [self.files.root], self.store.path)  # fmt: skip
         self.notifier = Notifier(config.settings, self._webhook_payload, self.store.claim_webhook,
                                  self.store.webhook_state)  # fmt: skip
         self._histogram = DurationHistogram()

@@ -22,7 +22,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["RESERVE_NAME", "Database", "with_reserve"]
+from service.jobs.errors import StoreDamaged
+
+__all__ = ["DB_NAME", "RESERVE_NAME", "Database", "check_file", "with_reserve"]
 
 log = logging.getLogger("geosmooth.jobs")
 
@@ -76,6 +78,36 @@ _V0_PROGRESS = (
 )
 _F = TypeVar("_F", bound=Callable[..., Any])
 RESERVE_NAME = "jobs.reserve"
+#: The job database's file name in the data directory.
+DB_NAME = "jobs.sqlite3"
+
+
+def check_file(path: Path) -> None:
+    """Raise :class:`StoreDamaged` unless ``path`` is missing, empty or passes SQLite's
+    ``quick_check`` (a truncated, zeroed or garbled file; issue 42).
+
+    Read-only: nothing is created, migrated or checkpointed.
+    """
+    if not path.exists() or path.stat().st_size == 0:
+        return
+    try:
+        conn = sqlite3.connect(path, timeout=30.0, isolation_level=None)
+        try:
+            rows = [r[0] for r in conn.execute("PRAGMA quick_check").fetchall()]
+        finally:
+            conn.close()
+    except sqlite3.OperationalError:  # locked, unreadable: not a verdict on the content
+        return
+    except sqlite3.DatabaseError as exc:
+        rows = [str(exc)]
+    if rows != ["ok"]:
+        detail = "; ".join(rows[:3])[:200]
+        raise StoreDamaged(
+            f"the job database {path.name} is damaged ({detail}); the server does not start on"
+            " it: restore it from a backup, or move it aside to start with a new one (job"
+            " directories without a record are then quarantined, never deleted)",
+            field="GEOSMOOTH_DATA_DIR",
+        )
 
 
 def with_reserve(method: _F) -> _F:
@@ -118,6 +150,7 @@ class Database:
             self._create()
 
     def _create(self) -> None:
+        check_file(self.path)
         try:
             self._create_schema()
         except sqlite3.OperationalError as exc:  # a read-only file system: reads only

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from service.jobs import JobStatus, LocalQueue
-from service.jobs.errors import StorageFull, StorageUnavailable
+from service.jobs.errors import StorageFull, StorageUnavailable, StoreDamaged
 from service.jobs.queue import NewJob
 from tests.jobs.jobs_fakes import script
 from tests.jobs.jobs_helpers import PARAMS, wait_finished, wait_for
@@ -120,13 +120,15 @@ def test_corrupted_database_is_reported_not_ready(make_queue: MakeQueue, tmp_pat
         wait_finished(queue, job_id)
     assert queue.health().checks["database"] == "ok"
     queue.stop()
+    running = make_queue(data_dir=data_dir)  # damaged while a server runs on it:
     db = data_dir / "jobs.sqlite3"
     size = db.stat().st_size
     assert size >= 3 * 4096
     with open(db, "r+b") as fh:  # garbage over the pages after the schema page
         fh.seek(4096)
         fh.write(os.urandom(size - 4096))
-    broken = make_queue(data_dir=data_dir)  # starts (maintenance fails, is logged)
-    health = broken.health()
+    health = running.health()  # ... it says so
     assert not health.ok and health.checks["database"] == "corrupt"
     assert "database corrupt" in (health.detail or "")
+    with pytest.raises(StoreDamaged, match="malformed"):  # a new one does not start on it
+        make_queue(data_dir=data_dir)  # (issue 42; it started before, maintenance failing)
