@@ -121,28 +121,24 @@ def _emit(progress: ProgressCallback | None, t0: float, stage: str, **kw: Any) -
 
 
 class _Clock:
-    """Tiles done, points per second and the time left, from the tiles measured so far."""
+    """Tiles done, points per second and the time left, measured from the probe's start."""
 
     def __init__(self, geometry: Geometry, tiles: int, progress: ProgressCallback | None,
-                 t0: float, lam: float) -> None:  # fmt: skip
-        self.total, self.tiles, self.progress, self.t0, self.lam = geometry.n, tiles, progress, \
-            t0, lam
-        self.base = self.points = self.done = 0
+                 t0: float) -> None:  # fmt: skip
+        self.total, self.tiles, self.progress, self.t0 = geometry.n, tiles, progress, t0
+        self.points = self.done = 0
+        self.lam: float | None = None
         self.start = time.perf_counter()
 
     def tick(self, points: int, tiles: int) -> None:
-        """``tiles`` more tiles with ``points`` points done (the first call: those done before,
-        not timed)."""
-        if self.done == 0 and self.points == 0 and self.base == 0:
-            self.base, self.done = points, tiles
-        else:
-            self.points += points
-            self.done += tiles
+        """``tiles`` more tiles with ``points`` points done."""
+        self.points += points
+        self.done += tiles
         spent = time.perf_counter() - self.start
         rate = self.points / spent if spent > 0 and self.points else None
-        left = None if rate is None else (self.total - self.base - self.points) / rate
+        left = None if rate is None else (self.total - self.points) / rate
         _emit(self.progress, self.t0, "search", lam=self.lam, iteration=1,
-              fraction=(self.base + self.points) / max(self.total, 1), tiles_done=self.done,
+              fraction=self.points / max(self.total, 1), tiles_done=self.done,
               tiles_total=self.tiles, points_per_second=rate, seconds_left=left)
 
 
@@ -186,9 +182,10 @@ def smooth_tiled(
     probe_tile = Tile(cores[first], tile_members(geometry.points, cores[first],
                                                  PROBE_HOPS * hop), PROBE_HOPS)  # fmt: skip
     _emit(progress, t0, "analysis")
+    clock = _Clock(geometry, len(cores), progress, t0)
 
     def run_tile(g: Geometry, n_core: int, p: SmoothingParams, lam: float | None) -> TileSolution:
-        return mapper(solve_tile, [(g, n_core, p, lam, noise, memory_limit)])[0]
+        return mapper(solve_tile, [(g, n_core, p, lam, noise, memory_limit, True)])[0]
 
     decision = rule(ProbeTile(tile_geometry(geometry, probe_tile.members), probe_tile.n_core,
                               _share(geometry, probe_tile.core)), params, run_tile)  # fmt: skip
@@ -206,7 +203,7 @@ def smooth_tiled(
     tiles = [Tile(c, np.zeros(0, np.int64), hops) for c in cores]
     if first in solved:
         tiles[first] = probe_tile
-    clock = _Clock(geometry, len(cores), progress, t0, lam)
+    clock.lam = lam
     _run_tiles(geometry, params, tiles, solved, lam, noise, hop, mapper, memory_limit, clock)
     return _stitch(geometry, params, tiles, solved, decision, noise, hop, first,
                    time.perf_counter() - t0)
@@ -225,7 +222,7 @@ def _run_tiles(
 ) -> None:  # fmt: skip
     """Every tile not yet in ``solved`` at ``lam``, ``workers`` tiles at a time (the run map's
     ``workers`` attribute, default 1), cut from the input when its chunk starts."""
-    clock.tick(sum(tiles[i].n_core for i in solved), len(solved))
+    clock.tick(sum(tiles[i].n_core for i in solved), len(solved))  # the probe, when kept
     todo = [i for i in range(len(tiles)) if i not in solved]
     step = max(int(getattr(mapper, "workers", 1) or 1), 1)
     for at in range(0, len(todo), step):

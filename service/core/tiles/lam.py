@@ -53,7 +53,8 @@ class LambdaDecision:
     probe: TileSolution | None = None
 
 
-#: ``run_tile(geometry, n_core, params, lam)``: the default on one tile (``lam=None``: its rule).
+#: ``run_tile(geometry, n_core, params, lam)``: the default on one tile (``lam=None``: its rule),
+#: with the numbers the halo needs.
 RunTile = Callable[[Geometry, int, SmoothingParams, "float | None"], TileSolution]
 #: ``rule(probe, params, run_tile) -> LambdaDecision``.
 LambdaRule = Callable[[ProbeTile, SmoothingParams, RunTile], LambdaDecision]
@@ -63,7 +64,8 @@ def probe_rule(probe: ProbeTile, params: SmoothingParams, run_tile: RunTile) -> 
     """Today's rule on the probe tile (module docstring)."""
     if params.tau_rule == "lam":
         assert params.lam is not None
-        return LambdaDecision(float(params.lam), "given")
+        return LambdaDecision(float(params.lam), "given",
+                              run_tile(probe.geometry, probe.n_core, params, float(params.lam)))
     local = params
     how = "the untiled rule on the probe tile"
     if params.tau_rule == "tau":

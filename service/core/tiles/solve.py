@@ -139,9 +139,11 @@ def solve_tile(
     lam: float | None,
     noise: NoiseEstimate | None,
     memory_limit: int | None = None,
+    measure: bool = False,
 ) -> TileSolution:
     """The default on the tile (core first in ``geometry``): its own rule when ``lam`` is
-    ``None`` (the probe), else one solve at ``lam`` (input frame); the core's result."""
+    ``None`` (the probe), else one solve at ``lam`` (input frame); the core's result, with the
+    halo's numbers when ``measure``."""
     t0 = time.perf_counter()
     seeded_noise(geometry, noise)
     run = Run(None)
@@ -153,7 +155,7 @@ def solve_tile(
         sol = _at_lambda(problem, plan, run, lam, memory_limit)
     res = report(problem, plan, run, sol, finish(problem, plan, sol))
     tile = _core_of(geometry, problem, res, n_core, sol, time.perf_counter() - t0)
-    return tile if lam is not None else _measured(tile, geometry, problem, n_core)
+    return _measured(tile, geometry, problem, n_core) if measure else tile
 
 
 def _measured(tile: TileSolution, geometry: Geometry, problem: Problem,
