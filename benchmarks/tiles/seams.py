@@ -36,7 +36,7 @@ def make(m: int, n: int, sigma: float, where: Path) -> tuple[float, list[Path]]:
     paths = []
     for i in range(m):
         for j in range(m):
-            xy = rng.uniform(0, side, (n, 2)) + [i * side, j * side]
+            xy = rng.uniform(0, side, (n, 2)) + np.array([i * side, j * side])
             z = terrain.heights(xy, m * side, seed=0) + sigma * rng.standard_normal(n)
             header = laspy.LasHeader(point_format=3, version="1.2")
             header.scales = np.array([0.001, 0.001, 0.001])

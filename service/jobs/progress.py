@@ -102,8 +102,8 @@ class ProgressTracker:
         eta = None
         if percent >= 100.0:
             eta = 0.0
-        elif getattr(event, "seconds_left", None) is not None:  # a tiled run's own (issue 43)
-            eta = round(float(event.seconds_left), 3)
+        elif (left := getattr(event, "seconds_left", None)) is not None:  # a tiled run's own
+            eta = round(float(left), 3)
         elif percent >= _MIN_PERCENT_FOR_ETA and elapsed > 0:
             eta = round(elapsed * (100.0 - percent) / percent, 3)
         last = self._last

@@ -126,7 +126,7 @@ def smooth_dataset(
     P = np.concatenate(parts)
     del parts
     largest = params.tile_points or max(sizes)
-    cores = []
+    cores: list[NDArray[np.int64]] = []
     for i, n in enumerate(sizes):
         own = np.arange(starts[i], starts[i + 1], dtype=np.int64)
         cores += [own[c] for c in kd_split(P[own], largest)] if n > largest else [own]

@@ -25,7 +25,7 @@ def _files(where: Path, m: int = 2, n: int = 3600, gap: float = 0.0) -> list[Pat
     out = []
     for i in range(m):
         for j in range(m):
-            xy = rng.uniform(0, SIDE, (n, 2)) + [i * (SIDE + gap), j * (SIDE + gap)]
+            xy = rng.uniform(0, SIDE, (n, 2)) + np.array([i, j]) * (SIDE + gap)
             z = heights(xy, 500.0, seed=1) + 0.1 * rng.standard_normal(n)  # smooth at 0.5 m
             header = laspy.LasHeader(point_format=3, version="1.2")
             header.scales = np.array([0.001, 0.001, 0.001])

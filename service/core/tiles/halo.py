@@ -33,7 +33,13 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = [
-    "HALO_EPS", "MAX_HOPS", "RATE_MARGIN", "decay_rate", "halo_hops", "operator_norm_bound", "spectral_norm"
+    "HALO_EPS",
+    "MAX_HOPS",
+    "RATE_MARGIN",
+    "decay_rate",
+    "halo_hops",
+    "operator_norm_bound",
+    "spectral_norm",
 ]
 
 #: Relative influence of the cut left at the core's edge. The benchmark asks for 1 % of the

@@ -167,7 +167,7 @@ def _measured(tile: TileSolution, geometry: Geometry, problem: Problem,
         tile,
         norm=operator_norm_bound(op.L),
         reach=hop_radius(geometry.points, op.neighborhoods.adjacency,
-                         _sources(geometry.points[:n_core])),  # fmt: skip
+                         _sources(geometry.points[:n_core])),
         lam_scale=problem.frame.lam_in(1.0),
         omega_low=float(np.quantile(omega, 0.01)) if omega.size else 1.0,
     )
