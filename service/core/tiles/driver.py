@@ -188,7 +188,7 @@ def smooth_tiled(
         return mapper(solve_tile, [(g, n_core, p, lam, noise, memory_limit, True)])[0]
 
     decision = rule(ProbeTile(tile_geometry(geometry, probe_tile.members), probe_tile.n_core,
-                              _share(geometry, probe_tile.core)), params, run_tile)  # fmt: skip
+                              _share(geometry, probe_tile.members)), params, run_tile)  # fmt: skip
     if decision.lam is None:
         return _unchanged(geometry, params, cores, decision, noise, hop,
                           time.perf_counter() - t0)
@@ -209,10 +209,12 @@ def smooth_tiled(
                    time.perf_counter() - t0)
 
 
-def _share(geometry: Geometry, core: np.ndarray) -> float:
+def _share(geometry: Geometry, members: np.ndarray) -> float:
+    """The tile's (core + halo) share of ``sum omega^2`` over the free points: the share of a
+    given tau its own search meets (its phi counts the halo too)."""
     w2 = geometry.omega() ** 2
     free = ~geometry.fixed_mask()
-    return float(w2[core][free[core]].sum() / max(w2[free].sum(), 1e-300))
+    return float(w2[members][free[members]].sum() / max(w2[free].sum(), 1e-300))
 
 
 def _run_tiles(

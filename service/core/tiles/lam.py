@@ -35,7 +35,8 @@ class ProbeTile:
     geometry : Geometry
     n_core : int
     share : float
-        ``sum_core omega_i^2 / sum_all omega_i^2`` over the free points (a tau's share).
+        ``sum_tile omega_i^2 / sum_all omega_i^2`` over the free points (a tau's share; the
+        tile's phi counts its halo).
     """
 
     geometry: Geometry
