@@ -121,7 +121,9 @@ def _emit(progress: ProgressCallback | None, t0: float, stage: str, **kw: Any) -
 
 
 class _Clock:
-    """Tiles done, points per second and the time left, measured from the probe's start."""
+    """Tiles done, points per second and the time left. The rate is measured from the probe's
+    start until a tile at the fixed lambda is done, then on those tiles alone (the probe
+    searches: slower per point than the others, so its rate alone overstates the time left)."""
 
     def __init__(self, geometry: Geometry, tiles: int, progress: ProgressCallback | None,
                  t0: float) -> None:  # fmt: skip
@@ -129,13 +131,17 @@ class _Clock:
         self.points = self.done = 0
         self.lam: float | None = None
         self.start = time.perf_counter()
+        self.since: tuple[float, int] | None = None  # (clock, points) after the probe
 
     def tick(self, points: int, tiles: int) -> None:
-        """``tiles`` more tiles with ``points`` points done."""
+        """``tiles`` more tiles with ``points`` points done (the first call: the probe's)."""
+        now = time.perf_counter()
         self.points += points
         self.done += tiles
-        spent = time.perf_counter() - self.start
-        rate = self.points / spent if spent > 0 and self.points else None
+        since = self.since = self.since or (now, self.points)
+        start, base = (self.start, 0) if self.points == since[1] else since
+        rate = (self.points - base) / (now - start) if now > start and self.points > base \
+            else None
         left = None if rate is None else (self.total - self.points) / rate
         _emit(self.progress, self.t0, "search", lam=self.lam, iteration=1,
               fraction=self.points / max(self.total, 1), tiles_done=self.done,
