@@ -193,8 +193,9 @@ def smooth_tiled(
     def run_tile(g: Geometry, n_core: int, p: SmoothingParams, lam: float | None) -> TileSolution:
         return mapper(solve_tile, [(g, n_core, p, lam, noise, memory_limit, True)])[0]
 
+    share = _share(geometry, probe_tile.members)
     decision = rule(ProbeTile(tile_geometry(geometry, probe_tile.members), probe_tile.n_core,
-                              _share(geometry, probe_tile.members)), params, run_tile)  # fmt: skip
+                              share), params, run_tile)  # fmt: skip
     if decision.lam is None:
         return _unchanged(geometry, params, cores, decision, noise, hop,
                           time.perf_counter() - t0)
@@ -212,7 +213,7 @@ def smooth_tiled(
     clock.lam = lam
     _run_tiles(geometry, params, tiles, solved, lam, noise, hop, mapper, memory_limit, clock)
     return _stitch(geometry, params, tiles, solved, decision, noise, hop, first,
-                   time.perf_counter() - t0)
+                   time.perf_counter() - t0, share)
 
 
 def _share(geometry: Geometry, members: np.ndarray) -> float:
@@ -249,19 +250,23 @@ def _run_tiles(
 def _stitch(
     geometry: Geometry, params: SmoothingParams, tiles: list[Tile],
     solved: dict[int, TileSolution], decision: LambdaDecision, noise: NoiseEstimate | None,
-    hop: float, probe: int, seconds: float,
+    hop: float, probe: int, seconds: float, share: float,
 ) -> TiledResult:  # fmt: skip
-    """Every core's points from its tile, and the whole run's :class:`SmoothResult`."""
+    """Every core's points from its tile, and the whole run's :class:`SmoothResult`: tau is
+    the given one, or the probe's target over its weight ``share`` (so ``relative_error``
+    says how far the whole input's phi is from the rule's budget)."""
     X = geometry.points.copy()
     for i, t in enumerate(tiles):
         X[t.core] = solved[i].points
     sols = [solved[i] for i in range(len(tiles))]
     phi = float(sum(s.phi for s in sols))
     tau = _given_tau(geometry, params)
+    if tau is None and decision.probe is not None and decision.probe.tau and share:
+        tau = decision.probe.tau / share  # the rule's target carried to the whole input
     dev = np.linalg.norm(X - geometry.points, axis=1)
     outliers = np.sort(np.concatenate([t.core[s.outliers] for t, s in zip(tiles, sols,
                                                                            strict=True)]))
-    warnings = sorted({w for s in sols for w in s.warnings})
+    warnings = _merged([w for s in sols for w in s.warnings], int(outliers.size))
     if tiles[0].hops >= MAX_HOPS:
         warnings.append(f"the halo was capped at {MAX_HOPS} hops: seams may show")
     result = SmoothResult(
@@ -279,11 +284,25 @@ def _stitch(
         tau_how=f"lambda {decision.lam:.6g}: {decision.how}" if decision.lam else decision.how,
         checks=shape_checks(geometry, X).to_dict(), outliers=outliers.astype(np.int64),
         outlier_mode=params.outliers if outliers.size else None,
+        data_weights=params.robust if outliers.size else None,
     )
     reports = [TileReport(i, t.n_core, t.n_halo, t.hops, solved[i].worker, solved[i].seconds,
                           solved[i].phi, solved[i].factorizations)
                for i, t in enumerate(tiles)]  # fmt: skip
     return TiledResult(result, reports, 1, max(t.hops for t in tiles), hop, probe, decision.how)
+
+
+def _merged(warnings: list[str], outliers: int) -> list[str]:
+    """The tiles' warnings once each. A tile counts the outliers of its halo too: the outlier
+    note says the stitched count, and the tiles' "N more points the solve moved far" notes
+    (those points are among the stitched outliers) are folded into it."""
+    out: set[str] = set()
+    for w in warnings:
+        head, _, rest = w.partition(" ")
+        if head.isdigit() and rest.startswith("more points the solve moved far"):
+            continue
+        out.add(f"{outliers} {rest}" if head.isdigit() and " as outliers (" in rest else w)
+    return sorted(out)
 
 
 def _given_tau(geometry: Geometry, params: SmoothingParams) -> float | None:
