@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import glob
+import itertools
 import os
 import sys
 import time
@@ -358,9 +359,12 @@ def run_batch(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int
     started = time.perf_counter()
     each = _prepare(ns, inputs)
     jobs = _jobs(ns, inputs, err)
+    from service.cli.datasets import smooth_sets  # issue 43: adjacent clouds as one surface
+
+    each, together = smooth_sets(each)
     outcomes: list[FileOutcome] = []
     clock = BatchClock(inputs, started)
-    for outcome in _outcomes(each, jobs):
+    for outcome in itertools.chain(together, _outcomes(each, jobs)):
         outcomes.append(outcome)
         if outcome.code != EXIT_OK or not ns.quiet:
             k, times = clock.done(outcome.input)

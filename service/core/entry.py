@@ -60,7 +60,8 @@ def smooth(
     from service.core.tiles.driver import smooth_tiled
 
     tiled = smooth_tiled(geometry, params, n_tile, progress, run_map, memory_limit)
-    per_tile = Choice(None, "decided per tile (tiles keep the user's weights)")
+    per_tile = Choice("auto", "the default on every tile (core + halo) with the input's noise "
+                      f"estimate; lambda {tiled.lam_how}")
     plan = dataclasses.replace(
         make_plan(geometry, params, tracks=False), data_weights=per_tile, tangential=per_tile
     )

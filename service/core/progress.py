@@ -59,6 +59,14 @@ class ProgressEvent:
         Seconds since the run started.
     step : str or None
         One of :data:`STEPS` (inside ``neighborhoods``), else ``None``.
+    fraction : float or None
+        Share of the stage's work done (tiled runs: points of the tiles done).
+    tiles_done, tiles_total : int or None
+        Tiles finished and in all (tiled runs).
+    points_per_second : float or None
+        Points smoothed per second so far (tiled runs).
+    seconds_left : float or None
+        The run's own estimate of the time left (tiled runs: measured seconds per point).
     """
 
     stage: str
@@ -68,6 +76,11 @@ class ProgressEvent:
     phi: float | None = None
     elapsed: float = 0.0
     step: str | None = None
+    fraction: float | None = None
+    tiles_done: int | None = None
+    tiles_total: int | None = None
+    points_per_second: float | None = None
+    seconds_left: float | None = None
 
     @property
     def relative_error(self) -> float | None:

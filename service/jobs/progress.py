@@ -102,6 +102,8 @@ class ProgressTracker:
         eta = None
         if percent >= 100.0:
             eta = 0.0
+        elif (left := getattr(event, "seconds_left", None)) is not None:  # a tiled run's own
+            eta = round(float(left), 3)
         elif percent >= _MIN_PERCENT_FOR_ETA and elapsed > 0:
             eta = round(elapsed * (100.0 - percent) / percent, 3)
         last = self._last
@@ -116,6 +118,7 @@ class ProgressTracker:
             "percent": round(percent, 2),
             "eta_seconds": eta,
             "elapsed_seconds": round(elapsed, 3),
+            **_tiles(event),
         }
 
     def _percent(self, event: ProgressEvent, rel: float | None) -> float:
@@ -136,6 +139,15 @@ class ProgressTracker:
         if first <= tol:
             return 1.0
         return math.log(first / max(rel, tol)) / math.log(first / tol)
+
+
+def _tiles(event: ProgressEvent) -> dict[str, Any]:
+    """A tiled run's counter: tiles done and in all, points per second (issue 43)."""
+    total = getattr(event, "tiles_total", None)
+    if not total:
+        return {}
+    return {"tiles_done": event.tiles_done, "tiles_total": total,
+            "points_per_second": _finite(event.points_per_second)}
 
 
 def _finite(value: float | None) -> float | None:

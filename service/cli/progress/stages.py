@@ -225,6 +225,7 @@ class StageDisplay(ProgressDisplay):
             "phi": d.get("phi") if kind == "iteration" else None,
             "tau": d.get("tau"),
             "relative_error": d.get("relative_error") if kind == "iteration" else None,
+            **{k: d[k] for k in ("tiles_done", "tiles_total", "points_per_second") if k in d},
         }
 
     def text(self, kind: str, now: float) -> str:
@@ -237,6 +238,10 @@ class StageDisplay(ProgressDisplay):
             line = self.line(int(d.get("iteration", 0)), float(d["lambda"]), float(d["phi"]))
             return f"{line}  ({clock})"
         stage_clock = f" {now - self._stage_t0:.1f} s" if kind == "tick" else ""
+        if d.get("tiles_total"):  # a tiled run (issue 43)
+            pps = d.get("points_per_second")
+            rate = f", {pps:.0f} points/s" if pps else ""
+            stage_clock += f", tile {d.get('tiles_done', 0)}/{d['tiles_total']}{rate}"
         return f"geosmooth: {where}{self._stage}{stage_clock}  ({clock})"
 
     def _out(self, kind: str, now: float) -> None:

@@ -33,12 +33,25 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = [
-    "HALO_EPS", "MAX_HOPS", "decay_rate", "halo_hops", "operator_norm_bound", "spectral_norm"
+    "HALO_EPS",
+    "MAX_HOPS",
+    "RATE_MARGIN",
+    "decay_rate",
+    "halo_hops",
+    "operator_norm_bound",
+    "spectral_norm",
 ]
 
-#: Relative influence of the cut left at the core's edge (the benchmark asks for 1 % of the
-#: RMS displacement; the margin covers the bound's constant).
-HALO_EPS = 1e-3
+#: Relative influence of the cut left at the core's edge. The benchmark asks for 1 % of the
+#: RMS displacement; the rate is a lower bound (measured 1.07-1.62x faster) and the cut touches
+#: a band of a few hops only: at 1e-2 a 200K terrain cloud's tiles (4 x 50K, lambda given)
+#: differ from the untiled solve by 1.9e-6 of the displacement at 4 box hops (issue 43).
+HALO_EPS = 1e-2
+#: Measured decay over the predicted rate used for the halo: the prediction is a lower bound,
+#: 1.07-1.62x below the measured rate with the tight norm (table in the README), ~4x on the
+#: default (normal displacement, order 2, the norm bound :func:`operator_norm_bound`) of the
+#: calibration cloud (200K terrain, noise 5 cm, issue 43); 2 keeps a margin on both.
+RATE_MARGIN = 2.0
 #: Cap on the halo width in hops (with a warning): tiny lambda would otherwise ask for halos
 #: larger than any tile.
 MAX_HOPS = 400

@@ -1,186 +1,194 @@
-"""The work of one tile: a probe (round 0) and a solve at a given lambda (later rounds).
+"""The work of one tile: the whole default run on the tile (core + halo), at a given lambda.
 
-Both run :func:`service.core.pipeline.smooth_one` on the tile's geometry (core + halo) with the
-operator built on the tile, so fixed points, weights, the Laplacian variant, the displacement
-mode and the solver paths are those of an untiled run; only the core's points are returned.
-What travels back to the coordinator besides the core's points is a handful of scalars
-(:class:`TileProbe`, :class:`TileSolution`).
+:func:`solve_tile` runs the pipeline's stages (:mod:`service.core.pipeline`: plan, problem with
+the data weights, target, finish with the outliers and the tangential step, report) on the
+tile's geometry, with the run's one noise estimate (:func:`seeded_noise`) and either
+
+* ``lam=None``: the untiled rule itself (:func:`service.core.pipeline.solve`: knee, search)
+  on this tile: the *probe* tile whose lambda the coordinator's rule reads
+  (:mod:`.lam`), or
+* a lambda (input frame): the same stages with the search replaced by one solve at it.
+
+Only the core's points travel back, with a handful of scalars (:class:`TileSolution`).
 """
 
 from __future__ import annotations
 
 import os
 import time
-from collections import OrderedDict
-from dataclasses import dataclass, field
+import weakref
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from service.core.geometry import Geometry
-from service.core.operator.build import SmoothingOperator, build_operator, operator_key
+from service.core.linalg.cache import analysis_of
+from service.core.linalg.resources import choose_solver
+from service.core.noise import estimate as noise_estimate
+from service.core.noise.estimate import NoiseEstimate
 from service.core.params import SmoothingParams
-from service.core.pipeline import smooth_one as smooth
-from service.core.tiles.halo import spectral_norm
+from service.core.pipeline import finish, plan_and_prepare, report, solve, target, unchanged
+from service.core.plan import Plan
+from service.core.problem import Problem
+from service.core.result import SmoothResult
+from service.core.run import Run
+from service.core.search.roots import LambdaSearch
+from service.core.search.target import Solution
+from service.core.system.deviation import Deviation
+from service.core.tiles.halo import operator_norm_bound
 from service.core.tiles.partition import hop_radius
 
-__all__ = ["CACHE_POINTS", "TileProbe", "TileSolution", "probe_tile", "solve_tile"]
-
-#: Points whose tile operators a process keeps between rounds (least recently used dropped).
-CACHE_POINTS = 4_000_000
-_operators: OrderedDict[str, tuple[int, SmoothingOperator]] = OrderedDict()
-
-
-@dataclass(frozen=True)
-class TileProbe:
-    """Round 0 of one tile: its own search and what the coordinator needs (scalars only).
-
-    Attributes
-    ----------
-    lam : float or None
-        The tile's lambda for its share of tau (input frame); ``None`` for a given lambda.
-    history : list of (float, float)
-        ``(lambda, phi)`` of the tile's search (the whole tile).
-    core_ratio : float
-        ``phi_core / phi_tile`` at ``lam`` (the model of the core's phi).
-    tau, sigma : float or None
-        The tile's automatic tau (core share) and noise estimate.
-    norm : float
-        ``||L||_2`` of the tile's operator (internal frame, :func:`.halo.spectral_norm`).
-    reach : float
-        Euclidean reach per graph hop (:func:`.partition.hop_radius`, input frame).
-    lam_scale : float
-        ``s^(2p)``: the internal lambda per input lambda, before weights.
-    omega_min : float
-        Smallest weight of the tile's free points.
-    n_core, n_halo : int
-    seconds : float
-    worker : str
-    """
-
-    lam: float | None
-    history: list[tuple[float, float]]
-    core_ratio: float
-    tau: float | None
-    sigma: float | None
-    norm: float
-    reach: float
-    lam_scale: float
-    omega_min: float
-    n_core: int
-    n_halo: int
-    seconds: float
-    worker: str = field(default_factory=lambda: f"pid {os.getpid()}")
+__all__ = ["TileSolution", "core_phi", "seeded_noise", "solve_tile"]
 
 
 @dataclass(frozen=True)
 class TileSolution:
-    """One tile solved at a given lambda.
+    """One tile smoothed by the default (scalars besides the core's points).
 
     Attributes
     ----------
     points : ndarray, shape (n_core, s)
         The core's smoothed points (input order of the core).
     phi : float
-        ``sum_core omega_i^2 ||x_i - p_i||^2``: the tile's share of eq. (15).
-    factorizations, solves : int
-    solver : str
-    seconds : float
-    warnings : list of str
-    worker : str
+        ``sum_core omega_i^2 ||x_i - p_i||^2`` with the tile's data weights.
+    lam : float
+        The lambda solved at (input frame).
+    tau : float or None
+        The tile's target (its knee's, for the probe; else its ``tau_0``), whole tile.
+    outliers : ndarray of int
+        Core points the data weights treated as outliers (core-local indices).
+    norm, reach, lam_scale, omega_low : float
+        For the halo (:mod:`.halo`): a bound of ``||L||_2`` (no iteration: Lanczos cost 6 s
+        on a 107K-point probe tile, a third of the tile), Euclidean reach per hop, ``s^(2p) w^2``
+        (internal per input lambda) and the 1st percentile of the free points' weights over
+        their frame scale.
+    unchanged : bool
+        The default returned the tile as it was (no noise found, nothing can move).
     """
 
     points: NDArray[np.float64]
     phi: float
+    lam: float
+    tau: float | None
+    outliers: NDArray[np.int64]
     factorizations: int
     solves: int
     solver: str
     seconds: float
     warnings: list[str]
+    norm: float = 0.0
+    reach: float = 0.0
+    lam_scale: float = 1.0
+    omega_low: float = 1.0
+    unchanged: bool = False
+    n_halo: int = 0
     worker: str = field(default_factory=lambda: f"pid {os.getpid()}")
 
 
-def _operator(geometry: Geometry, params: SmoothingParams) -> SmoothingOperator:
-    """The tile's operator, kept between rounds (up to :data:`CACHE_POINTS` points)."""
-    key = operator_key(geometry, params)
-    if key in _operators:
-        _operators.move_to_end(key)
-        return _operators[key][1]
-    op = build_operator(geometry, params)
-    _operators[key] = (geometry.n, op)
-    while sum(n for n, _ in _operators.values()) > CACHE_POINTS and len(_operators) > 1:
-        _operators.popitem(last=False)
-    return op
+def seeded_noise(geometry: Geometry, est: NoiseEstimate | None) -> None:
+    """Make ``est`` (the whole input's estimate) the noise estimate of ``geometry``'s runs.
+
+    Every stage asks :func:`service.core.noise.estimate.estimate_noise` for the estimate of
+    the points array it holds; this seeds its memo with the global one (its per-point
+    neighbours dropped), so the data weights, tau_0 and the checks of a tile read one noise
+    level. ``None`` leaves the tile to estimate its own (no global estimate was possible)."""
+    if est is None:
+        return
+    key = (None, float(np.sum(geometry.points)))
+    kept = NoiseEstimate(est.sigma, est.manifold_dim, est.k, est.points_used, est.residuals,
+                         est.roughness, est.scale_ratio, None, est.track)  # fmt: skip
+    noise_estimate._MEMO[:] = [(weakref.ref(geometry.points), key, kept)]
 
 
-def core_phi(geometry: Geometry, X: NDArray[np.float64], n_core: int) -> float:
-    """``sum_core omega_i^2 ||x_i - p_i||^2`` (fixed points do not move)."""
-    moved = X[:n_core] - geometry.points[:n_core]
-    return float(np.sum(geometry.omega()[:n_core] ** 2 * np.sum(moved**2, axis=1)))
+def core_phi(omega: NDArray[np.float64], X: NDArray[np.float64], P: NDArray[np.float64]) -> float:
+    """``sum omega_i^2 ||x_i - p_i||^2`` over the rows given."""
+    return float(np.sum(omega**2 * np.sum((X - P) ** 2, axis=1)))
 
 
-def _sources(geometry: Geometry, n_core: int, count: int = 4) -> NDArray[np.int64]:
-    """Core points to measure the hop reach from: the one nearest the core's centre and
-    ``count - 1`` drawn at random (seeded)."""
-    P = geometry.points[:n_core]
+def _sources(P: NDArray[np.float64], count: int = 4) -> NDArray[np.int64]:
+    """Points to measure the hop reach from: the one nearest the centre, ``count - 1`` seeded."""
     centre = int(np.argmin(np.sum((P - P.mean(axis=0)) ** 2, axis=1)))
-    rng = np.random.default_rng(0)
-    more = rng.choice(n_core, size=min(count - 1, n_core), replace=False)
+    more = np.random.default_rng(0).choice(P.shape[0], size=min(count - 1, P.shape[0]),
+                                           replace=False)  # fmt: skip
     return np.unique(np.concatenate([[centre], more])).astype(np.int64)
 
 
-def probe_tile(
-    geometry: Geometry,
-    n_core: int,
-    params: SmoothingParams,
-    tau_share: float | None,
-    memory_limit: int | None = None,
-) -> TileProbe:
-    """Round 0: the tile's operator norm and, unless lambda is given, its own search for
-    ``tau_share`` (a number, or ``params.tau`` when ``None``: the automatic rule)."""
+def _at_lambda(problem: Problem, plan: Plan, run: Run, lam: float,
+               memory_limit: int | None) -> Solution:  # fmt: skip
+    """The solve stage with the search replaced by one solve at ``lam`` (input frame)."""
+    aim = target(problem, plan)
+    if problem.system.empty or (plan.automatic_tau and not aim.tau):
+        return unchanged(problem, plan, aim, run)
+    params, system = problem.params, problem.system
     t0 = time.perf_counter()
-    op = _operator(geometry, params)
-    fixed = geometry.fixed_mask()
-    omega = geometry.omega()[~fixed]
-    norm = spectral_norm(op.L)
-    reach = hop_radius(geometry.points, op.neighborhoods.adjacency, _sources(geometry, n_core))
-    lam_scale = op.frame.scale ** (2 * op.frame.power)
-    omega_min = float(omega.min()) if omega.size else 1.0
-    lam = tau = sigma = None
-    history: list[tuple[float, float]] = []
-    ratio = 1.0
-    if params.lam is None:
-        update = {"tau": tau_share, "rms": None} if tau_share is not None else {}
-        res = smooth(geometry, params.model_copy(update=update), operator=op,
-                     memory_limit=memory_limit)
-        lam, history, sigma = res.lam, res.history, res.sigma_estimate
-        phi_core = core_phi(geometry, res.points, n_core)
-        ratio = phi_core / res.phi if res.phi > 0 else 1.0
-        w2 = geometry.omega() ** 2
-        share = float(w2[:n_core][~fixed[:n_core]].sum() / max(w2[~fixed].sum(), 1e-300))
-        tau = None if res.tau is None else res.tau * share
-    return TileProbe(lam, history, ratio, tau, sigma, norm, reach, lam_scale, omega_min,
-                     n_core, geometry.n - n_core, time.perf_counter() - t0)
+    solver = choose_solver(system, params, memory_limit, run.notes)
+    dev = Deviation(system, solver=solver, order=params.order, reuse=True, symbolic=analysis_of)
+    inner = problem.frame.lam_in(lam)
+    if params.solver == "auto":  # CG: 0.5 s against CHOLMOD's 1.6 s on a 63K tile at the
+        dev.use_matrix_free()  # default's lambda (the untiled default is matrix-free too)
+    phi = dev(inner)
+    search = LambdaSearch(inner, phi, True, list(dev.history))
+    return Solution(aim, search, dev.solution(inner), dev, None, time.perf_counter() - t0)
 
 
 def solve_tile(
     geometry: Geometry,
     n_core: int,
     params: SmoothingParams,
-    lam: float,
+    lam: float | None,
+    noise: NoiseEstimate | None,
     memory_limit: int | None = None,
+    measure: bool = False,
 ) -> TileSolution:
-    """The tile smoothed at ``lam`` (input frame); the core's points and phi."""
+    """The default on the tile (core first in ``geometry``): its own rule when ``lam`` is
+    ``None`` (the probe), else one solve at ``lam`` (input frame); the core's result, with the
+    halo's numbers when ``measure``."""
     t0 = time.perf_counter()
-    op = _operator(geometry, params)
-    given = params.model_copy(update={"lam": lam, "tau": None, "rms": None})
-    res = smooth(geometry, given, operator=op, memory_limit=memory_limit)
+    seeded_noise(geometry, noise)
+    run = Run(None)
+    plan, problem = plan_and_prepare(geometry, params, None, run.notes)
+    if lam is None:
+        aim = target(problem, plan)
+        sol = solve(problem, plan, aim, run, memory_limit)
+    else:
+        sol = _at_lambda(problem, plan, run, lam, memory_limit)
+    res = report(problem, plan, run, sol, finish(problem, plan, sol))
+    tile = _core_of(geometry, problem, res, n_core, sol, time.perf_counter() - t0)
+    return _measured(tile, geometry, problem, n_core) if measure else tile
+
+
+def _measured(tile: TileSolution, geometry: Geometry, problem: Problem,
+              n_core: int) -> TileSolution:  # fmt: skip
+    """The probe's numbers for the halo (:mod:`.halo`): norm, reach per hop, frame scales."""
+    omega = problem.geometry.omega()[~problem.fixed] / problem.frame.weight_scale
+    op = problem.op
+    return replace(
+        tile,
+        norm=operator_norm_bound(op.L),
+        reach=hop_radius(geometry.points, op.neighborhoods.adjacency,
+                         _sources(geometry.points[:n_core])),
+        lam_scale=problem.frame.lam_in(1.0),
+        omega_low=float(np.quantile(omega, 0.01)) if omega.size else 1.0,
+    )
+
+
+def _core_of(geometry: Geometry, problem: Problem, res: SmoothResult, n_core: int,
+             sol: Solution, seconds: float) -> TileSolution:  # fmt: skip
+    """The core's share of a tile's result."""
+    omega = problem.geometry.omega()
+    outliers = np.asarray(res.outliers if res.outliers is not None else [], dtype=np.int64)
     return TileSolution(
-        res.points[:n_core].copy(),
-        core_phi(geometry, res.points, n_core),
-        res.factorizations,
-        res.solves,
-        res.solver,
-        time.perf_counter() - t0,
-        list(res.warnings),
+        points=res.points[:n_core].copy(),
+        phi=core_phi(omega[:n_core], res.points[:n_core], geometry.points[:n_core]),
+        lam=float(res.lam),
+        tau=res.tau,
+        outliers=outliers[outliers < n_core],
+        factorizations=res.factorizations,
+        solves=res.solves,
+        solver=res.solver,
+        seconds=seconds,
+        warnings=list(res.warnings),
+        unchanged=sol.U is None,
+        n_halo=geometry.n - n_core,
     )

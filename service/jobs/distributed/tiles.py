@@ -137,6 +137,10 @@ def run_tile(job_id: str, name: str) -> None:
     _run_one(backend, job_id, name, f"{socket.gethostname()} pid {os.getpid()}")
 
 
+#: Tiles the coordinator puts in storage at once (the driver's chunk, issue 43).
+TILES_PER_ROUND = 8
+
+
 @contextlib.contextmanager
 def rq_tiles(
     job_id: str, on_tile: Callable[[], None] | None, counter: TileCounter
@@ -189,4 +193,5 @@ def rq_tiles(
         backend.redis.delete(finished, *(f"{_key(backend, job_id, n)}:runs" for n in names))
         return [results[i] for i in range(len(args))]
 
+    run_map.workers = TILES_PER_ROUND  # type: ignore[attr-defined]  # tiles per chunk (issue 43)
     yield run_map

@@ -112,6 +112,7 @@ def local_tiles(
                 count.retried += len(todo)
         return [out[i] for i in range(len(args))]
 
+    run_map.workers = workers  # type: ignore[attr-defined]  # tiles per chunk (issue 43)
     try:
         yield run_map
     except BaseException:

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from service.core import Geometry, ParameterError, SmoothingParams, smooth
+from service.core.progress import ProgressEvent
 from service.core.tiles import smooth_tiled
+from service.core.tiles.lam import LambdaDecision, ProbeTile
 from service.core.tiles.partition import kd_split, tile_geometry
 from tests.core.tiles.terrain import terrain_cloud, terrain_mesh
 
@@ -69,8 +71,8 @@ def test_stitched_equals_untiled_at_the_same_lambda(kind: str) -> None:
     ref = smooth(g, params)
     tiled = smooth_tiled(g, params, g.n // 4)
     assert len(tiled.tiles) == 4
-    # the halos are real halos, not the whole input
-    assert all(t.points + t.halo < g.n for t in tiled.tiles)
+    # the halos are real halos, not the whole input (the probe's provisional one may be)
+    assert all(t.points + t.halo < g.n for t in tiled.tiles if t.index != tiled.probe)
     assert _relative(tiled.result.points, ref.points, g.points) <= 1e-2
     phi = float(np.sum((tiled.result.points - g.points) ** 2))
     assert tiled.result.phi == pytest.approx(phi, rel=1e-9)
@@ -91,29 +93,101 @@ def test_fixed_points_and_weights_are_respected() -> None:
     assert tiled.result.phi == pytest.approx(phi, rel=1e-9)
 
 
-@pytest.mark.parametrize("kind", ["cloud", "curve"])
-def test_one_global_tau(kind: str) -> None:
-    g = CASES[kind]()
-    untiled = smooth(g, SmoothingParams())
-    tau = untiled.phi
-    tiled = smooth_tiled(g, SmoothingParams(tau=tau), g.n // 4)
-    phi = float(np.sum((tiled.result.points - g.points) ** 2))  # recomputed from the points
-    assert abs(phi - tau) / tau <= 1e-3
-    assert tiled.result.converged
-    ref = smooth(g, SmoothingParams(tau=tau))
-    assert _relative(tiled.result.points, ref.points, g.points) <= 1e-2
+def _stray_cloud() -> Geometry:
+    """A noisy terrain cloud with 0.3 % of its points thrown 1-3 m up or down."""
+    P = terrain_cloud(30000, side=60.0, sigma=0.1)
+    rng = np.random.default_rng(5)
+    at = rng.choice(P.shape[0], 90, replace=False)
+    P[at, 2] += rng.uniform(1, 3, at.size) * rng.choice([-1.0, 1.0], at.size)
+    return Geometry(P)
 
 
-def test_automatic_tau_pools_the_noise() -> None:
-    g = CASES["cloud"]()
+def test_tiles_share_one_noise_estimate_and_flag_the_strays() -> None:
+    g = _stray_cloud()
     untiled = smooth(g, SmoothingParams())
     tiled = smooth_tiled(g, SmoothingParams(), g.n // 4)
     res = tiled.result
-    assert res.tau is not None and untiled.tau is not None
-    assert abs(res.phi - res.tau) / res.tau <= 1e-3
-    # pooled noise and budget close to the untiled automatic rule (noise 0.05 in the data)
-    assert res.sigma_estimate == pytest.approx(untiled.sigma_estimate, rel=0.1)
-    assert res.tau == pytest.approx(untiled.tau, rel=0.1)
+    assert len(tiled.tiles) == 4
+    assert all(t.points + t.halo < g.n for t in tiled.tiles if t.index != tiled.probe)
+    # one noise estimate: the untiled run's, bit for bit (not pooled from tiles)
+    assert res.sigma_estimate == untiled.sigma_estimate
+    # the data weights ran in the tiles (core + halo): the outliers are the untiled ones
+    assert untiled.outliers.size >= 90
+    common = np.intersect1d(untiled.outliers, res.outliers).size
+    assert common >= 0.95 * untiled.outliers.size
+    assert res.outliers.size <= 1.05 * untiled.outliers.size
+    # flagged outliers stay at their input positions (outliers="auto": flagged and kept)
+    assert np.array_equal(res.points[res.outliers], g.points[res.outliers])
+    # one note with the stitched count (a tile counts its halo's outliers too)
+    notes = [w for w in res.warnings if " as outliers (" in w]
+    assert len(notes) == 1 and notes[0].startswith(f"{res.outliers.size} points")
+    # the rule's target over the whole input, and how far the stitched phi is from it
+    assert res.tau == pytest.approx(untiled.tau, rel=0.05)
+    assert res.relative_error == pytest.approx(abs(res.phi - res.tau) / res.tau)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 43, not met: outlier decisions flip with a tile's "
+                   "own residual calibration, and the probe tile's lambda is not the whole "
+                   "input's (service/core/tiles/README.md); 4.3 % here, 1.5-4.5 % at 1M")
+@pytest.mark.parametrize("make", [CASES["cloud"], _stray_cloud], ids=["noisy", "stray"])
+def test_tiled_default_equals_untiled_default(make: object) -> None:
+    g = make()  # type: ignore[operator]
+    untiled = smooth(g, SmoothingParams())
+    tiled = smooth_tiled(g, SmoothingParams(), g.n // 4)
+    assert _relative(tiled.result.points, untiled.points, g.points) <= 1e-2
+
+
+def test_tiles_at_the_rule_lambda_are_the_untiled_default_at_that_lambda() -> None:
+    """The lambda rule is a plug: given the untiled run's lambda, every tile (probe included)
+    runs the default at it, and the result is the untiled default's to the halo's truncation."""
+    g = _stray_cloud()
+    untiled = smooth(g, SmoothingParams())
+    calls: list[float] = []
+
+    def rule(probe: ProbeTile, params: SmoothingParams, run_tile: object) -> LambdaDecision:
+        calls.append(probe.share)
+        return LambdaDecision(untiled.lam, "the untiled run's")
+
+    tiled = smooth_tiled(g, SmoothingParams(), g.n // 4, rule=rule)
+    assert len(calls) == 1 and 0.25 < calls[0] <= 1  # one decision; the probe tile's weight
+    assert tiled.result.lam == untiled.lam
+    assert _relative(tiled.result.points, untiled.points, g.points) <= 1e-2
+
+
+def test_given_tau_is_met_over_the_whole_input() -> None:
+    g = CASES["cloud"]()
+    tau = smooth(g, SmoothingParams()).phi
+    tiled = smooth_tiled(g, SmoothingParams(tau=tau), g.n // 4).result
+    phi = float(np.sum((tiled.points - g.points) ** 2))  # recomputed from the points
+    assert tiled.tau == tau
+    assert tiled.phi == pytest.approx(phi, rel=1e-9)
+    assert abs(phi - tau) / tau <= 0.05  # the probe's share of tau, not a budget over tiles
+    ref = smooth(g, SmoothingParams(tau=tau))
+    assert _relative(tiled.points, ref.points, g.points) <= 2e-2
+
+
+def test_no_noise_found_returns_the_input() -> None:
+    P = terrain_cloud(14000, side=60.0, sigma=0.0)  # the shape's own detail, no noise
+    g = Geometry(P)
+    assert smooth(g, SmoothingParams()).lam == 0.0
+    tiled = smooth_tiled(g, SmoothingParams(), g.n // 4)
+    assert np.array_equal(tiled.result.points, P)
+    assert tiled.result.sigma_estimate == 0.0
+
+
+def test_progress_counts_tiles_and_time_left() -> None:
+    g = CASES["cloud"]()
+    events: list[ProgressEvent] = []
+    smooth_tiled(g, SmoothingParams(), g.n // 4, progress=events.append)
+    ticks = [e for e in events if e.tiles_total]
+    done = [e.tiles_done for e in ticks]
+    assert done[-3:] == [2, 3, 4] and done[0] in (0, 1)  # the probe (when kept), one per tile
+    assert all(e.tiles_total == 4 for e in ticks)
+    timed = [e for e in ticks if e.tiles_done]
+    assert all(e.seconds_left is not None and e.seconds_left >= 0 for e in timed)
+    assert ticks[-1].seconds_left == 0 and ticks[-1].fraction == 1.0
+    # equal cores (k-d split of 14000 points): the fraction is the share of tiles done
+    assert [e.fraction for e in timed] == pytest.approx([d / 4 for d in done if d], abs=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -124,8 +198,6 @@ def test_automatic_tau_pools_the_noise() -> None:
         ({"tau": "gcv"}, "params.tau"),
         ({"method": "windowed-sinc"}, "params.method"),
         ({"laplacian": "feature"}, "params.laplacian"),
-        ({"robust": "tukey"}, "params.robust"),
-        ({"noise_weights": "local"}, "params.noise_weights"),
     ],
 )
 def test_options_without_a_tiled_form_are_refused(update: dict, field: str) -> None:
