@@ -7,11 +7,12 @@ core nearest the input's centre, with a provisional halo) and a function that ru
 on a tile (``lam=None``: the untiled rule there) and gets back the lambda and, when the rule
 solved the probe at that lambda, its solution (reused, not solved again).
 
-:func:`probe_rule` is today's rule: the untiled automatic rule (tau_0 from the one global noise
-estimate and the data weights, then the knee and the search) run on the probe tile, whose
-lambda is the run's; a given tau becomes the probe's share ``tau * sum_tile omega^2 /
-sum omega^2``, ``rms`` stays per point, a given lambda is taken as it is. A rule chosen in
-lambda-space (issues 37/38: UPRE or GCV-like) drops in as another function of this shape.
+:func:`probe_rule` is today's rule: the untiled automatic rule (the risk minimiser of issue 37 with
+the one global noise estimate and the data weights) run on the probe tile, whose lambda is
+the run's; a given tau becomes the probe's share ``tau * sum_tile omega^2 /
+sum omega^2``, ``rms`` stays per point, a given lambda is taken as it is. A rule that reads
+every tile's curves (the whole input's risk, issue 43's open item) drops in as another
+function of this shape.
 """
 
 from __future__ import annotations
