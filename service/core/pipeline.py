@@ -323,7 +323,8 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
     X, along = relax_tangential(
         problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
     )
-    X = join_duplicates(problem.geometry.points, X, problem.geometry.fixed_mask())
+    if problem.geometry.kind == "cloud":  # a mesh's split vertices stay split (--no-weld)
+        X = join_duplicates(problem.geometry.points, X, problem.geometry.fixed_mask())
     volume_scale, group = None, params.finish
     if group.preserve_volume:
         X, volume_scale = preserve_measure(problem.geometry, X)

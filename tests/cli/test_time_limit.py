@@ -35,7 +35,9 @@ def test_the_block_is_stopped_after_its_cpu_seconds() -> None:
     with pytest.raises(TimeLimitReached) as caught, cpu_time_limit(1.0):
         _burn(30.0)
     used = time.process_time() - start
-    assert 1.0 <= used < 4.0, used  # the soft limit is whole seconds (rounded up)
+    # the soft limit is whole seconds (rounded up) of the process's CPU, which the kernel
+    # accounts at tick granularity: 0.965 s was measured at load 15
+    assert 0.9 <= used < 4.0, used
     assert exit_code_of(caught.value) == EXIT_LIMIT and EXIT_LIMIT in EXIT_CODES
     assert "CPU time limit of 1 s" in caught.value.message
     assert "--time-limit" in caught.value.message and "\n" not in caught.value.message

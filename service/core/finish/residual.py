@@ -29,7 +29,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 __all__ = ["ALPHA", "CLUSTER", "HOPS", "RHO_BACKOFF", "BackOff", "back_off", "beyond_noise",
            "correlation"]
@@ -131,6 +130,8 @@ def beyond_noise(R: Array, L: sp.spmatrix, use: NDArray[np.bool_], sigma: Array 
     fewer than :data:`CLUSTER` graph neighbours are beyond it too (an extreme of the noise is a
     point, a cut crease or pressed step a line of them)."""
     n = R.shape[0]
+    from scipy.stats import chi2  # loads scipy.optimize: only where the test runs
+
     z = float(np.sqrt(chi2.isf(ALPHA / max(n, 1), max(codim, 1))))
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.linalg.norm(R, axis=1) / (z * np.asarray(sigma))

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from service.core.linalg.lanczos_run import LanczosRun
 from service.core.search.risk import RiskCurves, Rule, probe_block, run_rules
@@ -283,6 +282,8 @@ def _root_near(f: Callable[[float], float], lam0: float, lo: float, hi: float
     def g(x: float) -> float:
         count[0] += 1
         return f(x)
+
+    from scipy.optimize import brentq  # the factorized path only: small runs do not load it
 
     lo_x, hi_x = min(x0, x1), max(x0, x1)
     root = brentq(g, lo_x, hi_x, xtol=1e-8, rtol=1e-10, maxiter=60)
