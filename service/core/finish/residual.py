@@ -130,9 +130,9 @@ def beyond_noise(R: Array, L: sp.spmatrix, use: NDArray[np.bool_], sigma: Array 
     fewer than :data:`CLUSTER` graph neighbours are beyond it too (an extreme of the noise is a
     point, a cut crease or pressed step a line of them)."""
     n = R.shape[0]
-    from scipy.stats import chi2  # loads scipy.optimize: only where the test runs
+    from scipy.special import gammainccinv  # chi2.isf(q, k) = 2 Q^-1(k/2, q): no scipy.stats
 
-    z = float(np.sqrt(chi2.isf(ALPHA / max(n, 1), max(codim, 1))))
+    z = float(np.sqrt(2.0 * gammainccinv(max(codim, 1) / 2, ALPHA / max(n, 1))))
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.linalg.norm(R, axis=1) / (z * np.asarray(sigma))
     t = np.where(use & np.isfinite(t), t, 0.0)
