@@ -205,13 +205,19 @@ FALLBACK = (
 
 def noise_model(problem: Problem, aim: Target) -> NoiseModel:
     """The automatic rule's noise model per unknown of the system (internal frame): the
-    scale ``omega_i sigma_i / sigma``, the points' invariant radius (the probes' phase), the
-    local fits' sigma^2 and the discrepancy budget."""
+    scale ``omega_i sigma_i / sigma`` (signed as the data, below), the points' invariant
+    radius (the probes' phase), the local fits' sigma^2 and the discrepancy budget."""
     system, frame = problem.system, problem.frame
     free = np.flatnonzero(~problem.fixed)
-    rows = np.repeat(free, max(system.size // max(free.size, 1), 1))
+    rep = max(system.size // max(free.size, 1), 1)
+    rows = np.repeat(free, rep)
     ts = problem.weights.tau_scale[rows] if problem.weights is not None else 1.0
     S = np.sqrt(system.d2) * ts
+    if problem.params.displacement == "normal" and rep == 1 and system.r.shape[1] == 1:
+        # a normal's sign is the eigensolver's: flipping n_i flips unknown i of the system
+        # (a similarity) and of r; the probes' entries follow r's sign, so the trace estimate
+        # is the same whatever signs the normals got (rotated input: 2.6e-2 sigma before)
+        S = S * np.where(system.r[:, 0] < 0, -1.0, 1.0)
     sigma = (aim.sigma or 0.0) / frame.scale
     assert aim.tau is not None
     return NoiseModel(S, invariant_radius(problem.geometry.points[rows]), sigma**2,
