@@ -34,6 +34,7 @@ from service.core.tiles.budget import PhiModel, solve_budget
 from service.core.tiles.halo import HALO_EPS, MAX_HOPS, decay_rate, halo_hops
 from service.core.tiles.partition import Tile, hop_length, kd_split, tile_geometry, tile_members
 from service.core.tiles.solve import TileProbe, TileSolution, probe_tile, solve_tile
+from service.core.warnings import warning
 
 __all__ = ["PROBE_HOPS", "TileReport", "TiledResult", "check_tileable", "smooth_tiled"]
 
@@ -238,9 +239,10 @@ def _stitch(
         X[t.core] = solutions[i].points
     total = float(sum(s.phi for s in solutions.values())) if phi is None else phi
     dev = np.linalg.norm(X - geometry.points, axis=1)
-    warnings = sorted({w for s in solutions.values() for w in s.warnings})
+    warnings = sorted({w for s in solutions.values() for w in s.warnings}, key=str)
     if tiles[0].hops >= MAX_HOPS:
-        warnings.append(f"the halo was capped at {MAX_HOPS} hops: seams may show")
+        warnings.append(warning("halo-capped", f"the halo was capped at {MAX_HOPS} hops: seams "
+                                "may show", hops=MAX_HOPS))  # fmt: skip
     result = SmoothResult(
         points=X, lam=float(lam), phi=total, tau=tau,
         relative_error=None if tau is None else abs(total - tau) / tau,

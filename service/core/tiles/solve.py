@@ -23,6 +23,7 @@ from service.core.params import SmoothingParams
 from service.core.pipeline import smooth_one as smooth
 from service.core.tiles.halo import spectral_norm
 from service.core.tiles.partition import hop_radius
+from service.core.warnings import EngineWarning
 
 __all__ = ["CACHE_POINTS", "TileProbe", "TileSolution", "probe_tile", "solve_tile"]
 
@@ -86,7 +87,7 @@ class TileSolution:
     factorizations, solves : int
     solver : str
     seconds : float
-    warnings : list of str
+    warnings : list of EngineWarning
     worker : str
     """
 
@@ -96,7 +97,7 @@ class TileSolution:
     solves: int
     solver: str
     seconds: float
-    warnings: list[str]
+    warnings: list[EngineWarning]
     worker: str = field(default_factory=lambda: f"pid {os.getpid()}")
 
 
