@@ -100,6 +100,13 @@ def plan_and_prepare(
     weights), the plan completed with what that decided."""
     plan = make_plan(geometry, params, tracks=operator is None)  # a given operator: its weights
     problem = prepare(geometry, plan.params, params.displacement, operator=operator, step=step)
+    fell_back = problem.params.displacement != plan.params.displacement
+    if fell_back and params.boundary == "auto" and problem.op.neighborhoods.boundary.any() \
+            and operator is None:  # fmt: skip
+        # an open mesh flat across itself: free displacement takes its boundary rows too
+        free = params.model_copy(update={"displacement": "free"})
+        plan = replace(make_plan(geometry, free), displacement=plan.displacement)
+        problem = prepare(geometry, plan.params, "free")
     return with_problem(plan, problem), problem
 
 
