@@ -121,11 +121,11 @@ def prepare(
     """
     op = _operator(geometry, params, operator)
     corners = held_corners(geometry, params)
-    fixed, n_fixed = free_set(geometry, op, params, corners)
+    fixed, n_fixed = free_set(geometry, op, params.fix_boundary, params.preserve_volume, corners)
     said = _boundary_ignored(op, params)
     if step is not None:
         step("weights")
-    geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
+    geometry, weights = data_weights(geometry, params.data)  # robust, noise weights (issue 21)
     weights = _corners_kept(weights, corners)
     said += () if weights is None else weights.warnings
     frame = op.frame.weighted(geometry.omega()[~fixed])
@@ -186,7 +186,7 @@ def _operator(
 
 
 def free_set(
-    geometry: Geometry, op: SmoothingOperator, params: SmoothingParams,
+    geometry: Geometry, op: SmoothingOperator, fix_boundary: bool, preserve_volume: bool,
     corners: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.bool_], int]:
     """Points eliminated from the system: fixed ones (section 8), uncoupled ones and a track's
@@ -202,9 +202,9 @@ def free_set(
     """
     nb = op.neighborhoods
     fixed = geometry.fixed_mask()
-    if params.fix_boundary:  # no boundary on k-NN neighbourhoods (_boundary_ignored)
+    if fix_boundary:  # no boundary on k-NN neighbourhoods (_boundary_ignored)
         fixed = fixed | nb.boundary
-    if params.preserve_volume:
+    if preserve_volume:
         check_preservable(geometry, fixed)
     L = op.L
     coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)

@@ -75,12 +75,13 @@ class EngineWarning:
         return {"code": self.code, "message": self.message, "values": self.numbers}
 
 
-def warning(code: str, message: str, **values: Value) -> EngineWarning:
+def warning(code: str, message: str, **values: Any) -> EngineWarning:
     """A warning of a known ``code`` (a :class:`KeyError` for an unknown one: a programming
-    error, caught by the tests)."""
+    error, caught by the tests); numpy scalars among ``values`` become Python numbers."""
     if code not in CODES:
         raise KeyError(f"unknown warning code {code!r}")
-    return EngineWarning(code, message, tuple(values.items()))
+    plain = {k: v.item() if hasattr(v, "item") else v for k, v in values.items()}  # numpy
+    return EngineWarning(code, message, tuple(plain.items()))
 
 
 def to_wire(warnings: Iterable[EngineWarning]) -> dict[str, list[Any]]:

@@ -43,4 +43,4 @@ def planned_weights(geometry, params):  # type: ignore[no-untyped-def]
     from service.core.noise.robust import data_weights
     from service.core.plan import make_plan
 
-    return data_weights(geometry, make_plan(geometry, params).params)
+    return data_weights(geometry, make_plan(geometry, params).params.data)

@@ -43,7 +43,7 @@ from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.noise.quantiles import chi2, poisson_ppf
 from service.core.noise.uneven import RATIO_CAP, crease_factor, local_sigma, on_grid, row_quantile
 from service.core.operator.sized_kernels import COMPILED_FROM
-from service.core.params import SmoothingParams
+from service.core.params import DataParams
 from service.core.warnings import EngineWarning, warning
 
 __all__ = [
@@ -124,12 +124,13 @@ class DataWeights:
 
 
 def data_weights(
-    geometry: Geometry, params: SmoothingParams
+    geometry: Geometry, params: DataParams
 ) -> tuple[Geometry, DataWeights | None]:
     """The geometry with its weights replaced by ``omega`` of :class:`DataWeights`, and them.
 
-    ``params`` are the plan's: ``robust`` and ``noise_weights`` are what the run tries, their
-    gates decided (:func:`service.core.params.rules.data_weight_gates`, in
+    ``params`` is the plan's data group (``SmoothingParams.data``): ``robust`` and
+    ``noise_weights`` are what the run tries, their gates decided
+    (:func:`service.core.params.rules.data_weight_gates`, in
     :func:`service.core.plan.make_plan`). ``None``: nothing applies.
     """
     robust, uneven = params.robust, params.noise_weights
