@@ -31,6 +31,7 @@ from service.core.linalg.resources import choose_solver
 from service.core.noise.estimate import codimension
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
+from service.core.params.rules import boundary_mode
 from service.core.plan import Plan, make_plan, with_finish, with_problem, with_solution
 from service.core.problem import Problem, prepare
 from service.core.progress import ProgressCallback
@@ -101,7 +102,8 @@ def plan_and_prepare(
     plan = make_plan(geometry, params, tracks=operator is None)  # a given operator: its weights
     problem = prepare(geometry, plan.params, params.displacement, operator=operator, step=step)
     fell_back = problem.params.displacement != plan.params.displacement
-    if fell_back and params.boundary == "auto" and problem.op.neighborhoods.boundary.any() \
+    rows = boundary_mode(params.boundary, problem.params.displacement)
+    if fell_back and rows != plan.params.boundary and problem.op.neighborhoods.boundary.any() \
             and operator is None:  # fmt: skip
         # an open mesh flat across itself: free displacement takes its boundary rows too
         free = params.model_copy(update={"displacement": "free"})

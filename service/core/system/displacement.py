@@ -340,11 +340,12 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
             " use displacement 'free' or 'auto'",
             field="params.displacement",
         )
-    if params.displacement != "auto":
-        if params.displacement == "normal" and "tangential" not in params.model_fields_set:
-            return params.model_copy(update={"tangential": "off"})
+    if params.displacement == "normal" and "tangential" not in params.model_fields_set:
+        return params.model_copy(update={"tangential": "off"})
+    kind, dim = geometry.kind, geometry.dim
+    mode = displacement_mode(params.displacement, kind, dim, params.method, params.tau_rule)
+    if mode == params.displacement:
         return params
-    mode = displacement_mode("auto", geometry.kind, geometry.dim, params.method, params.tau_rule)
     return params.model_copy(update={"displacement": mode})
 
 
