@@ -104,11 +104,11 @@ def smooth(
         ``(0, phi(0))``: :class:`TauOutOfRange` carries the range), solver failure.
     """
     from service.core.linalg.threads import use_default_threads
-    from service.workflows.smooth_file import run_engine
+    from service.workflows.smooth_file import counted, run_engine
 
     use_default_threads(os.environ)  # GEOSMOOTH_THREADS, default 1 (docs/threads.md)
     doc, rebuild = adapt(geometry, faces=faces, edges=edges)
-    result = run_engine(doc.geometry, _params(params, values), progress)
+    result = counted(run_engine(doc.geometry, _params(params, values), progress), doc)
     smoothed = rebuild(result.points)
     return (smoothed, result) if full_output else smoothed
 

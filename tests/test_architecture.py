@@ -73,6 +73,7 @@ CORE_ROOMS: tuple[tuple[str, ...], ...] = tuple(
     (room,)
     for room in (
         "errors",
+        "warnings",  # typed warnings (issue 38)
         "_arrays",
         "geometry",
         "frame",  # the internal frame (centre, scale, weight scale) and its conversions

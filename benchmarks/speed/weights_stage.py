@@ -37,7 +37,7 @@ def _rss_mib() -> float:
 def _run(g, params):  # type: ignore[no-untyped-def]
     estimate._MEMO.clear()
     c0 = time.process_time()
-    got, dw = data_weights(g, params)
+    got, dw = data_weights(g, params.data)
     return time.process_time() - c0, got, dw
 
 
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> None:
             estimate._MEMO.clear()
             prof = cProfile.Profile(time.process_time)
             prof.enable()
-            data_weights(g, params)
+            data_weights(g, params.data)
             prof.disable()
             st = pstats.Stats(prof).stats  # type: ignore[attr-defined]
             rows = sorted(((v[3], v[2], f"{fn[0].split('/')[-1]}:{fn[2]}")

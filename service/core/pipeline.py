@@ -24,7 +24,7 @@ from service.core.errors import TauOutOfRange
 from service.core.finish.clip import clip_points
 from service.core.finish.duplicates import join_duplicates
 from service.core.finish.finished import Finished
-from service.core.finish.outliers import far_moved, place_outliers
+from service.core.finish.outliers import Outliers, far_moved, outliers_of, place_outliers
 from service.core.finish.residual import BackOff, back_off
 from service.core.finish.tangential import relax_tangential
 from service.core.finish.volume import preserve_measure
@@ -35,7 +35,8 @@ from service.core.linalg.resources import choose_solver
 from service.core.noise.estimate import codimension
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.plan import Plan, make_plan, with_problem, with_solution
+from service.core.params.rules import boundary_mode
+from service.core.plan import Plan, make_plan, with_finish, with_problem, with_solution
 from service.core.problem import Problem, prepare
 from service.core.progress import ProgressCallback
 from service.core.result import SmoothResult
@@ -63,6 +64,7 @@ from service.core.search.target import (
     resolve_tau,
 )
 from service.core.system.deviation import Deviation
+from service.core.warnings import warning
 
 __all__ = ["finish", "plan_and_prepare", "report", "smooth_one", "solve", "target", "tikhonov"]
 
@@ -90,14 +92,16 @@ def smooth_one(
     """
     run = Run(progress)
     run.emit("neighborhoods")
-    plan, problem = plan_and_prepare(geometry, params, operator, run.notes, step=run.step)
+    plan, problem = plan_and_prepare(geometry, params, operator, step=run.step)
     run.step("noise")
     aim = target(problem, plan)
     run.emit("analysis", tau=aim.tau)
     solution = solve(problem, plan, aim, run, memory_limit)
     finished = finish(problem, plan, solution)
     if finished.backoff is not None:
-        run.notes.append(finished.backoff.describe())
+        b = finished.backoff
+        run.warn(warning("residual-backoff", b.describe(), points=int(b.points.size),
+                         restored_rms=b.restored_rms, removed_rms=b.removed_rms))
     return report(problem, plan, run, solution, finished)
 
 
@@ -105,7 +109,6 @@ def plan_and_prepare(
     geometry: Geometry,
     params: SmoothingParams,
     operator: SmoothingOperator | None = None,
-    notes: list[str] | None = None,
     *,
     step: Callable[[str], None] | None = None,
 ) -> tuple[Plan, Problem]:
@@ -113,9 +116,15 @@ def plan_and_prepare(
     (:func:`~service.core.problem.prepare`, told ``step("weights")`` when it gets to the data
     weights), the plan completed with what that decided."""
     plan = make_plan(geometry, params, tracks=operator is None)  # a given operator: its weights
-    problem = prepare(
-        geometry, plan.params, params.displacement, operator=operator, notes=notes, step=step
-    )
+    problem = prepare(geometry, plan.params, params.displacement, operator=operator, step=step)
+    fell_back = problem.params.displacement != plan.params.displacement
+    rows = boundary_mode(params.boundary, problem.params.displacement)
+    if fell_back and rows != plan.params.boundary and problem.op.neighborhoods.boundary.any() \
+            and operator is None:  # fmt: skip
+        # an open mesh flat across itself: free displacement takes its boundary rows too
+        free = params.model_copy(update={"displacement": "free"})
+        plan = replace(make_plan(geometry, free), displacement=plan.displacement)
+        problem = prepare(geometry, plan.params, "free")
     return with_problem(plan, problem), problem
 
 
@@ -148,7 +157,7 @@ def tikhonov(
     unbiased predictive risk, :mod:`~service.core.search.risk_rule`), found for a tau
     (section 6.3) or by GCV, the solution ``U`` (max-norm bounded, section 9)."""
     params, frame = problem.params, problem.frame
-    solver = choose_solver(problem.system, params, memory_limit, run.notes)
+    solver = choose_solver(problem.system, params, memory_limit, run.warn)
     dev = Deviation(
         problem.system,
         solver=solver,
@@ -259,7 +268,7 @@ def _bounded(problem: Problem, dev: Deviation, sol: Solution, run: Run) -> Solut
         bracket=(dev.floor, max(hi, search.lam)),
         tolerance=params.tolerance,
     )
-    run.notes.extend(res.warnings)
+    run.warn(*(warning("max-deviation", said) for said in res.warnings))
     bound = {"max_deviation": params.max_deviation, "rounds": res.rounds, "clipped": res.clipped}
     converged = tau is None or abs(res.phi - tau) <= params.tolerance * tau
     history = [*search.history, *res.history]
@@ -279,7 +288,8 @@ def filtered(problem: Problem, aim: Target, run: Run) -> Solution:
         check_range(dev, problem.op, problem.fixed, params, aim, frame)
     U, search = filter_system(dev, params.laplacian, tau, lam, params.tolerance)
     if not search.converged:
-        run.notes.append("windowed-sinc: no pass band of this degree meets tau within tolerance")
+        run.warn(warning("filter-tau-not-met", "windowed-sinc: no pass band of this degree meets "
+                         "tau within tolerance", tolerance=params.tolerance))  # fmt: skip
     run.listener(frame, aim.tau)(search.lam, search.phi, 1)
     return Solution(aim, search, U, dev)
 
@@ -296,7 +306,7 @@ def unchanged(problem: Problem, plan: Plan, aim: Target, run: Run) -> Solution:
     params = problem.params
     if plan.automatic_tau:
         reason = (aim.how or "nothing can move").removeprefix("automatic: ")
-        run.notes.append("not smoothed: " + reason)
+        run.warn(warning("not-smoothed", "not smoothed: " + reason))
         aim = replace(aim, tau=None)
     elif aim.tau is not None:
         raise TauOutOfRange(
@@ -307,25 +317,27 @@ def unchanged(problem: Problem, plan: Plan, aim: Target, run: Run) -> Solution:
             tau_max=0.0,
         )
     else:
-        run.notes.append("nothing to smooth: the input is returned unchanged")
+        run.warn(warning("nothing-to-smooth", "nothing to smooth: the input is returned unchanged"))
     return Solution(aim, LambdaSearch(float(params.lam or 0.0), 0.0, True, []))
 
 
 def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
     """The points in the input's frame: outliers pulled in by eq. (4) as ``omega_i -> 0`` or
     kept in place (:mod:`.finish.outliers`; kept points stay bit for bit through every step),
-    the tangential step, volume/area kept (sections 8-9), the max-norm clip (section 9)."""
+    the tangential step, volume/area kept (sections 8-9), the max-norm clip (section 9); and
+    the outliers as they end up (:class:`~service.core.finish.outliers.Outliers`)."""
     if sol.U is None:
-        return Finished(problem.geometry.points.copy())
+        X = problem.geometry.points.copy()
+        return Finished(X, outliers=_outliers(problem, plan, sol, X))
     X = problem.points(sol.U)
     params = problem.params
     if params.method == "windowed-sinc":
-        return Finished(X)
+        return Finished(X, outliers=_outliers(problem, plan, sol, X))
     if problem.weights is not None:  # outliers: kept (flag, drop) or pulled in, bounded
         X = place_outliers(problem.geometry.points, X, problem.op.L, problem.weights.pulled,
                            plan.outliers.value)
     X, backoff = _residual_test(problem, plan, sol, X)
-    enabled = plan.tangential.value == "auto"
+    enabled = plan.tangential.value == "on"
     X, along = relax_tangential(
         problem.geometry, enabled, problem.op, problem.fixed, problem.frame, X, sol.search
     )
@@ -345,7 +357,8 @@ def finish(problem: Problem, plan: Plan, sol: Solution) -> Finished:
                              problem.weights.tau_scale)
         X = place_outliers(P, X, problem.op.L, kept[~problem.geometry.fixed_mask()[kept]],
                            plan.outliers.value)
-    return Finished(X, volume_scale, along, kept, backoff)
+    solved = X if backoff is None else backoff.undone(X)  # the count: the smoothing's own moves
+    return Finished(X, volume_scale, along, _outliers(problem, plan, sol, solved, kept), backoff)
 
 
 def _residual_test(
@@ -364,13 +377,31 @@ def _residual_test(
                     codimension(g))
 
 
+def _outliers(
+    problem: Problem, plan: Plan, sol: Solution, X: NDArray[np.float64],
+    kept: NDArray[np.int64] | None = None,
+) -> Outliers | None:  # fmt: skip
+    """The run's :class:`~service.core.finish.outliers.Outliers` for the final points ``X``."""
+    dw = problem.weights
+    if dw is None:
+        return None
+    return outliers_of(problem.geometry.points, X, dw.outliers, dw.pulled, plan.outliers.value,
+                       dw.robust, sol.target.sigma, codimension(problem.geometry), kept)
+
+
 def report(
     problem: Problem, plan: Plan, run: Run, sol: Solution, fin: Finished
 ) -> SmoothResult:
-    """The :class:`SmoothResult`: the diagnostics' numbers and the completed plan."""
-    fields = diagnostics(
-        problem.geometry, problem.params, problem.op, problem.frame, run, sol, fin,
+    """The :class:`SmoothResult`: the diagnostics' numbers and the completed plan. Its warnings
+    in run order: the plan's and the set-up's, the outliers', the solve's, the checks', the
+    solver's."""
+    fields, checked = diagnostics(
+        problem.geometry, problem.params, problem.op, problem.frame, run.t0, sol, fin,
         problem.n_fixed, problem.weights,
     )  # fmt: skip
-    plan = with_solution(plan, sol.target, fields["solver"], run.notes)
-    return SmoothResult(**fields, plan=plan)
+    said = run.warnings
+    outliers = () if fin.outliers is None else fin.outliers.warnings
+    stats = sol.dev.stats.warnings if sol.dev is not None else []
+    warnings = [*plan.warnings, *problem.warnings, *outliers, *said, *checked, *stats]
+    plan = with_finish(with_solution(plan, sol.target, fields["solver"], said), fin.outliers)
+    return SmoothResult(**fields, warnings=warnings, plan=plan)

@@ -20,13 +20,14 @@ from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.noise.curves import track_pins
 from service.core.noise.estimate import estimate_noise
-from service.core.noise.robust import DataWeights, data_weights, outlier_note
+from service.core.noise.robust import DataWeights, data_weights
 from service.core.operator.build import SmoothingOperator, build_operator, operator_key
 from service.core.params import SmoothingParams
 from service.core.params.groups import OperatorParams, field_names
 from service.core.system.deviation import SmoothingSystem
 from service.core.system.displacement import auto_system, normal_mode
 from service.core.system.elimination import laplacian_system
+from service.core.warnings import EngineWarning, warning
 
 __all__ = ["Problem", "free_set", "held_corners", "is_track", "prepare", "smoothing_system"]
 
@@ -57,6 +58,8 @@ class Problem:
         From the system's solution ``U`` to the free points (still in the frame).
     weights : DataWeights or None
         The robust and noise data weights, when any apply.
+    warnings : tuple of EngineWarning
+        What setting it up found the user should know (in run order).
     """
 
     geometry: Geometry
@@ -68,6 +71,7 @@ class Problem:
     system: SmoothingSystem
     to_points: Callable[[Array], Array]
     weights: DataWeights | None = None
+    warnings: tuple[EngineWarning, ...] = ()
 
     def tau_in(self, tau: float) -> float:
         """A budget of the input in the internal frame: ``tau / (s w)^2``."""
@@ -98,7 +102,6 @@ def prepare(
     requested: str,
     *,
     operator: SmoothingOperator | None = None,
-    notes: list[str] | None = None,
     step: Callable[[str], None] | None = None,
 ) -> Problem:
     """Neighbourhoods and ``L`` -> free points -> data weights -> the system of the mode.
@@ -113,25 +116,31 @@ def prepare(
         for an input already smooth across itself, :func:`auto_system`).
     operator : SmoothingOperator, optional
         Built for this geometry and operator group (reuse across tau).
-    notes : list of str, optional
-        Collects what the caller should be told (e.g. ``fix_boundary`` without a boundary).
     step : callable, optional
         Told ``"weights"`` when the neighbourhoods are built (progress, :meth:`.Run.step`).
     """
     op = _operator(geometry, params, operator)
     corners = held_corners(geometry, params)
-    fixed, n_fixed = free_set(geometry, op, params, [] if notes is None else notes, corners)
+    fixed, n_fixed = free_set(geometry, op, params.fix_boundary, params.preserve_volume, corners)
+    said = _boundary_ignored(op, params)
     if step is not None:
         step("weights")
-    geometry, weights = data_weights(geometry, params)  # robust and noise weights (issue 21)
-    weights = _corners_kept(weights, corners, params)
-    if weights is not None and notes is not None:
-        notes.extend(weights.notes)
+    geometry, weights = data_weights(geometry, params.data)  # robust, noise weights (issue 21)
+    weights = _corners_kept(weights, corners)
+    said += () if weights is None else weights.warnings
     frame = op.frame.weighted(geometry.omega()[~fixed])
     params, system, to_points = auto_system(
         params, requested, lambda p: smoothing_system(geometry, op, fixed, frame, p)
     )
-    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points, weights)
+    return Problem(geometry, params, op, fixed, n_fixed, frame, system, to_points, weights, said)
+
+
+def _boundary_ignored(op: SmoothingOperator, params: SmoothingParams) -> tuple[EngineWarning, ...]:
+    """The warning that ``fix_boundary`` means nothing on k-NN neighbourhoods."""
+    if not params.fix_boundary or op.neighborhoods.source != "knn":
+        return ()
+    return (warning("fix-boundary-ignored",
+                    "fix_boundary has no effect on k-NN neighbourhoods (no boundary defined)"),)
 
 
 def is_track(geometry: Geometry, tau_rule: str) -> bool:
@@ -153,17 +162,13 @@ def held_corners(geometry: Geometry, params: SmoothingParams) -> NDArray[np.bool
 
 
 def _corners_kept(
-    weights: DataWeights | None, corners: NDArray[np.bool_], params: SmoothingParams
+    weights: DataWeights | None, corners: NDArray[np.bool_]
 ) -> DataWeights | None:
     """``weights`` without the outliers that are held corners: a corner is shape."""
     if weights is None or not corners[weights.outliers].any():
         return weights
     out = weights.outliers[~corners[weights.outliers]]
-    notes = tuple(n for n in weights.notes if "outliers" not in n)
-    if out.size:
-        notes += (outlier_note(int(out.size), params.outliers, weights.robust),)
-    return replace(weights, outliers=out, pulled=weights.pulled[~corners[weights.pulled]],
-                   notes=notes)
+    return replace(weights, outliers=out, pulled=weights.pulled[~corners[weights.pulled]])
 
 
 def _operator(
@@ -181,7 +186,7 @@ def _operator(
 
 
 def free_set(
-    geometry: Geometry, op: SmoothingOperator, params: SmoothingParams, notes: list[str],
+    geometry: Geometry, op: SmoothingOperator, fix_boundary: bool, preserve_volume: bool,
     corners: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.bool_], int]:
     """Points eliminated from the system: fixed ones (section 8), uncoupled ones and a track's
@@ -197,11 +202,9 @@ def free_set(
     """
     nb = op.neighborhoods
     fixed = geometry.fixed_mask()
-    if params.fix_boundary:
-        if nb.source == "knn":
-            notes.append("fix_boundary has no effect on k-NN neighbourhoods (no boundary defined)")
+    if fix_boundary:  # no boundary on k-NN neighbourhoods (_boundary_ignored)
         fixed = fixed | nb.boundary
-    if params.preserve_volume:
+    if preserve_volume:
         check_preservable(geometry, fixed)
     L = op.L
     coupled = (np.diff(L.indptr) > 0) | (np.bincount(L.indices, minlength=geometry.n) > 0)

@@ -80,7 +80,25 @@ class Report(BaseModel):
         description="(lambda, phi) for every lambda tried.",
         examples=[[{"lambda": 0.01, "phi": 0.41}, {"lambda": 0.0123, "phi": 0.4998}]],
     )
-    n_points: int = Field(description="Points smoothed.", examples=[2930])
+    n_points: int = Field(
+        description="Points smoothed (after welding: points_solved).", examples=[2930]
+    )
+    points_in: int = Field(
+        description="Vertices (points) of the input as read, before welding.", examples=[2930]
+    )
+    points_solved: int = Field(
+        description="Points the engine smoothed, after welding coincident vertices.",
+        examples=[2930],
+    )
+    points_out: int = Field(
+        description="Vertices of the output (the input's count, less the outliers "
+        "outliers='drop' leaves out).",
+        examples=[2930],
+    )
+    welded_pairs: int = Field(
+        description="Vertices welded onto a coincident vertex (points_in - points_solved).",
+        examples=[0],
+    )
     dimension: int = Field(description="Coordinates per point.", examples=[3])
     kind: str = Field(description="mesh, curve or cloud.", examples=["mesh"])
     laplacian: str = Field(description="Laplacian variant used.", examples=["normalized"])
@@ -110,6 +128,11 @@ class Report(BaseModel):
         examples=["cholmod"],
     )
     warnings: list[str] = Field(description="Anything the user should know.", examples=[[]])
+    warning_details: list[dict[str, Any]] = Field(
+        description="The warnings as records, in the same order: code (stable, "
+        "service.core.warnings.CODES), message (as in warnings) and the numbers it states.",
+        examples=[[]],
+    )
     spectrum: dict[str, list[float]] | None = Field(
         default=None,
         description="Singular values and filter factors, when requested.",

@@ -9,11 +9,39 @@ import numpy as np
 from numpy.typing import NDArray
 
 from service.core.checks.spectrum import Spectrum
+from service.core.warnings import EngineWarning, to_wire
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.core.plan import Plan
 
-__all__ = ["SmoothResult", "Spectrum"]
+__all__ = ["PointCounts", "SmoothResult", "Spectrum"]
+
+
+@dataclass(frozen=True)
+class PointCounts:
+    """What the file holds against what was solved (issue 38: a welded PLY reported the 1722
+    points solved while its file and output hold 5096 vertices).
+
+    Attributes
+    ----------
+    points_in : int
+        Vertices (points) in the input as read, before welding.
+    points_solved : int
+        Points the engine smoothed (after welding coincident vertices).
+    points_out : int
+        Vertices written (the input's count; less the outliers ``drop`` leaves out).
+    welded_pairs : int
+        Vertices welded onto a coincident one (``points_in - points_solved``).
+    """
+
+    points_in: int
+    points_solved: int
+    points_out: int
+    welded_pairs: int = 0
+
+    def to_dict(self) -> dict[str, int]:
+        return {"points_in": self.points_in, "points_solved": self.points_solved,
+                "points_out": self.points_out, "welded_pairs": self.welded_pairs}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -68,8 +96,9 @@ class SmoothResult:
         Points held fixed.
     volume_scale : float or None
         Scale applied for volume/area preservation.
-    warnings : list of str
-        Anything the user should know (solver fallback, search not converged, ...).
+    warnings : list of EngineWarning
+        Anything the user should know (solver fallback, search not converged, ...), in run
+        order: typed records (code, message, numbers; :mod:`service.core.warnings`).
     spectrum : Spectrum or None
         Present when requested and the input is small enough.
     displacement : str
@@ -125,6 +154,10 @@ class SmoothResult:
     unchanged : str or None
         Nothing smoothed, the output written by :mod:`service.workflows.smooth_file`:
         ``"copied"`` (the input's bytes) or ``"converted"`` (a straight conversion).
+    counts : PointCounts or None
+        Points in, solved, out and welded, set by the file workflows
+        (:mod:`service.workflows.smooth_file`); ``None``: the points given are the points
+        solved and returned (:attr:`point_counts`).
     """
 
     points: NDArray[np.float64]
@@ -151,7 +184,7 @@ class SmoothResult:
     order: int = 1
     n_fixed: int = 0
     volume_scale: float | None = None
-    warnings: list[str] = field(default_factory=list)
+    warnings: list[EngineWarning] = field(default_factory=list)
     spectrum: Spectrum | None = None
     # --- core-quality block ---
     displacement: str = "free"
@@ -177,6 +210,13 @@ class SmoothResult:
     output_deviation: dict[str, float] | None = None  # issue 30: what the output is
     plan: Plan | None = None  # issue 29: every automatic choice and its evidence
     unchanged: str | None = None  # issue 32: set by service.workflows.smooth_file
+    counts: PointCounts | None = None  # issue 38: set by service.workflows.smooth_file
+
+    @property
+    def point_counts(self) -> PointCounts:
+        """:attr:`counts`, or the points given solved and returned."""
+        n = self.n_points
+        return self.counts if self.counts is not None else PointCounts(n, n, n, 0)
 
     @property
     def rms_deviation(self) -> float:
@@ -210,6 +250,7 @@ class SmoothResult:
             "matvecs": self.matvecs,
             "history": [{"lambda": lam, "phi": phi} for lam, phi in self.history],
             "n_points": self.n_points,
+            **self.point_counts.to_dict(),
             "dimension": self.dimension,
             "kind": self.kind,
             "laplacian": self.laplacian,
@@ -223,7 +264,7 @@ class SmoothResult:
             "search": self.search,
             "method": self.method,
             "order": self.order,
-            "warnings": list(self.warnings),
+            **to_wire(self.warnings),
         }
         out.update(
             displacement=self.displacement,

@@ -1,9 +1,11 @@
 """The bookkeeping of one :func:`~service.core.pipeline.smooth_one` call: the clock, the
-progress callback and the notes that end up in the report's ``warnings`` (in run order).
+progress callback and the solve stage's warnings (typed records, :mod:`.warnings`, in run order).
 
 Everything a stage decides travels in the record it returns (:class:`~service.core.plan.Plan`,
 :class:`~service.core.problem.Problem`, :class:`~service.core.search.target.Target`, ...), not
-here.
+here: the set-up's warnings are the problem's, the outliers' the finish stage's, the checks' the
+report's. ``notes`` is where the lambda search (``service/core/search``) still writes strings;
+they become :data:`~service.core.warnings.LEGACY` warnings in their run order.
 """
 
 from __future__ import annotations
@@ -14,17 +16,34 @@ from typing import Any
 
 from service.core.frame import Frame
 from service.core.progress import ProgressCallback, ProgressEvent
+from service.core.warnings import LEGACY, EngineWarning
 
 __all__ = ["Run"]
 
 
 class Run:
-    """Clock, progress events and notes of one run (input-frame numbers)."""
+    """Clock, progress events and the solve stage's warnings of one run (input-frame numbers)."""
 
     def __init__(self, progress: ProgressCallback | None) -> None:
         self.t0 = time.perf_counter()
         self.progress = progress
-        self.notes: list[str] = []
+        self.notes: list[str] = []  # strings of the lambda search (untyped, issue 38)
+        self._warnings: list[EngineWarning] = []
+
+    def warn(self, *warnings: EngineWarning) -> None:
+        """Warnings of the solve stage, after any note the search wrote before them."""
+        self._warnings.extend([*self._legacy(), *warnings])
+
+    @property
+    def warnings(self) -> tuple[EngineWarning, ...]:
+        """Every warning of the solve stage so far, in run order."""
+        self._warnings.extend(self._legacy())
+        return tuple(self._warnings)
+
+    def _legacy(self) -> list[EngineWarning]:
+        said = [EngineWarning(LEGACY, note) for note in self.notes]
+        self.notes.clear()
+        return said
 
     def emit(self, stage: str, tau: float | None = None, **kw: Any) -> None:
         """One progress event; ``tau`` is the resolved target from the ``analysis`` stage on."""

@@ -64,6 +64,7 @@ __all__ = [
     "OutputFormatError",
     "Smoothed",
     "Store",
+    "counted",
     "encode",
     "returned_unchanged",
     "run_engine",
@@ -151,6 +152,20 @@ def run_engine(
     if memory_limit is None and run_map is None:
         return core.smooth(geometry, params, progress=progress)
     return core.smooth(geometry, params, progress, memory_limit=memory_limit, run_map=run_map)
+
+
+def counted(result: SmoothResult, doc: GeometryDocument) -> SmoothResult:
+    """``result`` with the counts of the file ``doc`` was read from (issue 38): vertices in,
+    points solved after welding, vertices written (less the outliers ``drop`` leaves out) and
+    the vertices welded onto another."""
+    import dataclasses
+
+    from service.core.result import PointCounts
+    from service.io._shared.flags import dropped_rows
+
+    n_in, solved = doc.n_output, result.n_points
+    counts = PointCounts(n_in, solved, n_in - dropped_rows(doc, result), n_in - doc.geometry.n)
+    return dataclasses.replace(result, counts=counts)
 
 
 def encode(doc: GeometryDocument, fmt: str, points: Any = None, **options: Any) -> bytes:
@@ -269,7 +284,7 @@ def smooth_document(
     if check is not None:
         check(shape)
     run = engine or (lambda g: run_engine(g, params, progress))
-    return Smoothed(run(shape), doc, doc.source_format, fmt)
+    return Smoothed(counted(run(shape), doc), doc, doc.source_format, fmt)
 
 
 def smooth_file(

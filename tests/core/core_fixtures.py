@@ -35,3 +35,12 @@ def polyline_edges(n: int, closed: bool = False, offset: int = 0) -> NDArray:
 def random_rotation(dim: int, seed: int = 0) -> NDArray:
     q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(dim, dim)))
     return q
+
+
+def planned_weights(geometry, params):  # type: ignore[no-untyped-def]
+    """The data weights of ``params`` as a run computes them: the plan decides the gates
+    (issue 38), :func:`service.core.noise.robust.data_weights` applies them."""
+    from service.core.noise.robust import data_weights
+    from service.core.plan import make_plan
+
+    return data_weights(geometry, make_plan(geometry, params).params.data)

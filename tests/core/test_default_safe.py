@@ -52,7 +52,7 @@ def _assert_unchanged(g: Geometry, params: SmoothingParams | None = None) -> Non
     assert np.array_equal(res.points, g.points)  # bit for bit
     assert res.noise_found is False or res.sigma_estimate == 0 or res.tau is None
     assert res.rms_deviation == 0.0
-    assert any(w.startswith("not smoothed") for w in res.warnings), res.warnings
+    assert any(w.code == "not-smoothed" for w in res.warnings), res.warnings
     assert res.report()["tau_how"]
 
 

@@ -55,9 +55,13 @@ def test_a_library_that_cannot_be_mapped_under_the_cap_is_out_of_memory() -> Non
 
 def test_the_time_estimate_counts_dimension_and_codimension() -> None:
     """Normal displacement of a cloud in s-D solves for s - 2 unknowns per point: the estimate
-    grows with the square of that (block entries) and 50 points in 200-D are refused."""
-    params = SmoothingParams()
+    grows with the square of that (block entries) and 50 points in 200-D are refused. The
+    automatic displacement is estimated as the engine runs it (issue 38: one rule): free above
+    two normal directions."""
+    params = SmoothingParams(displacement="normal")
     low, high = (estimate_resources(50, s, "cloud", params) for s in (3, 200))
+    auto = estimate_resources(50, 200, "cloud", SmoothingParams())
+    assert auto == estimate_resources(50, 200, "cloud", SmoothingParams(displacement="free"))
     assert high.seconds > 1000 * low.seconds
     assert high.memory_bytes > 1000 * low.memory_bytes
     with pytest.raises(JobTooLarge) as err:

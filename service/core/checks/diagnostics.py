@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -26,15 +25,15 @@ from service.core.checks.spectrum import (
 )
 from service.core.errors import ShapeLost, SolverError
 from service.core.finish.finished import Finished
-from service.core.finish.outliers import beyond_noise
+from service.core.finish.outliers import Outliers
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.noise.estimate import codimension, estimate_noise
-from service.core.noise.robust import DataWeights, outlier_note
+from service.core.noise.robust import DataWeights
 from service.core.operator.build import SmoothingOperator
 from service.core.params import SmoothingParams
-from service.core.run import Run
 from service.core.search.target import Solution, Target
+from service.core.warnings import EngineWarning, warning
 
 __all__ = ["diagnostics"]
 
@@ -46,14 +45,15 @@ def diagnostics(
     params: SmoothingParams,
     op: SmoothingOperator,
     frame: Frame,
-    run: Run,
+    t0: float,
     sol: Solution,
     fin: Finished,
     n_fixed: int,
     weights: DataWeights | None = None,
-) -> dict[str, Any]:
+) -> tuple[dict[str, Any], list[EngineWarning]]:
     """The fields of the run's :class:`~service.core.result.SmoothResult`: input-frame numbers
-    (eq. 15's ``phi``, lambda of eq. 4), timings and work counters.
+    (eq. 15's ``phi``, lambda of eq. 4), timings (from ``t0``), work counters and the finish
+    stage's outliers (``fin.outliers``); and the checks' warnings (shape, folds, spectrum).
 
     Raises
     ------
@@ -74,18 +74,17 @@ def diagnostics(
         )
     stats = dev.stats if dev is not None else None
     rms = float(np.sqrt(np.mean(dev_pt**2)))
-    weights = _kept(weights, fin, run.notes)
-    solved = X if fin.backoff is None else fin.backoff.undone(X)  # the smoothing's own moves
-    weights = _measured(weights, geometry, solved, target.sigma, params.outliers, run.notes)
-    checks, shape_warnings, sigma = _shape(
-        geometry, params, target, X, _bulk_rms(dev_pt, weights), run.notes
+    outliers = None if fin.outliers is None else fin.outliers.indices
+    checks, shape_warnings, sigma, said = _shape(
+        geometry, params, target, X, _bulk_rms(dev_pt, outliers)
     )
-    timings = _timings(op, sol, run)
+    timings = _timings(op, sol, t0)
     tau = target.tau
     spectrum = None
     if params.spectrum:
-        spectrum = _spectrum(op, geometry, frame, search.lam, n_fixed, run.notes)
-    return dict(
+        spectrum, unavailable = _spectrum(op, geometry, frame, search.lam, n_fixed)
+        said += unavailable
+    fields = dict(
         points=X,
         lam=params.lam if params.lam is not None else frame.lam_out(search.lam),
         phi=phi,
@@ -110,7 +109,6 @@ def diagnostics(
         kind=geometry.kind,
         n_fixed=n_fixed,
         volume_scale=fin.volume_scale,
-        warnings=[*run.notes, *(stats.warnings if stats else [])],
         spectrum=spectrum,
         displacement=params.displacement,
         tau_rule=params.tau_rule,
@@ -120,61 +118,40 @@ def diagnostics(
         bound=sol.bound,
         shape_warnings=shape_warnings,
         noise_found=None if params.tau_rule != "auto" else bool(target.sigma),
-        **_data_weights(weights, params.outliers),
         tangential=None if fin.tangential is None else fin.tangential.to_dict(frame.phi_factor),
         output_deviation=(
             None if dev is None else _output_deviation(geometry, moved, phi, fin, frame)
         ),
+        **_data_weights(weights, fin.outliers),
     )
+    return fields, said
 
 
-def _kept(dw: DataWeights | None, fin: Finished, notes: list[str]) -> DataWeights | None:
-    """The data weights with the outliers the finish stage kept in place (issue 31: a cloud's
-    points the solve moved far are kept and flagged too), with a note when it added some."""
-    kept = fin.outliers
-    if dw is None or kept is None or kept.size <= dw.outliers.size:
-        return dw
-    notes.append(
-        f"{kept.size - dw.outliers.size} more points the solve moved far from their "
-        "input (beyond twice the outliers' threshold) were kept in place as outliers too"
+def _data_weights(dw: DataWeights | None, outliers: Outliers | None) -> dict[str, Any]:
+    """The data weights of the run (issue 21) and the outliers as the finish stage left them
+    (issue 31; one record, :class:`~service.core.finish.outliers.Outliers`), as
+    :class:`~service.core.result.SmoothResult` fields."""
+    if dw is None or outliers is None:
+        return {}
+    kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
+        ["noise"] if dw.uneven else []
     )
-    return replace(dw, outliers=kept)
+    return {
+        "outliers": outliers.indices,
+        "data_weights": " + ".join(kinds) or None,
+        "omega": dw.omega if kinds else None,
+        "pulled": outliers.pulled,
+        "outlier_mode": outliers.mode if outliers.count else None,
+    }
 
 
-def _measured(
-    dw: DataWeights | None,
-    geometry: Geometry,
-    X: Array,
-    sigma: float | None,
-    mode: str,
-    notes: list[str],
-) -> DataWeights | None:
-    """The data weights with only the pulled-in outliers whose move is beyond what the noise
-    and the smoothing explain (:func:`~service.core.finish.outliers.beyond_noise`, issue 31),
-    and their note counting those (none: no note). The rest are the Gaussian tail of shape
-    detail; the weights the residual test set stay (``data_weights`` still says ``robust``)."""
-    if dw is None or mode != "pull" or dw.outliers.size == 0:
-        return dw
-    kept = beyond_noise(geometry.points, X, dw.outliers, sigma, codimension(geometry))
-    if kept.size == dw.outliers.size:
-        return dw
-    note = outlier_note(int(dw.outliers.size), mode, dw.robust)
-    if note in notes:
-        at = notes.index(note)
-        if kept.size:
-            notes[at] = outlier_note(int(kept.size), mode, dw.robust)
-        else:
-            del notes[at]
-    return replace(dw, outliers=kept, pulled=np.intersect1d(dw.pulled, kept))
-
-
-def _bulk_rms(dev_pt: Array, dw: DataWeights | None) -> float:
+def _bulk_rms(dev_pt: Array, outliers: NDArray[np.int64] | None) -> float:
     """The RMS move of the points that are not outliers: an outlier pulled in moves by its
     offset, which says nothing about whether the shape itself was smoothed (issue 31)."""
-    if dw is None or dw.outliers.size == 0 or dw.outliers.size >= dev_pt.size:
+    if outliers is None or outliers.size == 0 or outliers.size >= dev_pt.size:
         return float(np.sqrt(np.mean(dev_pt**2)))
     keep = np.ones(dev_pt.size, dtype=bool)
-    keep[dw.outliers] = False
+    keep[outliers] = False
     return float(np.sqrt(np.mean(dev_pt[keep] ** 2)))
 
 
@@ -198,10 +175,9 @@ def _shape(
     target: Target,
     X: Array,
     rms: float,
-    notes: list[str],
-) -> tuple[ShapeChecks, list[str], float | None]:
-    """The shape checks of :mod:`.guards`, their warnings (added to ``notes``) and the noise
-    level they compared with.
+) -> tuple[ShapeChecks, list[str], float | None, list[EngineWarning]]:
+    """The shape checks of :mod:`.guards`, their messages, the noise level they compared with
+    and the warnings (the shape checks' and the folds kept).
 
     Raises
     ------
@@ -215,14 +191,17 @@ def _shape(
     shape_warnings = guard_warnings(checks, params.tau_rule, back, moves)
     if shape_warnings and params.strict:
         raise ShapeLost(shape_warnings, checks.to_dict())
-    notes.extend(shape_warnings)
+    numbers = {"moves": moves, "new_folds": checks.new_folds,
+               "area_change": checks.area_change}  # fmt: skip
+    said = [warning("shape", message, **numbers) for message in shape_warnings]
     note = fold_note(checks, params.displacement)
     if note:
-        notes.append(note)
-    return checks, shape_warnings, sigma
+        said.append(warning("folds-kept", note, folded=checks.folded_faces,
+                            folded_input=checks.folded_input))  # fmt: skip
+    return checks, shape_warnings, sigma, said
 
 
-def _timings(op: SmoothingOperator, sol: Solution, run: Run) -> dict[str, float]:
+def _timings(op: SmoothingOperator, sol: Solution, t0: float) -> dict[str, float]:
     """Seconds per stage: build, analysis, factorization, solve, products, search, total."""
     timings = dict(op.timings)
     stats = sol.dev.stats if sol.dev is not None else None
@@ -234,26 +213,8 @@ def _timings(op: SmoothingOperator, sol: Solution, run: Run) -> dict[str, float]
             matvec=stats.matvec,
         )
     timings["search"] = sol.seconds
-    timings["total"] = time.perf_counter() - run.t0
+    timings["total"] = time.perf_counter() - t0
     return timings
-
-
-def _data_weights(dw: DataWeights | None, mode: str) -> dict[str, Any]:
-    """The outliers, what was done with them (issue 31) and the data weights of the run
-    (issue 21), as
-    :class:`~service.core.result.SmoothResult` fields."""
-    if dw is None:
-        return {}
-    kinds = ([f"robust ({dw.robust})"] if dw.robust != "none" else []) + (
-        ["noise"] if dw.uneven else []
-    )
-    return {
-        "outliers": dw.outliers,
-        "data_weights": " + ".join(kinds) or None,
-        "omega": dw.omega if kinds else None,
-        "pulled": dw.pulled,
-        "outlier_mode": mode if dw.outliers.size else None,
-    }
 
 
 def _noise_for_checks(
@@ -275,14 +236,17 @@ def _spectrum(
     frame: Frame,
     lam: float,
     n_fixed: int,
-    notes: list[str],
-) -> Spectrum | None:
+) -> tuple[Spectrum | None, list[EngineWarning]]:
+    """Singular values and filter factors (eq. 12), or why not."""
     if n_fixed:
-        notes.append("spectrum: not available with fixed points (eq. 12 assumes none)")
-        return None
+        return None, [warning("spectrum-unavailable",
+                              "spectrum: not available with fixed points (eq. 12 assumes none)")]
     if geometry.n > SPECTRUM_MAX_POINTS:
-        notes.append(f"spectrum: only computed for inputs up to {SPECTRUM_MAX_POINTS} points")
-        return None
+        return None, [warning(
+            "spectrum-unavailable",
+            f"spectrum: only computed for inputs up to {SPECTRUM_MAX_POINTS} points",
+            points=geometry.n, bound=SPECTRUM_MAX_POINTS,
+        )]  # fmt: skip
     L = op.L * op.frame.scale ** (-op.frame.power)
     sigma, _ = singular_values(L, geometry.omega())
-    return Spectrum(sigma=sigma, gamma=filter_factors(sigma, frame.lam_out(lam)))
+    return Spectrum(sigma=sigma, gamma=filter_factors(sigma, frame.lam_out(lam))), []

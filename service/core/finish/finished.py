@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from service.core.finish.outliers import Outliers
 from service.core.finish.residual import BackOff
 from service.core.finish.tangential import TangentialStep
 
@@ -25,9 +26,9 @@ class Finished:
         The rescaling about the centroid that kept the volume or area (sections 8-9).
     tangential : TangentialStep or None
         The tangential step of normal displacement on meshes, when it applies.
-    outliers : ndarray of int or None
-        The outliers kept in place (flag, drop): the data weights' and the points the solve
-        moved far (:func:`~service.core.finish.outliers.far_moved`); ``None``: the weights'.
+    outliers : Outliers or None
+        The outliers as this stage leaves them (the one record the plan and the report read);
+        ``None`` without data weights.
     backoff : BackOff or None
         Where the residual test (:mod:`~service.core.finish.residual`) put shape back.
     """
@@ -35,5 +36,5 @@ class Finished:
     X: NDArray[np.float64]
     volume_scale: float | None = None
     tangential: TangentialStep | None = None
-    outliers: NDArray[np.int64] | None = None
+    outliers: Outliers | None = None
     backoff: BackOff | None = None

@@ -22,17 +22,23 @@ estimated noise at 0.05 edge); spikes of 10 edges move 200 - 300 times it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.linalg import spsolve
 
+from service.core.warnings import EngineWarning, warning
+
 __all__ = [
     "EXTREME_ALPHA",
     "FAR_MOVE",
+    "Outliers",
     "beyond_noise",
     "bound_to_ring",
     "far_moved",
+    "outliers_of",
     "place_outliers",
     "within_offset",
 ]
@@ -48,6 +54,105 @@ FAR_MOVE = 2.0 * 3.89
 EXTREME_ALPHA = 1e-3
 
 Array = NDArray[np.float64]
+Index = NDArray[np.int64]
+
+
+def _none() -> Index:
+    return np.zeros(0, np.int64)
+
+
+@dataclass(frozen=True)
+class Outliers:
+    """The outliers of a run as the finish stage leaves them: the one record the plan's
+    ``outliers`` entry and the report read (issue 38: they counted apart before).
+
+    Attributes
+    ----------
+    mode : str
+        ``"flag"``, ``"drop"`` or ``"pull"`` (the plan's).
+    rule : str
+        The robust rule the data weights applied.
+    found : int
+        Outliers the data weights found (a track's held corners are shape, not outliers).
+    indices : ndarray of int
+        The outliers reported (sorted): with ``flag``/``drop`` those found and the points the
+        solve moved far (:func:`far_moved`); with ``pull`` those whose move is beyond what the
+        noise and the smoothing explain (:func:`beyond_noise`).
+    pulled : ndarray of int
+        Reported outliers placed by :func:`pull_in` (next to no weight).
+    far : int
+        Points the solve moved far, kept in place as outliers too (``flag``/``drop``).
+    within_noise : int
+        Found outliers a ``pull`` moved no further than the noise explains (not reported).
+    """
+
+    mode: str
+    rule: str = "none"
+    found: int = 0
+    indices: Index = field(default_factory=_none)
+    pulled: Index = field(default_factory=_none)
+    far: int = 0
+    within_noise: int = 0
+
+    @property
+    def count(self) -> int:
+        """The report's ``outlier_count``."""
+        return int(self.indices.size)
+
+    @property
+    def warnings(self) -> tuple[EngineWarning, ...]:
+        """What the user is told: the outliers and what happened to them (never tau advice)."""
+        said = []
+        shown = self.count if self.mode == "pull" else self.found
+        if shown:
+            said.append(warning("outliers", _outlier_message(shown, self.mode, self.rule),
+                                count=shown, mode=self.mode, rule=self.rule))  # fmt: skip
+        if self.far:
+            said.append(warning(
+                "outliers-moved-far",
+                f"{self.far} more points the solve moved far from their input (beyond twice the "
+                "outliers' threshold) were kept in place as outliers too",
+                count=self.far, factor=FAR_MOVE,
+            ))  # fmt: skip
+        return tuple(said)
+
+
+def _outlier_message(count: int, mode: str, rule: str) -> str:
+    if mode == "flag":
+        return (f"{count} points far from the surface flagged as outliers ({rule} weights): "
+                "kept at their input positions and left out of tau; listed in the report "
+                "(outliers) and flagged in the output where the format holds a flag (LAS "
+                "classification 7, PLY/PCD vertex attribute 'outlier'); outliers='drop' "
+                "removes them")
+    if mode == "drop":
+        return (f"{count} points far from the surface dropped as outliers ({rule} weights): "
+                "the output is written without them; their indices are in the report "
+                "(outliers)")
+    return (f"{count} points far from the surface treated as outliers ({rule} weights): "
+            "pulled back into their neighbours' ring")
+
+
+def outliers_of(
+    P: Array,
+    X: Array,
+    found: Index,
+    pulled: Index,
+    mode: str,
+    rule: str,
+    sigma: float | None,
+    codim: int,
+    kept: Index | None = None,
+) -> Outliers:
+    """The :class:`Outliers` of the final points ``X`` (input ``P``): ``found`` by the data
+    weights (``pulled`` of them with next to no weight), ``kept`` in place by the finish stage
+    (``flag``/``drop``: ``found`` and the points moved far), the noise level ``sigma`` in each
+    of ``codim`` normal directions."""
+    if mode != "pull":
+        kept = found if kept is None else kept
+        return Outliers(mode, rule, int(found.size), kept, pulled, int(kept.size - found.size))
+    shown = beyond_noise(P, X, found, sigma, codim) if found.size else found
+    return Outliers(mode, rule, int(found.size), shown, np.intersect1d(pulled, shown),
+                    within_noise=int(found.size - shown.size))  # fmt: skip
 
 
 def place_outliers(P: Array, X: Array, L: sp.spmatrix, idx: NDArray[np.int64], mode: str) -> Array:

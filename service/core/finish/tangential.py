@@ -48,7 +48,6 @@ from service.core.finish.volume import edge_counts
 from service.core.frame import Frame
 from service.core.geometry import Geometry
 from service.core.operator.build import SmoothingOperator
-from service.core.params import SmoothingParams
 from service.core.search.roots import LambdaSearch
 from service.core.system.displacement import normal_frames
 
@@ -57,7 +56,6 @@ __all__ = [
     "SHARE_FLOOR",
     "SHARE_FLOOR_REGULAR",
     "TangentialStep",
-    "applies",
     "relax_tangential",
     "tangential_budget",
     "tangential_flow",
@@ -283,21 +281,6 @@ def unfold(X: Array, base: Array, faces: NDArray[np.int64], halvings: int = 6) -
             mark[faces[mark[faces].any(axis=1)].ravel()] = True
         scale[mark] = 0.5 * scale[mark] if k < halvings else 0.0
     return base.copy(), n  # not reached
-
-
-def applies(geometry: Geometry, params: SmoothingParams) -> bool:
-    """The step runs for triangle meshes in 3-D smoothed by normal displacement with
-    ``tangential="auto"`` (the default; an explicit ``displacement="normal"`` sets it to
-    ``"off"``, :func:`~service.core.system.displacement.resolve_displacement`) and the
-    automatic tau: a given ``tau``, ``rms`` or ``lam`` keeps its contract ``phi = tau``."""
-    return (
-        params.tangential == "auto"
-        and params.tau_rule == "auto"
-        and params.displacement == "normal"
-        and geometry.faces is not None
-        and geometry.dim == 3
-        and params.method == "tikhonov"
-    )
 
 
 def relax_tangential(

@@ -14,6 +14,7 @@ Two estimates:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -22,7 +23,8 @@ import scipy.sparse as sp
 
 from service.core.linalg.solver import Gram, cholmod_available
 from service.core.params import SmoothingParams
-from service.core.params.rules import auto_displacement
+from service.core.params.rules import codimension_of, displacement_mode
+from service.core.warnings import EngineWarning, warning
 
 __all__ = [
     "MATRIX_FREE_FROM",
@@ -61,17 +63,13 @@ def _normal_unknowns(n: int, dim: int, kind: str, params: SmoothingParams | None
     """Unknowns per point of the system: the codimension with normal displacement, else 1
     (free displacement solves for the ``dim`` coordinates as right-hand sides of one matrix).
 
-    As :func:`service.core.system.displacement.resolve_displacement` decides: ``auto`` is
-    normal for meshes and clouds (not with ``tau="gcv"`` or windowed-sinc), free for curves.
+    As the plan decides (:func:`service.core.params.rules.displacement_mode`, the one rule).
     """
-    mode: str = params.displacement if params is not None else "auto"
-    if mode == "auto":
-        run = (params.method, params.tau_rule) if params is not None else ("tikhonov", "auto")
-        mode = auto_displacement(kind, *run)
-    if mode != "normal":
+    mode = "auto" if params is None else params.displacement
+    run = (params.method, params.tau_rule) if params is not None else ("tikhonov", "auto")
+    if displacement_mode(mode, kind, dim, *run) != "normal":
         return 1
-    manifold = {"mesh": 2, "curve": 1}.get(kind, min(2, dim - 1))
-    return max(dim - manifold, 1)
+    return max(codimension_of(kind, dim), 1)
 
 
 def _build_bytes(n: int, dim: int, kind: str, params: SmoothingParams | None, faces: int) -> float:
@@ -199,9 +197,13 @@ def prefer_matrix_free(size: int, lam: float, mu_bound: float) -> bool:
 
 
 def choose_solver(
-    system: Any, params: SmoothingParams, memory_limit: int | None, notes: list[str]
+    system: Any,
+    params: SmoothingParams,
+    memory_limit: int | None,
+    warn: Callable[[EngineWarning], None],
 ) -> Literal["cholmod", "superlu", "cg"]:
-    """The solver of a run: the named one, or for ``"auto"`` CHOLMOD unless it would not fit.
+    """The solver of a run: the named one, or for ``"auto"`` CHOLMOD unless it would not fit
+    (then ``warn`` is told why: a ``"matrix-free"`` warning).
 
     With a ``memory_limit``, the factor's size is counted from the symbolic analysis of
     ``K = M + D^2`` (AMD ordering) when the coarse model says it might not fit.
@@ -213,10 +215,12 @@ def choose_solver(
     M = system.M
     nnz_m = M.nnz_bound() if isinstance(M, Gram) else M.nnz
     if m >= 2000 and nnz_m > DENSE_ROWS * m:
-        notes.append(
+        warn(warning(
+            "matrix-free",
             f"matrix-free path: L^T L would have about {nnz_m / m:.0f} entries per row "
-            f"(more than {DENSE_ROWS}); its factor would be far larger"
-        )
+            f"(more than {DENSE_ROWS}); its factor would be far larger",
+            entries_per_row=nnz_m / m, bound=DENSE_ROWS,
+        ))  # fmt: skip
         return "cg"
     if memory_limit is None or m < 2000:
         return name
@@ -225,10 +229,12 @@ def choose_solver(
     if coarse < memory_limit / 8:
         return name
     if m_bytes > memory_limit / 2:
-        notes.append(
+        warn(warning(
+            "matrix-free",
             f"matrix-free path: L^T L alone would take {m_bytes / 2**20:.0f} MiB, more than "
-            f"half the memory limit of {memory_limit / 2**20:.0f} MiB"
-        )
+            f"half the memory limit of {memory_limit / 2**20:.0f} MiB",
+            bytes=m_bytes, memory_limit=memory_limit,
+        ))  # fmt: skip
         return "cg"
     from service.core.linalg import cache
 
@@ -237,9 +243,11 @@ def choose_solver(
     entries, _ = factor_size(pattern, perm)
     need = entries * _BYTES_PER_FACTOR_ENTRY
     if need > memory_limit / 2:
-        notes.append(
+        warn(warning(
+            "matrix-free",
             f"matrix-free path: the Cholesky factor would take {need / 2**20:.0f} MiB, more "
-            f"than half the memory limit of {memory_limit / 2**20:.0f} MiB"
-        )
+            f"than half the memory limit of {memory_limit / 2**20:.0f} MiB",
+            bytes=need, memory_limit=memory_limit,
+        ))  # fmt: skip
         return "cg"
     return name

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from service.core.errors import SolverError
 from service.core.linalg.gram import Gram, explicit
 from service.core.linalg.krylov import pcg
+from service.core.warnings import EngineWarning, warning
 
 __all__ = [
     "Direct",
@@ -73,7 +74,7 @@ class SolverStats:
     factorizations: int = 0
     solves: int = 0
     matvecs: int = 0
-    warnings: list[str] = field(default_factory=list)
+    warnings: list[EngineWarning] = field(default_factory=list)
 
 
 def split_fixed(
@@ -182,10 +183,12 @@ class MatrixFree(LinearSolver):
         inv = 1.0 / (self.diag + lam * self.d2)[:, None]
         X, ok = self._iterate(lam, R, x0, offset, lambda Q: inv * Q, self.maxiter)
         if not ok:
-            self.stats.warnings.append(
+            self.stats.warnings.append(warning(
+                "solver-accuracy",
                 f"conjugate gradients did not reach the accuracy bound at lambda={lam:.6g} "
-                f"in {self.maxiter} products"
-            )
+                f"in {self.maxiter} products",
+                lam=lam, products=self.maxiter,
+            ))  # fmt: skip
         return self._check(X, lam)
 
 
@@ -225,10 +228,11 @@ class Direct(LinearSolver):
     ) -> None:
         super().__init__(M, d2)
         if method == "cholmod" and _cholmod is None:
-            self.stats.warnings.append(
+            self.stats.warnings.append(warning(
+                "solver-fallback",
                 f"scikit-sparse (CHOLMOD) is not available ({_CHOLMOD_IMPORT_ERROR}); "
-                "used SciPy's SuperLU instead"
-            )
+                "used SciPy's SuperLU instead",
+            ))  # fmt: skip
             method = "superlu"
         self.name = method
         self.reuse = reuse

@@ -43,7 +43,8 @@ from service.core.noise.pointfits import leave_one_out, point_neighbours
 from service.core.noise.quantiles import chi2, poisson_ppf
 from service.core.noise.uneven import RATIO_CAP, crease_factor, local_sigma, on_grid, row_quantile
 from service.core.operator.sized_kernels import COMPILED_FROM
-from service.core.params import SmoothingParams
+from service.core.params import DataParams
+from service.core.warnings import EngineWarning, warning
 
 __all__ = [
     "ALPHA",
@@ -53,7 +54,6 @@ __all__ = [
     "data_weights",
     "flag_outliers",
     "isolated",
-    "outlier_note",
     "robust_weights",
 ]
 
@@ -105,7 +105,9 @@ class DataWeights:
         Whether ``s_i`` was applied.
     spread : float or None
         ``q90 - q10`` of ``log sigma_i``.
-    notes : tuple of str
+    warnings : tuple of EngineWarning
+        The noise weights' (the outliers' warning is the finish stage's record,
+        :class:`~service.core.finish.outliers.Outliers`).
     pulled : ndarray of int
         Outliers whose weight is (next to) zero:
         :func:`~service.core.finish.outliers.pull_in` places them.
@@ -117,29 +119,23 @@ class DataWeights:
     robust: str = "none"
     uneven: bool = False
     spread: float | None = None
-    notes: tuple[str, ...] = ()
+    warnings: tuple[EngineWarning, ...] = ()
     pulled: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def data_weights(
-    geometry: Geometry, params: SmoothingParams
+    geometry: Geometry, params: DataParams
 ) -> tuple[Geometry, DataWeights | None]:
     """The geometry with its weights replaced by ``omega`` of :class:`DataWeights`, and them.
 
-    ``"auto"`` rules act with the automatic tau only (a given tau, rms or lambda is a budget in
-    the user's weights) and never over user-given weights; ``"huber"``, ``"tukey"`` and
-    ``"local"`` always (tau then counts the new weights). ``None``: nothing applies.
+    ``params`` is the plan's data group (``SmoothingParams.data``): ``robust`` and
+    ``noise_weights`` are what the run tries, their gates decided
+    (:func:`service.core.params.rules.data_weight_gates`, in
+    :func:`service.core.plan.make_plan`). ``None``: nothing applies.
     """
-    automatic = params.tau_rule == "auto" and geometry.weights is None
-    robust = params.robust if params.robust != "auto" or automatic else "none"
-    uneven = params.noise_weights if params.noise_weights != "auto" or automatic else "none"
+    robust, uneven = params.robust, params.noise_weights
     if robust == "none" and uneven == "none":
-        notes: tuple[str, ...] = ()
-        if geometry.weights is not None and "auto" in (params.robust, params.noise_weights):
-            notes = ("weights given: no automatic robust or noise weights (robust='huber' or "
-                     "'tukey', noise_weights='local' apply them on top)",)
-        return geometry, (DataWeights(geometry.omega(), np.ones(geometry.n),
-                                      np.zeros(0, np.int64), notes=notes) if notes else None)
+        return geometry, None
     got = _factors(geometry, robust, uneven)
     if got is None:
         return geometry, None
@@ -150,31 +146,13 @@ def data_weights(
     omega = geometry.omega() * rho / ratio**UNEVEN_POWER
     weights = omega if geometry.weights is None else np.where(
         np.isfinite(geometry.weights), omega, geometry.weights)
-    said: list[str] = []
+    said: tuple[EngineWarning, ...] = ()
     if use_uneven:
-        said.append(f"noise varies across the input (spread of log sigma_i {spread:.2f}): "
-                     "weights 1/sigma_i")
-    if outliers.size:
-        said.append(outlier_note(int(outliers.size), params.outliers, applied))
+        said = (warning("uneven-noise", f"noise varies across the input (spread of log sigma_i "
+                        f"{spread:.2f}): weights 1/sigma_i", spread=spread, gate=SPREAD),)
     pulled = outliers[(rho[outliers] <= PULLED) & ~geometry.fixed_mask()[outliers]]
-    dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, tuple(said), pulled)
+    dw = DataWeights(omega, ratio, outliers, applied, use_uneven, spread, said, pulled)
     return replace(geometry, weights=weights), dw
-
-
-def outlier_note(count: int, mode: str, applied: str) -> str:
-    """The warning that names the outliers and what happened to them (never tau advice)."""
-    if mode == "flag":
-        return (f"{count} points far from the surface flagged as outliers ({applied} weights): "
-                "kept at their input positions and left out of tau; listed in the report "
-                "(outliers) and flagged in the output where the format holds a flag (LAS "
-                "classification 7, PLY/PCD vertex attribute 'outlier'); outliers='drop' "
-                "removes them")
-    if mode == "drop":
-        return (f"{count} points far from the surface dropped as outliers ({applied} weights): "
-                "the output is written without them; their indices are in the report "
-                "(outliers)")
-    return (f"{count} points far from the surface treated as outliers ({applied} weights): "
-            "pulled back into their neighbours' ring")
 
 
 def _factors(

@@ -31,7 +31,7 @@ from service.core._arrays import unique_keys
 from service.core.geometry import Geometry
 from service.core.operator.neighborhoods import Neighborhoods, pair_adjacency
 from service.core.params import SmoothingParams
-from service.core.params.rules import auto_displacement
+from service.core.params.rules import boundary_mode, displacement_mode
 
 __all__ = [
     "boundary_edges",
@@ -51,21 +51,16 @@ def ends_rule(params: SmoothingParams) -> EndsRule:
 
 
 def boundary_rule(params: SmoothingParams, geometry: Geometry) -> BoundaryRule:
-    """``params.boundary`` with ``"auto"`` resolved: ``"curve"`` where the points move freely.
-
-    Free displacement is the mode :func:`service.core.system.displacement.resolve_displacement`
-    picks for ``displacement="free"``, for ``method="windowed-sinc"``, ``tau="gcv"`` and for
-    meshes given in 2-D; the normal mode otherwise (``"ring"``).
-    """
+    """``params.boundary`` with ``"auto"`` resolved for the run's displacement: ``"curve"`` where
+    the points move freely, ``"ring"`` with normal displacement (one rule,
+    :func:`service.core.params.rules.boundary_mode`, for the displacement
+    :func:`~service.core.params.rules.displacement_mode` resolves)."""
     if geometry.faces is None:
         return "ring"  # no mesh boundary: the rule does not apply
-    if params.boundary != "auto":
-        return params.boundary
-    auto = auto_displacement("mesh", params.method, params.tau_rule)
-    free = params.displacement == "free" or (
-        params.displacement == "auto" and (auto == "free" or geometry.dim != 3)
+    mode = displacement_mode(
+        params.displacement, geometry.kind, geometry.dim, params.method, params.tau_rule
     )
-    return "curve" if free else "ring"
+    return "curve" if boundary_mode(params.boundary, mode) == "curve" else "ring"
 
 
 def pinned_ends(nb: Neighborhoods, rule: EndsRule) -> NDArray[np.bool_]:

@@ -191,7 +191,21 @@ def _build(
     t2 = time.perf_counter()
     timings = {"neighborhoods": t1 - t0, "laplacian": t2 - t1}
     pinned = pinned_ends(nb, ends_rule(params))
-    return SmoothingOperator(L, nb, scheme, frame, key, timings, pinned)
+    nb = dataclasses.replace(nb, adjacency=_frozen(nb.adjacency))
+    return SmoothingOperator(_frozen(L), nb, scheme, frame, key, timings, pinned)
+
+
+def _frozen(A: sp.spmatrix) -> sp.csr_matrix:
+    """``A`` in canonical CSR (rows' entries in column order, no duplicates), read-only: the
+    cached operator is shared by later runs, and a run that canonicalized it in place (scipy
+    sorts a matrix's indices when an operation needs them sorted) changed the order in which
+    the next run's products summed each row, so its output bits (issue 38: a golden case failed
+    after another run of the same input in the process)."""
+    A = sp.csr_matrix(A)
+    A.sum_duplicates()
+    for part in (A.data, A.indices, A.indptr):
+        part.flags.writeable = False
+    return A
 
 
 def build_laplacian(

@@ -43,7 +43,7 @@ from service.core.noise.estimate import codimension
 from service.core.operator.laplacian import presmooth
 from service.core.operator.neighborhoods import Neighborhoods
 from service.core.params import SmoothingParams
-from service.core.params.rules import DEFAULT_DISPLACEMENT, auto_displacement
+from service.core.params.rules import DEFAULT_DISPLACEMENT, displacement_mode
 from service.core.system.deviation import SmoothingSystem
 
 __all__ = [
@@ -59,12 +59,6 @@ __all__ = [
 ]
 
 FRAME_NEIGHBOURS = 12
-#: ``displacement="auto"`` takes normal displacement only up to this codimension: its system has
-#: ``r x r`` blocks per Laplacian entry (assembly ``O(nnz r^2)``, factor ``O(r^3)`` times the free
-#: system's, which solves ``s`` columns with one factor). Surfaces in 3-D and curves in 2-D have
-#: ``r = 1``, a cloud in 4-D ``r = 2``; a cloud in 300-D would have ``r = 298`` (minutes for 50
-#: points) while in ``s - 2`` of ``s`` directions normal and free displacement barely differ.
-AUTO_NORMAL_MAX_CODIM = 2
 #: Bound on the estimated entries of the normal system, ``n min(n, 40) r^2``: above it an
 #: explicit ``displacement="normal"`` is a ParameterError (``5e7`` entries: ~1.2 GB of COO).
 NORMAL_MAX_ENTRIES = 50_000_000
@@ -324,7 +318,8 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
     ``tau="gcv"`` (cross-validation assumes the data are the points: in normal displacement the
     Laplacian of the clean curved shape is part of the data and its score falls towards the
     collapsed shape). Normal displacement only up to codimension
-    :data:`AUTO_NORMAL_MAX_CODIM` (its cost grows like ``r^2``-``r^3``).
+    :data:`~service.core.params.rules.AUTO_NORMAL_MAX_CODIM` (its cost grows like
+    ``r^2``-``r^3``): :func:`~service.core.params.rules.displacement_mode`, the one rule.
 
     Raises
     ------
@@ -345,13 +340,12 @@ def resolve_displacement(params: SmoothingParams, geometry: Geometry) -> Smoothi
             " use displacement 'free' or 'auto'",
             field="params.displacement",
         )
-    if params.displacement != "auto":
-        if params.displacement == "normal" and "tangential" not in params.model_fields_set:
-            return params.model_copy(update={"tangential": "off"})
+    if params.displacement == "normal" and "tangential" not in params.model_fields_set:
+        return params.model_copy(update={"tangential": "off"})
+    kind, dim = geometry.kind, geometry.dim
+    mode = displacement_mode(params.displacement, kind, dim, params.method, params.tau_rule)
+    if mode == params.displacement:
         return params
-    mode = auto_displacement(geometry.kind, params.method, params.tau_rule)
-    if mode == "normal" and not 1 <= r <= AUTO_NORMAL_MAX_CODIM:  # e.g. a mesh given in 2-D
-        mode = "free"
     return params.model_copy(update={"displacement": mode})
 
 

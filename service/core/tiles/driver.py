@@ -37,6 +37,7 @@ from service.core.tiles.halo import HALO_EPS, MAX_HOPS, RATE_MARGIN, decay_rate,
 from service.core.tiles.lam import LambdaDecision, LambdaRule, ProbeTile, probe_rule
 from service.core.tiles.partition import Tile, hop_length, kd_split, tile_geometry, tile_members
 from service.core.tiles.solve import TileSolution, solve_tile
+from service.core.warnings import EngineWarning, warning
 
 __all__ = ["PROBE_HOPS", "TileReport", "TiledResult", "check_tileable", "smooth_tiled"]
 
@@ -268,7 +269,8 @@ def _stitch(
                                                                            strict=True)]))
     warnings = _merged([w for s in sols for w in s.warnings], int(outliers.size))
     if tiles[0].hops >= MAX_HOPS:
-        warnings.append(f"the halo was capped at {MAX_HOPS} hops: seams may show")
+        warnings.append(warning("halo-capped", f"the halo was capped at {MAX_HOPS} hops: seams "
+                                "may show", hops=MAX_HOPS))  # fmt: skip
     result = SmoothResult(
         points=X, lam=float(decision.lam or 0.0), phi=phi, tau=tau,
         relative_error=None if tau is None else abs(phi - tau) / tau,
@@ -292,17 +294,20 @@ def _stitch(
     return TiledResult(result, reports, 1, max(t.hops for t in tiles), hop, probe, decision.how)
 
 
-def _merged(warnings: list[str], outliers: int) -> list[str]:
+def _merged(warnings: list[EngineWarning], outliers: int) -> list[EngineWarning]:
     """The tiles' warnings once each. A tile counts the outliers of its halo too: the outlier
-    note says the stitched count, and the tiles' "N more points the solve moved far" notes
-    (those points are among the stitched outliers) are folded into it."""
-    out: set[str] = set()
+    warning says the stitched count, and the tiles' "N more points the solve moved far"
+    warnings (those points are among the stitched outliers) are folded into it."""
+    out: dict[str, EngineWarning] = {}
     for w in warnings:
-        head, _, rest = w.partition(" ")
-        if head.isdigit() and rest.startswith("more points the solve moved far"):
+        if w.code == "outliers-moved-far":
             continue
-        out.add(f"{outliers} {rest}" if head.isdigit() and " as outliers (" in rest else w)
-    return sorted(out)
+        if w.code == "outliers":
+            head, _, rest = w.message.partition(" ")
+            text = f"{outliers} {rest}" if head.isdigit() else w.message
+            w = warning("outliers", text, **{**w.numbers, "count": outliers})
+        out.setdefault(w.message, w)
+    return sorted(out.values(), key=str)
 
 
 def _given_tau(geometry: Geometry, params: SmoothingParams) -> float | None:

@@ -38,6 +38,7 @@ from service.core.search.target import Solution
 from service.core.system.deviation import Deviation
 from service.core.tiles.halo import operator_norm_bound
 from service.core.tiles.partition import hop_radius
+from service.core.warnings import EngineWarning
 
 __all__ = ["TileSolution", "core_phi", "seeded_noise", "solve_tile"]
 
@@ -76,7 +77,7 @@ class TileSolution:
     solves: int
     solver: str
     seconds: float
-    warnings: list[str]
+    warnings: list[EngineWarning]
     norm: float = 0.0
     reach: float = 0.0
     lam_scale: float = 1.0
@@ -122,7 +123,7 @@ def _at_lambda(problem: Problem, plan: Plan, run: Run, lam: float,
         return unchanged(problem, plan, aim, run)
     params, system = problem.params, problem.system
     t0 = time.perf_counter()
-    solver = choose_solver(system, params, memory_limit, run.notes)
+    solver = choose_solver(system, params, memory_limit, run.warn)
     dev = Deviation(system, solver=solver, order=params.order, reuse=True, symbolic=analysis_of)
     inner = problem.frame.lam_in(lam)
     if params.solver == "auto":  # CG: 0.5 s against CHOLMOD's 1.6 s on a 63K tile at the
@@ -147,7 +148,7 @@ def solve_tile(
     t0 = time.perf_counter()
     seeded_noise(geometry, noise)
     run = Run(None)
-    plan, problem = plan_and_prepare(geometry, params, None, run.notes)
+    plan, problem = plan_and_prepare(geometry, params, None)
     if lam is None:
         aim = target(problem, plan)
         sol = solve(problem, plan, aim, run, memory_limit)

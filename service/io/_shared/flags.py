@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from service.core.geometry import Geometry
 from service.io.document import GeometryDocument
 
-__all__ = ["FLAG_ATTRIBUTE", "LAS_OUTLIER_CLASS", "flag_holder", "with_outliers"]
+__all__ = ["FLAG_ATTRIBUTE", "LAS_OUTLIER_CLASS", "dropped_rows", "flag_holder", "with_outliers"]
 
 #: ASPRS LAS class 7: low point (noise).
 LAS_OUTLIER_CLASS = 7
@@ -49,9 +49,17 @@ def with_outliers(
     mode = getattr(result, "outlier_mode", None)
     if idx.size == 0 or mode not in ("flag", "drop") or doc.weld is not None:
         return doc, points
-    if mode == "drop" and doc.geometry.kind == "cloud":
+    if dropped_rows(doc, result):
         return _dropped(doc, points, idx)
     return _flagged(doc, idx, fmt), points
+
+
+def dropped_rows(doc: GeometryDocument, result: Any) -> int:
+    """Rows :func:`with_outliers` leaves out of the written document (``drop``: a point cloud's
+    outliers, never from a welded document)."""
+    idx = np.asarray(getattr(result, "outliers", ()), dtype=np.int64)
+    drops = getattr(result, "outlier_mode", None) == "drop" and doc.geometry.kind == "cloud"
+    return int(idx.size) if drops and doc.weld is None else 0
 
 
 def _flagged(doc: GeometryDocument, idx: NDArray[np.int64], fmt: str) -> GeometryDocument:

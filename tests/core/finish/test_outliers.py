@@ -34,7 +34,7 @@ def test_a_cloud_flags_its_strays_by_default_and_keeps_them_bit_for_bit() -> Non
     assert res.plan is not None and res.plan.outliers.value == "flag"
     report = res.report()
     assert report["outlier_mode"] == "flag" and report["outliers"] == res.outliers.tolist()
-    text = " ".join(res.warnings)
+    text = " ".join(map(str, res.warnings))
     assert "flagged as outliers" in text and "tau" not in text.split("flagged")[0]
     assert not res.shape_warnings
     # the bulk is smoothed all the same: closer to the sphere than its input

@@ -8,9 +8,9 @@ import pytest
 
 from service.core.finish.outliers import FAR_MOVE, far_moved
 from service.core.geometry import Geometry
-from service.core.noise.robust import data_weights
 from service.core.noise.uneven import RATIO_CAP, on_grid
 from service.core.params import SmoothingParams
+from tests.core.core_fixtures import planned_weights
 
 cases = pytest.importorskip("benchmarks.quality.cases")
 
@@ -18,7 +18,7 @@ cases = pytest.importorskip("benchmarks.quality.cases")
 def _weights(key: str):  # type: ignore[no-untyped-def]
     case = cases.make_case(key)
     g = Geometry(case.points, faces=case.shape.faces, edges=case.shape.edges)
-    return data_weights(g, SmoothingParams())[1]
+    return planned_weights(g, SmoothingParams())[1]
 
 
 @pytest.mark.parametrize("key", ["cube-6K/iso-0.05", "sphere-2.5K/quant-0.5"])

@@ -9,9 +9,10 @@ from scipy.spatial import cKDTree
 from service.core.geometry import Geometry
 from service.core.noise.estimate import codimension, estimate_noise
 from service.core.noise.pointfits import leave_one_out, point_neighbours
-from service.core.noise.robust import OMEGA_MIN, data_weights, robust_weights
+from service.core.noise.robust import OMEGA_MIN, robust_weights
 from service.core.params import SmoothingParams
 from service.core.pipeline import smooth_one as smooth
+from tests.core.core_fixtures import planned_weights
 
 
 def _sheet(n: int = 40, seed: int = 0, sigma: float | np.ndarray = 0.02) -> np.ndarray:
@@ -71,7 +72,7 @@ def test_a_single_huge_outlier_gets_weight_near_zero_and_leaves_the_budget() -> 
     P[555, 2] += 50 * sigma
     g = Geometry(P)
     params = SmoothingParams(displacement="normal", outliers="pull")
-    g2, dw = data_weights(g, params)
+    g2, dw = planned_weights(g, params)
     assert dw is not None
     assert dw.outliers.tolist() == [555]
     assert g2.omega()[555] == pytest.approx(OMEGA_MIN)
@@ -108,7 +109,7 @@ def test_huber_irls_weights_match_a_dense_weighted_solve() -> None:
     edges = np.c_[np.arange(120), (np.arange(120) + 1) % 120]
     g = Geometry(P, edges=edges)
     params = SmoothingParams(lam=0.5, robust="huber", displacement="free", order=1)
-    g2, dw = data_weights(g, params)
+    g2, dw = planned_weights(g, params)
     assert dw is not None and 7 in dw.outliers.tolist()
     rho = g2.omega()
     z_out = (1.345 / rho[7] ** 2)  # z of the outlier from its weight
@@ -150,7 +151,7 @@ def test_auto_leaves_gaussian_noise_alone() -> None:
     """No outliers: 'auto' changes nothing (the same points as robust='none')."""
     g = Geometry(_sheet(40, seed=5))
     params = SmoothingParams(displacement="normal")
-    _, dw = data_weights(g, params)
+    _, dw = planned_weights(g, params)
     assert dw is None or (dw.robust == "none" and not dw.uneven)
     a = smooth(g, params)
     b = smooth(g, SmoothingParams(displacement="normal", robust="none", noise_weights="none"))
@@ -166,14 +167,14 @@ def test_local_sigma_tracks_a_known_sigma() -> None:
     sig = 0.005 * np.exp(np.log(5.0) * (np.repeat(x[None, :], n, 0).ravel() + 1) / 2)
     P = _sheet(n, seed=6, sigma=sig)
     g = Geometry(P)
-    _, dw = data_weights(g, SmoothingParams(noise_weights="local"))
+    _, dw = planned_weights(g, SmoothingParams(noise_weights="local"))
     est = estimate_noise(g)
     assert dw is not None and est is not None
     ratio = dw.tau_scale * est.sigma / sig
     assert np.mean(np.abs(np.log(ratio)) < np.log(1.3)) > 0.8
-    _, auto = data_weights(g, SmoothingParams())
+    _, auto = planned_weights(g, SmoothingParams())
     assert auto is not None and auto.uneven
-    _, const = data_weights(Geometry(_sheet(n, seed=6, sigma=0.01)), SmoothingParams())
+    _, const = planned_weights(Geometry(_sheet(n, seed=6, sigma=0.01)), SmoothingParams())
     assert const is None or not const.uneven
 
 
@@ -183,10 +184,10 @@ def test_user_weights_win_and_the_report_preset_has_none() -> None:
     g = Geometry(P, weights=np.ones(len(P)))
     res = smooth(g, SmoothingParams())
     assert res.report()["outlier_count"] == 0
-    assert any("weights given" in w for w in res.warnings)
+    assert [w.code for w in res.warnings] == ["data-weights-not-applied"]
     rep = SmoothingParams(preset="report")
     assert rep.robust == "none" and rep.noise_weights == "none"
-    _, dw = data_weights(Geometry(P), rep)
+    _, dw = planned_weights(Geometry(P), rep)
     assert dw is None
 
 
@@ -195,9 +196,9 @@ def test_given_tau_keeps_the_users_weights_unless_asked() -> None:
     P = _sheet(30, seed=8)
     P[100, 2] += 1.0
     g = Geometry(P)
-    _, dw = data_weights(g, SmoothingParams(tau=0.1))
+    _, dw = planned_weights(g, SmoothingParams(tau=0.1))
     assert dw is None
-    _, dw = data_weights(g, SmoothingParams(tau=0.1, robust="tukey"))
+    _, dw = planned_weights(g, SmoothingParams(tau=0.1, robust="tukey"))
     assert dw is not None and 100 in dw.outliers.tolist()
 
 
