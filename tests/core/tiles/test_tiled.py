@@ -119,7 +119,7 @@ def test_tiles_share_one_noise_estimate_and_flag_the_strays() -> None:
     # flagged outliers stay at their input positions (outliers="auto": flagged and kept)
     assert np.array_equal(res.points[res.outliers], g.points[res.outliers])
     # one note with the stitched count (a tile counts its halo's outliers too)
-    notes = [w for w in res.warnings if " as outliers (" in w]
+    notes = [w.message for w in res.warnings if " as outliers (" in w.message]
     assert len(notes) == 1 and notes[0].startswith(f"{res.outliers.size} points")
     # the rule's target over the whole input, and how far the stitched phi is from it
     assert res.tau == pytest.approx(untiled.tau, rel=0.05)
