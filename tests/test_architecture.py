@@ -157,7 +157,8 @@ CLI_ROOMS: tuple[tuple[str, ...], ...] = (
     ("output",),  # output format, the file writer, the report
     ("file_commands",),  # the options of the commands that read and write files
     ("parser",),  # build_parser()
-    ("smooth", "serve", "submit", "worker", "completion"),  # one command each
+    ("smooth", "serve", "submit", "worker", "completion", "datasets"),  # one command each
+    # (datasets: adjacent files as one set, called by the batch with its outcome and line)
     ("info", "batch"),  # info and batches reuse the smooth command's reader and run
     ("main",),  # parse, dispatch (importlib), report a failure
     ("__main__",),

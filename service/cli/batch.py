@@ -361,7 +361,7 @@ def run_batch(ns: argparse.Namespace, inputs: Sequence[str], err: TextIO) -> int
     jobs = _jobs(ns, inputs, err)
     from service.cli.datasets import smooth_sets  # issue 43: adjacent clouds as one surface
 
-    each, together = smooth_sets(each)
+    each, together = smooth_sets(each, FileOutcome, _ok_line)
     outcomes: list[FileOutcome] = []
     clock = BatchClock(inputs, started)
     for outcome in itertools.chain(together, _outcomes(each, jobs)):

@@ -299,7 +299,7 @@ def relax_tangential(
     geometry, op, fixed, frame
         Of the run (:class:`~service.core.problem.Problem`).
     enabled : bool
-        The plan's choice (:func:`applies`, :attr:`service.core.plan.Plan.tangential`).
+        The plan's choice (:attr:`service.core.plan.Plan.tangential`).
     X : ndarray, shape (n, 3)
         The normal solve's points.
     normal : LambdaSearch
@@ -309,7 +309,7 @@ def relax_tangential(
     -------
     X : ndarray
     step : TangentialStep or None
-        ``None`` when the step does not apply (:func:`applies`).
+        ``None`` when the step does not apply (the plan's choice).
     """
     if not enabled or not (~fixed).any():
         return X, None
