@@ -83,6 +83,11 @@ def warm_compiled(rng: np.random.Generator) -> None:
     local_sigma(np.ones(side * side), nbr, 4)
     patch_variances(sheet, nbr)
     normals = surface_normals(sheet, 10)[:, :, 0]
+    # coincident points (issue 42 item 5): rows of the distinct points' search expanded
+    from service.core.operator.knn import _collapsed, _copies
+
+    copies = np.r_[sheet, np.repeat(sheet[:1], 40, axis=0)]
+    _collapsed(_copies(copies), 10, np.arange(copies.shape[0], dtype=np.int64))
     # the neighbourhood kernels: below 50,000 points a run takes their NumPy versions
     # (operator.sized_kernels), but once this loads numba every run of the process uses these
     from service.core.operator import kernels
