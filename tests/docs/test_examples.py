@@ -194,7 +194,9 @@ def run_block(block: Block, cwd: Path, port: int) -> subprocess.CompletedProcess
 # --------------------------------------------------------------------------- tests
 
 
-@pytest.mark.parametrize("block", RUNNABLE, ids=[b.name for b in RUNNABLE])
+@pytest.mark.parametrize("block", [
+    pytest.param(b, id=b.name, marks=pytest.mark.xdist_group(f"docs:{b.path}")) for b in RUNNABLE
+])  # a page's blocks share its checkout: one worker runs them all, in order
 def test_documented_block_runs(
     block: Block, server: LiveServer, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
