@@ -64,8 +64,11 @@ def test_tiles_run_on_both_workers(cluster: dict[str, Any]) -> None:
     rec = queue.submit(NewJob.check(_xyz(cloud), "xyz", params, filename="t.xyz"))
     report = _check(queue, rec.id, cloud, 80.0, 8)
     workers = {t["worker"] for t in report["tiles"]["tiles"]}
-    assert any("coordinator" in w for w in workers)  # the job's own worker helps
-    assert any("coordinator" not in w for w in workers)  # and the other one takes tiles
+    # the tiles of a round are claimed by whichever worker is free (issue 43's rounds): on a
+    # busy machine the other worker may take all of them before the coordinator looks, so
+    # what is certain is that the tiles ran in other processes than one
+    assert len(workers) >= 2
+    assert any("coordinator" not in w for w in workers)  # the other worker takes tiles
 
 
 def _horse_of_other_worker(cluster: dict[str, Any], job_id: str) -> tuple[WorkerProcess, int]:
