@@ -146,8 +146,13 @@ class CountingQueue:
 
 
 def test_pings_and_stop_on_disconnect(tmp_path: Path) -> None:
+    # parse_timeout: in the full parallel suite (2 workers, load ~4) this 40K upload's parse
+    # and checks ran past 45 CPU s twice this session while taking 1.6 s in one process; the
+    # cause is open (issue 42 follow-up in the closing note); this test is about the events
+    # stream, so its upload gets the ingest's own 600 s budget
     settings = Settings(
-        data_dir=tmp_path / "data", workers=1, events_poll_seconds=0.05, events_ping_seconds=0.1
+        data_dir=tmp_path / "data", workers=1, events_poll_seconds=0.05, events_ping_seconds=0.1,
+        parse_timeout=600.0,
     )
     queue = CountingQueue(LocalQueue(LocalConfig(settings.data_dir, workers=1)))
     app = create_app(settings, queue=queue)  # type: ignore[arg-type]
